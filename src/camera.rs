@@ -1,0 +1,223 @@
+//! The render camera: generates primary rays in render space from film positions, and
+//! provides the world-to-camera and world-to-NDC matrices compositors read from the EXR.
+
+use crate::geometry::ray::Ray;
+use crate::sampling::warp::square_to_uniform_disk;
+use crate::scene::{self, Projection};
+use crate::world::RenderSpace;
+use glam::{DMat4, DVec3, DVec4, Vec2, Vec3};
+
+/// Image size used when neither the request nor the scene decides it: the long side.
+pub const DEFAULT_LONG_SIDE: u32 = 512;
+
+/// A camera in render space.
+#[derive(Clone, Debug)]
+pub struct Camera {
+    origin: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
+    kind: Kind,
+    lens_radius: f32,
+    focus_distance: f32,
+    width: u32,
+    height: u32,
+    /// World to camera space (x right, y up, z forward: OpenEXR's convention).
+    pub world_to_camera: DMat4,
+    /// World to OpenEXR NDC ((0, 0) top-left, (1, 1) bottom-right of the image).
+    pub world_to_ndc: DMat4,
+    /// Render-space length to world units (for the depth AOV).
+    to_world_length: f32,
+    /// Clipping range along the viewing axis, render space.
+    clip_near: f32,
+    clip_far: f32,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Kind {
+    Perspective { tan_half_x: f32, tan_half_y: f32 },
+    Orthographic { half_width: f32, half_height: f32 },
+}
+
+/// The resolution for a render: the request's, else the camera's aspect ratio with
+/// [`DEFAULT_LONG_SIDE`], else 4:3.
+pub fn resolve_resolution(
+    requested: Option<(u32, u32)>,
+    camera: Option<&scene::Camera>,
+) -> (u32, u32) {
+    if let Some(r) = requested {
+        return r;
+    }
+    let aspect = camera.and_then(|c| match c.projection {
+        Projection::Perspective { aspect, .. } => aspect,
+        Projection::Orthographic { xmag, ymag } => Some(xmag / ymag),
+    });
+    let aspect = aspect
+        .filter(|a| a.is_finite() && *a > 0.0)
+        .unwrap_or(4.0 / 3.0);
+    let long = DEFAULT_LONG_SIDE as f32;
+    if aspect >= 1.0 {
+        (DEFAULT_LONG_SIDE, ((long / aspect).round() as u32).max(1))
+    } else {
+        (((long * aspect).round() as u32).max(1), DEFAULT_LONG_SIDE)
+    }
+}
+
+/// A perspective camera framing world bounds `(lo, hi)`: looking along -Z at the bounds'
+/// centre from far enough that the bounding sphere fills a 40° field of view.
+pub fn framing_camera(lo: DVec3, hi: DVec3) -> scene::Camera {
+    let yfov = 40f32.to_radians();
+    let centre = (lo + hi) * 0.5;
+    let radius = ((hi - lo).length() * 0.5).max(1e-9);
+    let distance = radius / (yfov as f64 * 0.5).sin();
+    scene::Camera {
+        name: "auto".into(),
+        projection: Projection::Perspective { yfov, aspect: None },
+        transform: DMat4::from_translation(centre + DVec3::Z * distance),
+        aperture_radius: 0.0,
+        focus_distance: distance,
+        clip_near: 0.0,
+        clip_far: None,
+    }
+}
+
+impl Camera {
+    /// The render camera for scene camera `c` at `width` × `height`. A perspective camera
+    /// keeps its vertical field of view, an orthographic one its height.
+    pub fn new(c: &scene::Camera, space: &RenderSpace, width: u32, height: u32) -> Self {
+        let aspect = width as f32 / height as f32;
+        let m = c.transform;
+        let origin_w = m.transform_point3(DVec3::ZERO);
+        let right_w = m.transform_vector3(DVec3::X).normalize();
+        let forward_w = (-m.transform_vector3(DVec3::Z)).normalize();
+        // Re-orthogonalise: a sheared or scaled node must not skew the view.
+        let up_w = right_w.cross(forward_w).normalize();
+        let right_w = forward_w.cross(up_w);
+        let kind = match c.projection {
+            Projection::Perspective { yfov, .. } => {
+                let tan_half_y = (yfov * 0.5).tan();
+                Kind::Perspective {
+                    tan_half_x: tan_half_y * aspect,
+                    tan_half_y,
+                }
+            }
+            Projection::Orthographic { ymag, .. } => Kind::Orthographic {
+                half_width: ymag * aspect * space.scale as f32,
+                half_height: ymag * space.scale as f32,
+            },
+        };
+        let camera_to_world = DMat4::from_cols(
+            right_w.extend(0.0),
+            up_w.extend(0.0),
+            forward_w.extend(0.0),
+            origin_w.extend(1.0),
+        );
+        let world_to_camera = camera_to_world.inverse();
+        let projection = match kind {
+            Kind::Perspective {
+                tan_half_x,
+                tan_half_y,
+            } => DMat4::from_cols(
+                DVec4::new(0.5 / tan_half_x as f64, 0.0, 0.0, 0.0),
+                DVec4::new(0.0, -0.5 / tan_half_y as f64, 0.0, 0.0),
+                DVec4::new(0.5, 0.5, 0.0, 1.0),
+                // z_ndc = 1 / z: invertible, and the reversed depth Nuke's renderer writes.
+                DVec4::new(0.0, 0.0, 1.0, 0.0),
+            ),
+            Kind::Orthographic {
+                half_width,
+                half_height,
+            } => {
+                let (hw, hh) = (
+                    half_width as f64 / space.scale,
+                    half_height as f64 / space.scale,
+                );
+                DMat4::from_cols(
+                    DVec4::new(0.5 / hw, 0.0, 0.0, 0.0),
+                    DVec4::new(0.0, -0.5 / hh, 0.0, 0.0),
+                    DVec4::new(0.0, 0.0, 1.0, 0.0),
+                    DVec4::new(0.5, 0.5, 0.0, 1.0),
+                )
+            }
+        };
+        Self {
+            origin: space.point(origin_w),
+            right: right_w.as_vec3(),
+            up: up_w.as_vec3(),
+            forward: forward_w.as_vec3(),
+            kind,
+            lens_radius: (c.aperture_radius * space.scale) as f32,
+            focus_distance: (c.focus_distance * space.scale) as f32,
+            width,
+            height,
+            world_to_camera,
+            world_to_ndc: projection * world_to_camera,
+            to_world_length: (1.0 / space.scale) as f32,
+            clip_near: (c.clip_near.max(0.0) * space.scale) as f32,
+            clip_far: c
+                .clip_far
+                .map_or(f32::INFINITY, |f| (f * space.scale) as f32),
+        }
+    }
+
+    /// Image width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Image height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The primary ray through film position `film` (pixels, (0, 0) = top-left corner),
+    /// with lens sample `lens` for depth of field, limited to the clipping range. The
+    /// direction is unit length.
+    #[inline]
+    pub fn generate_ray(&self, film: Vec2, lens: Vec2) -> Ray {
+        let ndc = Vec2::new(
+            2.0 * film.x / self.width as f32 - 1.0,
+            1.0 - 2.0 * film.y / self.height as f32,
+        );
+        let (origin_cam, dir_cam) = match self.kind {
+            Kind::Perspective {
+                tan_half_x,
+                tan_half_y,
+            } => {
+                let dir = Vec3::new(ndc.x * tan_half_x, ndc.y * tan_half_y, 1.0);
+                if self.lens_radius > 0.0 {
+                    let l = square_to_uniform_disk(lens) * self.lens_radius;
+                    let focus = dir * self.focus_distance;
+                    let o = Vec3::new(l.x, l.y, 0.0);
+                    (o, focus - o)
+                } else {
+                    (Vec3::ZERO, dir)
+                }
+            }
+            Kind::Orthographic {
+                half_width,
+                half_height,
+            } => (
+                Vec3::new(ndc.x * half_width, ndc.y * half_height, 0.0),
+                Vec3::Z,
+            ),
+        };
+        let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
+        let dir = to_world(dir_cam).normalize();
+        // Clipping distances are along the viewing axis: convert them to ray distances.
+        let axial = dir.dot(self.forward);
+        let (near, far) = (self.clip_near / axial, self.clip_far / axial);
+        Ray {
+            origin: self.origin + to_world(origin_cam) + dir * near,
+            dir,
+            tmax: far - near,
+        }
+    }
+
+    /// Distance of render-space point `p` along the viewing axis, in world units (the
+    /// depth AOV's Z).
+    #[inline]
+    pub fn depth(&self, p: Vec3) -> f32 {
+        (p - self.origin).dot(self.forward) * self.to_world_length
+    }
+}

@@ -1,0 +1,238 @@
+//! The AOVs (render passes) lucerna can write, their EXR layer names and channels, and the
+//! routing of tagged contributions to the light AOVs that want them.
+
+use crate::integrator::path::{Contribution, Source};
+
+/// An AOV. The light AOVs (beauty through `direct_bsdf_unweighted`) sum contributions; the
+/// others are data.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Aov {
+    Beauty,
+    Emission,
+    Direct,
+    Indirect,
+    Nee,
+    Bsdf,
+    DirectNee,
+    DirectBsdf,
+    IndirectNee,
+    IndirectBsdf,
+    DirectNeeUnweighted,
+    DirectBsdfUnweighted,
+    Albedo,
+    Normal,
+    Depth,
+    Position,
+    Spp,
+    Variance,
+}
+
+/// Every AOV in canonical order.
+pub const ALL: [Aov; 18] = [
+    Aov::Beauty,
+    Aov::Emission,
+    Aov::Direct,
+    Aov::Indirect,
+    Aov::Nee,
+    Aov::Bsdf,
+    Aov::DirectNee,
+    Aov::DirectBsdf,
+    Aov::IndirectNee,
+    Aov::IndirectBsdf,
+    Aov::DirectNeeUnweighted,
+    Aov::DirectBsdfUnweighted,
+    Aov::Albedo,
+    Aov::Normal,
+    Aov::Depth,
+    Aov::Position,
+    Aov::Spp,
+    Aov::Variance,
+];
+
+impl Aov {
+    /// Layer name in the EXR (`""` for the beauty, whose channels are unprefixed).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Beauty => "beauty",
+            Self::Emission => "emission",
+            Self::Direct => "direct",
+            Self::Indirect => "indirect",
+            Self::Nee => "nee",
+            Self::Bsdf => "bsdf",
+            Self::DirectNee => "direct_nee",
+            Self::DirectBsdf => "direct_bsdf",
+            Self::IndirectNee => "indirect_nee",
+            Self::IndirectBsdf => "indirect_bsdf",
+            Self::DirectNeeUnweighted => "direct_nee_unweighted",
+            Self::DirectBsdfUnweighted => "direct_bsdf_unweighted",
+            Self::Albedo => "albedo",
+            Self::Normal => "normal",
+            Self::Depth => "depth",
+            Self::Position => "position",
+            Self::Spp => "spp",
+            Self::Variance => "variance",
+        }
+    }
+
+    /// Channel names within the layer.
+    pub fn channels(self) -> &'static [&'static str] {
+        match self {
+            Self::Beauty => &["R", "G", "B", "A"],
+            Self::Normal | Self::Position => &["X", "Y", "Z"],
+            Self::Depth => &["Z"],
+            Self::Spp => &["Y"],
+            _ => &["R", "G", "B"],
+        }
+    }
+
+    /// Full EXR channel names (`layer.C`, or `C` for the beauty).
+    pub fn channel_names(self) -> Vec<String> {
+        self.channels()
+            .iter()
+            .map(|c| {
+                if self == Self::Beauty {
+                    c.to_string()
+                } else {
+                    format!("{}.{c}", self.name())
+                }
+            })
+            .collect()
+    }
+
+    /// True for AOVs that sum light contributions.
+    pub fn is_light(self) -> bool {
+        self <= Self::DirectBsdfUnweighted
+    }
+
+    /// Whether this light AOV takes the (MIS-weighted) contribution `c`.
+    fn takes(self, c: &Contribution) -> bool {
+        let direct = c.depth == 1;
+        let indirect = c.depth >= 2;
+        match self {
+            Self::Beauty => true,
+            Self::Emission => c.source == Source::Emission,
+            Self::Direct => direct,
+            Self::Indirect => indirect,
+            Self::Nee => c.source == Source::Nee,
+            Self::Bsdf => c.source == Source::Bsdf,
+            Self::DirectNee => direct && c.source == Source::Nee,
+            Self::DirectBsdf => direct && c.source == Source::Bsdf,
+            Self::IndirectNee => indirect && c.source == Source::Nee,
+            Self::IndirectBsdf => indirect && c.source == Source::Bsdf,
+            _ => false,
+        }
+    }
+
+    /// Parses a layer name.
+    pub fn parse(name: &str) -> Option<Self> {
+        ALL.iter().copied().find(|a| a.name() == name)
+    }
+}
+
+/// The set of AOVs a render writes; the beauty is always in it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AovSet {
+    aovs: Vec<Aov>,
+}
+
+impl Default for AovSet {
+    /// Every AOV.
+    fn default() -> Self {
+        Self { aovs: ALL.to_vec() }
+    }
+}
+
+impl AovSet {
+    /// Parses a comma-separated list of layer names, or `all`; the beauty is added.
+    pub fn parse(list: &str) -> Result<Self, String> {
+        let mut aovs = vec![Aov::Beauty];
+        for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            if name == "all" {
+                return Ok(Self::default());
+            }
+            let aov = Aov::parse(name).ok_or_else(|| {
+                let known: Vec<&str> = ALL.iter().map(|a| a.name()).collect();
+                format!("unknown AOV {name:?} (known: all, {})", known.join(", "))
+            })?;
+            aovs.push(aov);
+        }
+        aovs.sort();
+        aovs.dedup();
+        Ok(Self { aovs })
+    }
+
+    /// The AOVs in canonical order.
+    pub fn iter(&self) -> impl Iterator<Item = Aov> + '_ {
+        self.aovs.iter().copied()
+    }
+
+    /// True if `aov` is requested.
+    pub fn contains(&self, aov: Aov) -> bool {
+        self.aovs.contains(&aov)
+    }
+
+    /// Comma-separated names.
+    pub fn describe(&self) -> String {
+        self.aovs
+            .iter()
+            .map(|a| a.name())
+            .collect::<Vec<_>>()
+            .join(",")
+    }
+}
+
+/// Precomputed routing: for each (source, depth class) the light-AOV slots a contribution
+/// goes to, and the slots of the two single-technique AOVs.
+#[derive(Clone, Debug)]
+pub struct Router {
+    /// Light AOVs in slot order (slot 0 is the beauty).
+    pub slots: Vec<Aov>,
+    /// [source][depth class 0 | 1 | 2+] → slots.
+    table: [[Vec<u8>; 3]; 3],
+    /// Slots of `direct_nee_unweighted` and `direct_bsdf_unweighted`.
+    pub single_technique: [Option<u8>; 2],
+}
+
+impl Router {
+    /// Routing for the light AOVs of `set`.
+    pub fn new(set: &AovSet) -> Self {
+        let slots: Vec<Aov> = set.iter().filter(|a| a.is_light()).collect();
+        let slot_of = |aov: Aov| slots.iter().position(|&a| a == aov).map(|i| i as u8);
+        let sources = [Source::Emission, Source::Nee, Source::Bsdf];
+        let table = std::array::from_fn(|s| {
+            std::array::from_fn(|d| {
+                let probe = Contribution {
+                    value: glam::Vec3::ZERO,
+                    depth: d as u32,
+                    source: sources[s],
+                    single_technique: None,
+                };
+                slots
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, a)| a.takes(&probe))
+                    .map(|(i, _)| i as u8)
+                    .collect()
+            })
+        });
+        Self {
+            single_technique: [
+                slot_of(Aov::DirectNeeUnweighted),
+                slot_of(Aov::DirectBsdfUnweighted),
+            ],
+            table,
+            slots,
+        }
+    }
+
+    /// The slots taking contribution `c`'s weighted value.
+    #[inline]
+    pub fn route(&self, c: &Contribution) -> &[u8] {
+        let s = match c.source {
+            Source::Emission => 0,
+            Source::Nee => 1,
+            Source::Bsdf => 2,
+        };
+        &self.table[s][(c.depth as usize).min(2)]
+    }
+}

@@ -1,0 +1,388 @@
+//! The film: per-pixel accumulation of every requested AOV, in tiles so that threads own
+//! disjoint memory. Samples of one pixel are summed in f64 in sample order before they
+//! reach the tile, so a pixel's value does not depend on the thread count.
+
+pub mod aov;
+pub mod exr;
+pub mod filter;
+pub mod preview;
+
+use crate::integrator::path::{Contribution, FirstHit, Recorder};
+use aov::{Aov, AovSet, Router};
+use glam::{DVec3, Vec3};
+
+/// Tile edge in pixels.
+pub const TILE_SIZE: u32 = 16;
+/// Depth written where the camera saw nothing (as Cycles does).
+pub const BACKGROUND_DEPTH: f32 = 1e10;
+
+/// What one camera sample produced, routed into light-AOV slots as it arrives.
+pub struct SampleRecord<'r> {
+    router: &'r Router,
+    values: Vec<Vec3>,
+    hit: Option<FirstHit>,
+    discarded: u64,
+}
+
+impl<'r> SampleRecord<'r> {
+    /// An empty record for `router`'s slots.
+    pub fn new(router: &'r Router) -> Self {
+        Self {
+            router,
+            values: vec![Vec3::ZERO; router.slots.len()],
+            hit: None,
+            discarded: 0,
+        }
+    }
+
+    /// Empties the record for the next sample.
+    #[inline]
+    pub fn clear(&mut self) {
+        self.values.fill(Vec3::ZERO);
+        self.hit = None;
+    }
+
+    /// The value of light slot `slot` so far.
+    pub fn value(&self, slot: usize) -> Vec3 {
+        self.values[slot]
+    }
+}
+
+impl Recorder for SampleRecord<'_> {
+    #[inline]
+    fn wants_single_technique(&self) -> bool {
+        self.router.single_technique.iter().any(Option::is_some)
+    }
+
+    #[inline]
+    fn contribution(&mut self, c: Contribution) {
+        // A non-finite contribution is dropped whole, from every AOV, and counted.
+        let finite = c.value.is_finite()
+            && c.single_technique
+                .is_none_or(|s| s[0].is_finite() && s[1].is_finite());
+        if !finite {
+            self.discarded += 1;
+            return;
+        }
+        for &slot in self.router.route(&c) {
+            self.values[slot as usize] += c.value;
+        }
+        if let Some(single) = c.single_technique {
+            for (value, slot) in single.iter().zip(self.router.single_technique) {
+                if let Some(slot) = slot {
+                    self.values[slot as usize] += *value;
+                }
+            }
+        }
+    }
+
+    #[inline]
+    fn first_hit(&mut self, hit: FirstHit) {
+        let finite = hit.albedo.is_finite()
+            && hit.normal.is_finite()
+            && hit.position.is_finite()
+            && hit.depth.is_finite();
+        if finite {
+            self.hit = Some(hit);
+        } else {
+            self.discarded += 1;
+        }
+    }
+}
+
+/// Sums of one pixel's samples over a range of sample indices, in double precision.
+pub struct PixelAccumulator {
+    light: Vec<DVec3>,
+    beauty_squares: DVec3,
+    coverage: f64,
+    albedo: DVec3,
+    normal: DVec3,
+    position: DVec3,
+    depth: f32,
+    samples: u32,
+    discarded: u64,
+}
+
+impl PixelAccumulator {
+    /// An empty accumulator for `slots` light slots.
+    pub fn new(slots: usize) -> Self {
+        Self {
+            light: vec![DVec3::ZERO; slots],
+            beauty_squares: DVec3::ZERO,
+            coverage: 0.0,
+            albedo: DVec3::ZERO,
+            normal: DVec3::ZERO,
+            position: DVec3::ZERO,
+            depth: f32::INFINITY,
+            samples: 0,
+            discarded: 0,
+        }
+    }
+
+    /// Empties the accumulator for the next pixel.
+    pub fn clear(&mut self) {
+        self.light.fill(DVec3::ZERO);
+        self.beauty_squares = DVec3::ZERO;
+        self.coverage = 0.0;
+        self.albedo = DVec3::ZERO;
+        self.normal = DVec3::ZERO;
+        self.position = DVec3::ZERO;
+        self.depth = f32::INFINITY;
+        self.samples = 0;
+        self.discarded = 0;
+    }
+
+    /// Adds one sample and takes its discarded-contribution count.
+    #[inline]
+    pub fn add(&mut self, rec: &mut SampleRecord) {
+        for (acc, v) in self.light.iter_mut().zip(&rec.values) {
+            *acc += v.as_dvec3();
+        }
+        let b = rec.values[0].as_dvec3();
+        self.beauty_squares += b * b;
+        if let Some(h) = &rec.hit {
+            self.coverage += 1.0;
+            self.albedo += h.albedo.as_dvec3();
+            self.normal += h.normal.as_dvec3();
+            self.position += h.position.as_dvec3();
+            self.depth = self.depth.min(h.depth);
+        }
+        self.samples += 1;
+        self.discarded += rec.discarded;
+        rec.discarded = 0;
+    }
+}
+
+/// One tile's accumulated sums.
+pub struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+    /// Light slots, slot-major (`slot * pixels + pixel`).
+    light: Vec<Vec3>,
+    /// Beauty sums and sums of squares in f64, for the variance AOV.
+    beauty_sum: Vec<DVec3>,
+    beauty_squares: Vec<DVec3>,
+    coverage: Vec<f32>,
+    albedo: Vec<Vec3>,
+    normal: Vec<Vec3>,
+    position: Vec<Vec3>,
+    depth: Vec<f32>,
+    samples: Vec<u32>,
+    /// Contributions dropped for being NaN or infinite.
+    pub discarded: u64,
+}
+
+impl Tile {
+    fn new(x0: u32, y0: u32, width: u32, height: u32, slots: usize, aovs: &AovSet) -> Self {
+        let n = (width * height) as usize;
+        let vec3s = |aov: Aov| {
+            if aovs.contains(aov) {
+                vec![Vec3::ZERO; n]
+            } else {
+                Vec::new()
+            }
+        };
+        let with_variance = aovs.contains(Aov::Variance);
+        Self {
+            x0,
+            y0,
+            width,
+            height,
+            light: vec![Vec3::ZERO; slots * n],
+            beauty_sum: if with_variance {
+                vec![DVec3::ZERO; n]
+            } else {
+                Vec::new()
+            },
+            beauty_squares: if with_variance {
+                vec![DVec3::ZERO; n]
+            } else {
+                Vec::new()
+            },
+            coverage: vec![0.0; n],
+            albedo: vec3s(Aov::Albedo),
+            normal: vec3s(Aov::Normal),
+            position: vec3s(Aov::Position),
+            depth: if aovs.contains(Aov::Depth) {
+                vec![f32::INFINITY; n]
+            } else {
+                Vec::new()
+            },
+            samples: vec![0; n],
+            discarded: 0,
+        }
+    }
+
+    /// Number of pixels.
+    pub fn pixel_count(&self) -> usize {
+        (self.width * self.height) as usize
+    }
+
+    /// Adds a pixel's accumulated samples; `pixel` indexes the tile row-major.
+    pub fn add(&mut self, pixel: usize, acc: &PixelAccumulator) {
+        let n = self.pixel_count();
+        for (slot, sum) in acc.light.iter().enumerate() {
+            self.light[slot * n + pixel] += sum.as_vec3();
+        }
+        if !self.beauty_sum.is_empty() {
+            self.beauty_sum[pixel] += acc.light[0];
+            self.beauty_squares[pixel] += acc.beauty_squares;
+        }
+        self.coverage[pixel] += acc.coverage as f32;
+        if !self.albedo.is_empty() {
+            self.albedo[pixel] += acc.albedo.as_vec3();
+        }
+        if !self.normal.is_empty() {
+            self.normal[pixel] += acc.normal.as_vec3();
+        }
+        if !self.position.is_empty() {
+            self.position[pixel] += acc.position.as_vec3();
+        }
+        if !self.depth.is_empty() {
+            self.depth[pixel] = self.depth[pixel].min(acc.depth);
+        }
+        self.samples[pixel] += acc.samples;
+        self.discarded += acc.discarded;
+    }
+}
+
+/// All tiles of an image plus the AOV set and routing.
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub aovs: AovSet,
+    pub router: Router,
+    pub tiles: Vec<Tile>,
+}
+
+impl Film {
+    /// An empty film of `width` × `height` pixels for `aovs`.
+    pub fn new(width: u32, height: u32, aovs: AovSet) -> Self {
+        let router = Router::new(&aovs);
+        let mut tiles = Vec::new();
+        for y0 in (0..height).step_by(TILE_SIZE as usize) {
+            for x0 in (0..width).step_by(TILE_SIZE as usize) {
+                let (w, h) = (TILE_SIZE.min(width - x0), TILE_SIZE.min(height - y0));
+                tiles.push(Tile::new(x0, y0, w, h, router.slots.len(), &aovs));
+            }
+        }
+        Self {
+            width,
+            height,
+            aovs,
+            router,
+            tiles,
+        }
+    }
+
+    /// Contributions dropped as NaN or infinite, over the whole image.
+    pub fn discarded(&self) -> u64 {
+        self.tiles.iter().map(|t| t.discarded).sum()
+    }
+
+    /// Total samples taken.
+    pub fn total_samples(&self) -> u64 {
+        self.tiles
+            .iter()
+            .flat_map(|t| &t.samples)
+            .map(|&s| s as u64)
+            .sum()
+    }
+
+    /// The final image of `aov`: one row-major plane per channel.
+    pub fn planes(&self, aov: Aov) -> Vec<Vec<f32>> {
+        let channels = aov.channels().len();
+        let n = (self.width * self.height) as usize;
+        let mut planes = vec![vec![0.0f32; n]; channels];
+        let slot = self.router.slots.iter().position(|&a| a == aov);
+        for tile in &self.tiles {
+            let tn = tile.pixel_count();
+            for ty in 0..tile.height {
+                for tx in 0..tile.width {
+                    let p = (ty * tile.width + tx) as usize;
+                    let out = ((tile.y0 + ty) * self.width + tile.x0 + tx) as usize;
+                    let spp = tile.samples[p] as f32;
+                    let mean = |v: Vec3| if spp > 0.0 { v / spp } else { Vec3::ZERO };
+                    let value: [f32; 4] = match (aov, slot) {
+                        (Aov::Beauty, Some(s)) => mean(tile.light[s * tn + p])
+                            .extend(if spp > 0.0 {
+                                tile.coverage[p] / spp
+                            } else {
+                                0.0
+                            })
+                            .to_array(),
+                        (_, Some(s)) => mean(tile.light[s * tn + p]).extend(0.0).to_array(),
+                        (Aov::Albedo, _) => mean(tile.albedo[p]).extend(0.0).to_array(),
+                        (Aov::Normal, _) => mean(tile.normal[p]).extend(0.0).to_array(),
+                        (Aov::Position, _) => mean(tile.position[p]).extend(0.0).to_array(),
+                        (Aov::Depth, _) => {
+                            let d = tile.depth[p];
+                            [
+                                if d.is_finite() { d } else { BACKGROUND_DEPTH },
+                                0.0,
+                                0.0,
+                                0.0,
+                            ]
+                        }
+                        (Aov::Spp, _) => [spp, 0.0, 0.0, 0.0],
+                        (Aov::Variance, _) => {
+                            let n = tile.samples[p] as f64;
+                            let v = if n > 1.0 {
+                                let s = tile.beauty_sum[p];
+                                ((tile.beauty_squares[p] - s * s / n) / (n * (n - 1.0)))
+                                    .max(DVec3::ZERO)
+                            } else {
+                                DVec3::ZERO
+                            };
+                            v.as_vec3().extend(0.0).to_array()
+                        }
+                        _ => unreachable!("light AOVs have slots"),
+                    };
+                    for (c, plane) in planes.iter_mut().enumerate() {
+                        plane[out] = value[c];
+                    }
+                }
+            }
+        }
+        planes
+    }
+}
+
+/// Writes a file atomically: `write` fills a temporary file next to `path`, which is then
+/// renamed over `path`. A failed or killed write never leaves a partial file at `path`.
+pub fn write_atomically<F>(path: &std::path::Path, write: F) -> crate::Result<()>
+where
+    F: FnOnce(&mut std::io::BufWriter<std::fs::File>) -> crate::Result<()>,
+{
+    use crate::error::Error;
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::other(path, "output", "not a file name"))?;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    let result = (|| {
+        let file =
+            std::fs::File::create(&tmp).map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        let mut writer = std::io::BufWriter::new(file);
+        write(&mut writer)?;
+        let file = writer
+            .into_inner()
+            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        file.sync_all()
+            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::other(path, "output", e.to_string()))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}

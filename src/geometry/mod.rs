@@ -1,0 +1,322 @@
+//! Geometry in render space: triangles, the BVH over them (an obvhs compressed wide BVH8),
+//! and the two ray queries the integrator needs: closest hit and occlusion.
+
+pub mod frame;
+pub mod ray;
+pub mod triangle;
+
+use glam::{UVec2, Vec3, Vec3A};
+use obvhs::{
+    BvhBuildParams,
+    cwbvh::{CwBvh, builder::build_cwbvh_from_tris, node::CwBvhNode},
+    traverse,
+};
+use ray::Ray;
+use triangle::{RayShear, TriangleHit};
+
+/// Intersection flag: the triangle is invisible from its back side (glTF `doubleSided: false`).
+pub const CULL_BACK: u8 = 1;
+/// Intersection flag: the triangle's material has an alpha cut-out; the caller's filter
+/// decides whether a hit counts.
+pub const ALPHA_TESTED: u8 = 2;
+
+/// A ray's closest accepted hit.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    pub t: f32,
+    /// Index of the triangle in the order given to [`Bvh::build`].
+    pub prim: u32,
+    pub b1: f32,
+    pub b2: f32,
+    pub front: bool,
+}
+
+/// A BVH over triangles with per-triangle flags, answering closest-hit and occlusion queries.
+pub struct Bvh {
+    bvh: CwBvh,
+    /// Triangle vertices in BVH leaf order, so leaves read them without indirection.
+    verts: Vec<[Vec3; 3]>,
+    flags: Vec<u8>,
+    /// BVH leaf order to input order.
+    order: Vec<u32>,
+}
+
+/// Slab-test constants of a ray for wide-node traversal.
+struct NodeRay {
+    origin: Vec3A,
+    inv_dir: Vec3A,
+    negative: [bool; 3],
+    tmax: f32,
+}
+
+/// Relative error bound of the slab test's three float operations (pbrt's 1 + 2γ₃): the
+/// far distance is enlarged by it so rounding never culls a box the ray touches.
+const SLAB_ROBUSTNESS: f32 =
+    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
+
+impl NodeRay {
+    fn new(ray: &Ray) -> Self {
+        // A finite reciprocal keeps 0 * inf = NaN out of the slab test.
+        let inv = |d: f32| {
+            if d.abs() < 1e-20 {
+                1e20f32.copysign(d)
+            } else {
+                1.0 / d
+            }
+        };
+        let inv_dir = Vec3A::new(inv(ray.dir.x), inv(ray.dir.y), inv(ray.dir.z));
+        Self {
+            origin: ray.origin.into(),
+            inv_dir,
+            // From the reciprocal's sign, so that -0.0 components pick near and far planes
+            // consistently with it.
+            negative: [inv_dir.x < 0.0, inv_dir.y < 0.0, inv_dir.z < 0.0],
+            tmax: ray.tmax,
+        }
+    }
+}
+
+/// Which of a node's eight children the ray overlaps, as the hit mask obvhs's traversal
+/// expects. Unlike obvhs's own node test, which clamps the near distance to an absolute 1e-4,
+/// this one accepts boxes from t = 0: rays leave surfaces at tiny offsets and must still see
+/// a wall right next to them.
+#[inline(always)]
+fn intersect_node(node: &CwBvhNode, ray: &NodeRay, oct_inv4: u32) -> u32 {
+    let scale = node.compute_extent() * ray.inv_dir;
+    let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_dir;
+    let pick = |neg: bool, lo: &[u8; 8], hi: &[u8; 8]| if neg { (*hi, *lo) } else { (*lo, *hi) };
+    let (near_x, far_x) = pick(ray.negative[0], &node.child_min_x, &node.child_max_x);
+    let (near_y, far_y) = pick(ray.negative[1], &node.child_min_y, &node.child_max_y);
+    let (near_z, far_z) = pick(ray.negative[2], &node.child_min_z, &node.child_max_z);
+    let mut overlaps = [false; 8];
+    for c in 0..8 {
+        let t0 = (near_x[c] as f32 * scale.x + offset.x)
+            .max(near_y[c] as f32 * scale.y + offset.y)
+            .max(near_z[c] as f32 * scale.z + offset.z)
+            .max(0.0);
+        let t1 = (far_x[c] as f32 * scale.x + offset.x)
+            .min(far_y[c] as f32 * scale.y + offset.y)
+            .min(far_z[c] as f32 * scale.z + offset.z)
+            * SLAB_ROBUSTNESS;
+        overlaps[c] = t0 <= t1.min(ray.tmax);
+    }
+    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
+    let mut hit_mask = 0u32;
+    for (c, &hit) in overlaps.iter().enumerate() {
+        if hit {
+            let child_bits = (child_bits8 >> (c * 8)) as u32 & 0xff;
+            let bit_index = (bit_index8 >> (c * 8)) as u32 & 0xff;
+            hit_mask |= child_bits << bit_index;
+        }
+    }
+    hit_mask
+}
+
+impl Bvh {
+    /// Builds the BVH over `triangles` (render space) with their intersection `flags`.
+    /// Runs on the current rayon pool.
+    pub fn build(triangles: &[[Vec3; 3]], flags: &[u8]) -> Self {
+        assert_eq!(triangles.len(), flags.len());
+        if triangles.is_empty() {
+            return Self {
+                bvh: CwBvh::default(),
+                verts: Vec::new(),
+                flags: Vec::new(),
+                order: Vec::new(),
+            };
+        }
+        let tris: Vec<obvhs::triangle::Triangle> = triangles
+            .iter()
+            .map(|t| obvhs::triangle::Triangle {
+                v0: t[0].into(),
+                v1: t[1].into(),
+                v2: t[2].into(),
+            })
+            .collect();
+        let bvh = build_cwbvh_from_tris(
+            &tris,
+            BvhBuildParams::medium_build(),
+            &mut std::time::Duration::default(),
+        );
+        drop(tris);
+        let order = bvh.primitive_indices.clone();
+        let verts = order.iter().map(|&i| triangles[i as usize]).collect();
+        let flags = order.iter().map(|&i| flags[i as usize]).collect();
+        Self {
+            bvh,
+            verts,
+            flags,
+            order,
+        }
+    }
+
+    /// Number of BVH nodes (for statistics).
+    pub fn node_count(&self) -> usize {
+        self.bvh.nodes.len()
+    }
+
+    /// Bytes held by the BVH and its leaf data.
+    pub fn memory_bytes(&self) -> usize {
+        self.bvh.nodes.len() * std::mem::size_of::<CwBvhNode>()
+            + self.bvh.primitive_indices.len() * 4
+            + self.verts.len() * std::mem::size_of::<[Vec3; 3]>()
+            + self.flags.len()
+            + self.order.len() * 4
+    }
+
+    /// Tests one leaf triangle; `accept` is consulted only for alpha-tested triangles.
+    #[inline(always)]
+    fn test<F: FnMut(u32, &TriangleHit) -> bool>(
+        &self,
+        leaf: usize,
+        shear: &RayShear,
+        tmax: f32,
+        accept: &mut F,
+    ) -> Option<TriangleHit> {
+        let [p0, p1, p2] = self.verts[leaf];
+        let hit = triangle::intersect(shear, p0, p1, p2, tmax)?;
+        let flags = self.flags[leaf];
+        if flags != 0 {
+            if flags & CULL_BACK != 0 && !hit.front {
+                return None;
+            }
+            if flags & ALPHA_TESTED != 0 && !accept(self.order[leaf], &hit) {
+                return None;
+            }
+        }
+        Some(hit)
+    }
+
+    /// Closest hit along `ray` in `(0, ray.tmax)`. `accept(prim, hit)` filters hits on
+    /// alpha-tested triangles.
+    pub fn intersect<F: FnMut(u32, &TriangleHit) -> bool>(
+        &self,
+        ray: &Ray,
+        mut accept: F,
+    ) -> Option<Hit> {
+        if self.bvh.nodes.is_empty() {
+            return None;
+        }
+        let shear = RayShear::new(ray);
+        let mut node_ray = NodeRay::new(ray);
+        let mut best: Option<(usize, TriangleHit)> = None;
+        let mut state = self.bvh.new_traversal(Vec3A::from(ray.dir));
+        let mut node;
+        traverse!(
+            self.bvh,
+            node,
+            state,
+            intersect_node(node, &node_ray, state.oct_inv4),
+            {
+                let leaf = state.primitive_id as usize;
+                if let Some(hit) = self.test(leaf, &shear, node_ray.tmax, &mut accept) {
+                    node_ray.tmax = hit.t;
+                    best = Some((leaf, hit));
+                }
+            }
+        );
+        best.map(|(leaf, h)| Hit {
+            t: h.t,
+            prim: self.order[leaf],
+            b1: h.b1,
+            b2: h.b2,
+            front: h.front,
+        })
+    }
+
+    /// True if anything accepted lies along `ray` in `(0, ray.tmax)`; stops at the first hit.
+    pub fn occluded<F: FnMut(u32, &TriangleHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
+        if self.bvh.nodes.is_empty() {
+            return false;
+        }
+        let shear = RayShear::new(ray);
+        let node_ray = NodeRay::new(ray);
+        let mut state = self.bvh.new_traversal(Vec3A::from(ray.dir));
+        let mut node;
+        let mut occluded = false;
+        'search: {
+            traverse!(
+                self.bvh,
+                node,
+                state,
+                intersect_node(node, &node_ray, state.oct_inv4),
+                {
+                    let leaf = state.primitive_id as usize;
+                    if self.test(leaf, &shear, ray.tmax, &mut accept).is_some() {
+                        occluded = true;
+                        break 'search;
+                    }
+                }
+            );
+        }
+        occluded
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A closed unit cube of 12 triangles, wound outwards.
+    fn cube() -> Vec<[Vec3; 3]> {
+        let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+        let quads = [
+            [c(0., 0., 0.), c(0., 1., 0.), c(1., 1., 0.), c(1., 0., 0.)],
+            [c(0., 0., 1.), c(1., 0., 1.), c(1., 1., 1.), c(0., 1., 1.)],
+            [c(0., 0., 0.), c(1., 0., 0.), c(1., 0., 1.), c(0., 0., 1.)],
+            [c(0., 1., 0.), c(0., 1., 1.), c(1., 1., 1.), c(1., 1., 0.)],
+            [c(0., 0., 0.), c(0., 0., 1.), c(0., 1., 1.), c(0., 1., 0.)],
+            [c(1., 0., 0.), c(1., 1., 0.), c(1., 1., 1.), c(1., 0., 1.)],
+        ];
+        quads
+            .iter()
+            .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+            .collect()
+    }
+
+    #[test]
+    fn rays_from_inside_a_closed_cube_always_hit_it() {
+        let tris = cube();
+        let bvh = Bvh::build(&tris, &vec![0; tris.len()]);
+        let mut rng = crate::sampling::pcg::Pcg32::new(7, 0);
+        for _ in 0..20000 {
+            let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let u = glam::Vec2::new(rng.next_f32(), rng.next_f32());
+            let d = crate::sampling::warp::square_to_uniform_sphere(u);
+            let hit = bvh
+                .intersect(&Ray::new(o, d), |_, _| true)
+                .expect("escaped the cube");
+            assert!(!hit.front, "the inside sees back faces");
+            // Brute force agrees on the distance.
+            let shear = RayShear::new(&Ray::new(o, d));
+            let best = tris
+                .iter()
+                .filter_map(|t| triangle::intersect(&shear, t[0], t[1], t[2], f32::INFINITY))
+                .map(|h| h.t)
+                .fold(f32::INFINITY, f32::min);
+            assert_eq!(hit.t, best);
+        }
+    }
+
+    #[test]
+    fn contact_hits_and_culling_and_occlusion() {
+        let tris = cube();
+        let mut flags = vec![0; tris.len()];
+        let bvh = Bvh::build(&tris, &flags);
+        // A ray starting 1e-6 in front of a face still sees it.
+        let o = Vec3::new(0.5, 0.5, 1.0 + 1e-6);
+        let hit = bvh.intersect(&Ray::new(o, -Vec3::Z), |_, _| true).unwrap();
+        assert!(hit.front && (hit.t - 1e-6).abs() < 1e-6);
+        // Culling back faces lets rays from inside escape.
+        flags.iter_mut().for_each(|f| *f = CULL_BACK);
+        let culled = Bvh::build(&tris, &flags);
+        let inside = Ray::new(Vec3::splat(0.5), Vec3::Y);
+        assert!(culled.intersect(&inside, |_, _| true).is_none());
+        assert!(bvh.occluded(&inside, |_, _| true));
+        let short = Ray {
+            tmax: 0.49,
+            ..inside
+        };
+        assert!(!bvh.occluded(&short, |_, _| true));
+    }
+}

@@ -1,0 +1,940 @@
+//! glTF 2.0 import (`.gltf` and `.glb`) with the `gltf` crate.
+//!
+//! The crate parses and validates the JSON; this module loads buffers and images itself
+//! (safe URI resolution, no network), checks every accessor's type and byte range and every
+//! vertex index before reading, and converts the default scene into a [`Scene`]: node
+//! hierarchy, triangle primitives (strips and fans converted; points and lines skipped),
+//! cameras, materials (metallic-roughness, normal maps, emission, KHR_texture_transform,
+//! alpha modes, double-sidedness, lucerna's BSDF selection in `extras`) and
+//! KHR_lights_punctual lights.
+
+use super::image as img;
+use super::{tangents, uri};
+use crate::error::{Error, Result};
+use crate::scene::{
+    self, AlphaMode, BsdfModel, Camera, Instance, Light, LightKind, Material, Mesh, Projection,
+    Scene, TextureRef, UvTransform, Wrap,
+};
+use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Extensions lucerna implements; a required extension outside this list is an error, a
+/// used one a warning.
+pub const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "KHR_lights_punctual",
+    "KHR_materials_emissive_strength",
+    "KHR_materials_ior",
+    "KHR_texture_transform",
+];
+
+/// Deepest node hierarchy accepted (deeper ones are almost certainly malicious).
+const MAX_NODE_DEPTH: usize = 1024;
+
+/// Reads and converts the glTF file at `path`.
+pub fn load(path: &Path) -> Result<Scene> {
+    let bytes = std::fs::read(path)
+        .map_err(|e| Error::bad_input(path, "file", format!("cannot read: {e}")))?;
+    let base = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    import(&bytes, &path.display().to_string(), Some(base))
+}
+
+/// Converts glTF bytes; `source` names the file in messages, `base` is its directory
+/// (`None`: external files are refused).
+pub fn import(bytes: &[u8], source: &str, base: Option<&Path>) -> Result<Scene> {
+    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| parse_error(source, e))?;
+    let mut importer = Importer {
+        source: source.to_string(),
+        base,
+        doc: &gltf.document,
+        blob: gltf.blob.as_deref(),
+        buffers: Vec::new(),
+        scene: Scene {
+            source: source.to_string(),
+            ..Default::default()
+        },
+        images: HashMap::new(),
+        textures: HashMap::new(),
+        materials: HashMap::new(),
+        meshes: HashMap::new(),
+    };
+    importer.run()?;
+    Ok(importer.scene)
+}
+
+fn parse_error(source: &str, e: gltf::Error) -> Error {
+    match e {
+        gltf::Error::Binary(e) => Error::bad_input(source, "GLB container", e.to_string()),
+        gltf::Error::Deserialize(e) => Error::bad_input(source, "JSON", e.to_string()),
+        gltf::Error::Validation(errors) => {
+            let (path, err) = &errors[0];
+            let reason = match err {
+                gltf::json::validation::Error::Unsupported => {
+                    "required extension is not supported by lucerna".into()
+                }
+                other => other.to_string(),
+            };
+            let more = if errors.len() > 1 {
+                format!(" (and {} more problems)", errors.len() - 1)
+            } else {
+                String::new()
+            };
+            Error::bad_input(source, path.to_string(), format!("{reason}{more}"))
+        }
+        other => Error::bad_input(source, "file", other.to_string()),
+    }
+}
+
+struct Importer<'a> {
+    source: String,
+    base: Option<&'a Path>,
+    doc: &'a gltf::Document,
+    blob: Option<&'a [u8]>,
+    buffers: Vec<Vec<u8>>,
+    scene: Scene,
+    /// glTF image index → decoded size and texels (shared by the textures that use it).
+    images: HashMap<usize, (u32, u32, Arc<scene::Texels>)>,
+    /// glTF texture index → scene texture.
+    textures: HashMap<usize, u32>,
+    /// glTF material index (`None`: the default material) → scene material.
+    materials: HashMap<Option<usize>, u32>,
+    /// (glTF mesh, primitive) → scene mesh, or `None` for a skipped primitive.
+    meshes: HashMap<(usize, usize), Option<u32>>,
+}
+
+/// The lucerna section of a material's `extras`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LucernaExtras {
+    bsdf: String,
+    exponent: Option<f32>,
+    specular: Option<SpecularValue>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(untagged)]
+enum SpecularValue {
+    Grey(f32),
+    Rgb([f32; 3]),
+}
+
+impl<'a> Importer<'a> {
+    fn err(&self, element: impl Into<String>, reason: impl Into<String>) -> Error {
+        Error::bad_input(&self.source, element, reason)
+    }
+
+    fn warn(&mut self, element: impl AsRef<str>, message: impl AsRef<str>) {
+        self.scene.warnings.push(format!(
+            "{}: {}: {}",
+            self.source,
+            element.as_ref(),
+            message.as_ref()
+        ));
+    }
+
+    fn run(&mut self) -> Result<()> {
+        for ext in self.doc.extensions_used() {
+            if !SUPPORTED_EXTENSIONS.contains(&ext) {
+                self.warn(
+                    "extensionsUsed",
+                    format!("extension {ext} is not supported and is ignored"),
+                );
+            }
+        }
+        self.load_buffers()?;
+        let gltf_scene = match self
+            .doc
+            .default_scene()
+            .or_else(|| self.doc.scenes().next())
+        {
+            Some(s) => s,
+            None => return Err(self.err("scenes", "the file has no scene")),
+        };
+        let mut path = Vec::new();
+        for node in gltf_scene.nodes() {
+            self.visit(node, DMat4::IDENTITY, &mut path)?;
+        }
+        if self.scene.instanced_triangle_count() == 0 {
+            return Err(self.err(
+                format!("scenes[{}]", gltf_scene.index()),
+                "contains no triangles",
+            ));
+        }
+        Ok(())
+    }
+
+    fn load_buffers(&mut self) -> Result<()> {
+        for buffer in self.doc.buffers() {
+            let element = format!("buffers[{}]", buffer.index());
+            let data = match buffer.source() {
+                gltf::buffer::Source::Bin => self
+                    .blob
+                    .ok_or_else(|| {
+                        self.err(&element, "refers to the GLB binary chunk, which is missing")
+                    })?
+                    .to_vec(),
+                gltf::buffer::Source::Uri(u) => {
+                    uri::read(u, self.base).map_err(|r| self.err(format!("{element}.uri"), r))?
+                }
+            };
+            if data.len() < buffer.length() {
+                return Err(self.err(
+                    &element,
+                    format!(
+                        "has {} bytes but byteLength is {} (truncated?)",
+                        data.len(),
+                        buffer.length()
+                    ),
+                ));
+            }
+            self.buffers.push(data);
+        }
+        Ok(())
+    }
+
+    fn visit(&mut self, node: gltf::Node<'a>, parent: DMat4, path: &mut Vec<usize>) -> Result<()> {
+        let element = format!("nodes[{}]", node.index());
+        if path.contains(&node.index()) {
+            return Err(self.err(&element, "node hierarchy contains a cycle"));
+        }
+        if path.len() >= MAX_NODE_DEPTH {
+            return Err(self.err(
+                &element,
+                format!("node hierarchy deeper than {MAX_NODE_DEPTH}"),
+            ));
+        }
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        if !local.is_finite() {
+            return Err(self.err(&element, "transform is not finite"));
+        }
+        let world = parent * local;
+        let name = node.name().map_or_else(|| element.clone(), str::to_string);
+        if let Some(mesh) = node.mesh() {
+            for primitive in mesh.primitives() {
+                if let Some(m) = self.primitive(&mesh, &primitive)? {
+                    self.scene.instances.push(Instance {
+                        name: name.clone(),
+                        mesh: m,
+                        transform: world,
+                    });
+                }
+            }
+        }
+        if let Some(camera) = node.camera() {
+            let cam = self.camera(&camera, world, &name)?;
+            self.scene.cameras.push(cam);
+        }
+        if let Some(light) = node.light() {
+            self.light(&light, world, &name);
+        }
+        path.push(node.index());
+        for child in node.children() {
+            self.visit(child, world, path)?;
+        }
+        path.pop();
+        Ok(())
+    }
+
+    /// Checks that `accessor` has an allowed type and that all its bytes exist.
+    fn check_accessor(
+        &self,
+        accessor: &gltf::Accessor,
+        element: &str,
+        dims: &[Dimensions],
+        types: &[DataType],
+        normalized_integers: bool,
+    ) -> Result<()> {
+        let e = format!("{element} (accessors[{}])", accessor.index());
+        if accessor.count() == 0 {
+            return Err(self.err(&e, "accessor has count 0"));
+        }
+        if !dims.contains(&accessor.dimensions()) || !types.contains(&accessor.data_type()) {
+            return Err(self.err(
+                &e,
+                format!(
+                    "accessor is {:?} of {:?}; expected {dims:?} of {types:?}",
+                    accessor.dimensions(),
+                    accessor.data_type()
+                ),
+            ));
+        }
+        if normalized_integers && accessor.data_type() != DataType::F32 && !accessor.normalized() {
+            return Err(self.err(&e, "integer accessor must be normalized"));
+        }
+        let check_range =
+            |view: gltf::buffer::View, offset: usize, count: usize, elem: usize| -> Result<()> {
+                let stride = view.stride().unwrap_or(elem);
+                if stride < elem {
+                    return Err(self.err(
+                        &e,
+                        format!("byteStride {stride} is smaller than the element size {elem}"),
+                    ));
+                }
+                let end = (count - 1)
+                    .checked_mul(stride)
+                    .and_then(|x| x.checked_add(offset))
+                    .and_then(|x| x.checked_add(elem));
+                if end.is_none_or(|end| end > view.length()) {
+                    return Err(self.err(
+                        &e,
+                        format!(
+                            "accessor data runs past the end of bufferViews[{}]",
+                            view.index()
+                        ),
+                    ));
+                }
+                let buffer_len = self.buffers.get(view.buffer().index()).map_or(0, Vec::len);
+                if view
+                    .offset()
+                    .checked_add(view.length())
+                    .is_none_or(|end| end > buffer_len)
+                {
+                    return Err(self.err(
+                        &e,
+                        format!(
+                            "bufferViews[{}] runs past the end of its buffer",
+                            view.index()
+                        ),
+                    ));
+                }
+                Ok(())
+            };
+        match (accessor.view(), accessor.sparse()) {
+            (Some(view), _) => {
+                check_range(view, accessor.offset(), accessor.count(), accessor.size())?
+            }
+            (None, None) => {
+                return Err(self.err(
+                    &e,
+                    "accessor has no data (no bufferView and no sparse values)",
+                ));
+            }
+            (None, Some(_)) => {}
+        }
+        if let Some(sparse) = accessor.sparse() {
+            let indices = sparse.indices();
+            check_range(
+                indices.view(),
+                indices.offset(),
+                sparse.count(),
+                indices.index_type().size(),
+            )?;
+            let values = sparse.values();
+            check_range(
+                values.view(),
+                values.offset(),
+                sparse.count(),
+                accessor.size(),
+            )?;
+        }
+        Ok(())
+    }
+
+    fn primitive(&mut self, mesh: &gltf::Mesh, primitive: &gltf::Primitive) -> Result<Option<u32>> {
+        let key = (mesh.index(), primitive.index());
+        if let Some(m) = self.meshes.get(&key) {
+            return Ok(*m);
+        }
+        let element = format!("meshes[{}].primitives[{}]", mesh.index(), primitive.index());
+        let mode = primitive.mode();
+        if !matches!(
+            mode,
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            self.warn(
+                &element,
+                format!("{mode:?} primitive skipped (only triangles are rendered)"),
+            );
+            self.meshes.insert(key, None);
+            return Ok(None);
+        }
+        let converted = self.convert_primitive(mesh, primitive, &element)?;
+        let index = converted.map(|m| {
+            self.scene.meshes.push(m);
+            (self.scene.meshes.len() - 1) as u32
+        });
+        self.meshes.insert(key, index);
+        Ok(index)
+    }
+
+    fn convert_primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        primitive: &gltf::Primitive,
+        element: &str,
+    ) -> Result<Option<Mesh>> {
+        let f32_only = [DataType::F32];
+        let uv_types = [DataType::F32, DataType::U8, DataType::U16];
+        let position_acc = primitive
+            .get(&gltf::Semantic::Positions)
+            .ok_or_else(|| self.err(element, "has no POSITION attribute"))?;
+        let pos_el = format!("{element}.attributes.POSITION");
+        self.check_accessor(
+            &position_acc,
+            &pos_el,
+            &[Dimensions::Vec3],
+            &f32_only,
+            false,
+        )?;
+        let checks: [(gltf::Semantic, &[Dimensions], &[DataType]); 5] = [
+            (gltf::Semantic::Normals, &[Dimensions::Vec3], &f32_only),
+            (gltf::Semantic::Tangents, &[Dimensions::Vec4], &f32_only),
+            (gltf::Semantic::TexCoords(0), &[Dimensions::Vec2], &uv_types),
+            (gltf::Semantic::TexCoords(1), &[Dimensions::Vec2], &uv_types),
+            (
+                gltf::Semantic::Colors(0),
+                &[Dimensions::Vec3, Dimensions::Vec4],
+                &uv_types,
+            ),
+        ];
+        let vertex_count = position_acc.count();
+        for (semantic, dims, types) in checks {
+            if let Some(acc) = primitive.get(&semantic) {
+                let el = format!("{element}.attributes.{}", semantic.to_string());
+                self.check_accessor(&acc, &el, dims, types, true)?;
+                if acc.count() != vertex_count {
+                    return Err(self.err(
+                        el,
+                        format!(
+                            "has {} elements but POSITION has {vertex_count}",
+                            acc.count()
+                        ),
+                    ));
+                }
+            }
+        }
+        if let Some(acc) = primitive.indices() {
+            self.check_accessor(
+                &acc,
+                &format!("{element}.indices"),
+                &[Dimensions::Scalar],
+                &[DataType::U8, DataType::U16, DataType::U32],
+                false,
+            )?;
+        }
+
+        let buffers = &self.buffers;
+        let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let positions: Vec<Vec3> = reader
+            .read_positions()
+            .ok_or_else(|| self.err(&pos_el, "cannot read positions"))?
+            .map(Vec3::from_array)
+            .collect();
+        let bad = positions.iter().filter(|p| !p.is_finite()).count();
+        if bad > 0 {
+            return Err(self.err(
+                &pos_el,
+                format!("{bad} of {} positions are NaN or infinite", positions.len()),
+            ));
+        }
+        let mut repaired = 0usize;
+        let normals = reader.read_normals().map(|it| {
+            it.map(|n| {
+                let n = Vec3::from_array(n);
+                if n.is_finite() && n.length_squared() > 0.0 {
+                    n
+                } else {
+                    repaired += 1;
+                    Vec3::ZERO
+                }
+            })
+            .collect::<Vec<_>>()
+        });
+        let tangents: Option<Vec<Vec4>> = reader
+            .read_tangents()
+            .map(|it| it.map(Vec4::from_array).collect());
+        let mut read_uv = |set: u32| {
+            reader.read_tex_coords(set).map(|it| {
+                it.into_f32()
+                    .map(|uv| {
+                        let uv = Vec2::from_array(uv);
+                        if uv.is_finite() {
+                            uv
+                        } else {
+                            repaired += 1;
+                            Vec2::ZERO
+                        }
+                    })
+                    .collect::<Vec<_>>()
+            })
+        };
+        let uvs = [read_uv(0), read_uv(1)];
+        let colors = reader.read_colors(0).map(|it| {
+            it.into_rgba_f32()
+                .map(|c| {
+                    let c = Vec4::from_array(c);
+                    if c.is_finite() {
+                        c
+                    } else {
+                        repaired += 1;
+                        Vec4::ONE
+                    }
+                })
+                .collect::<Vec<_>>()
+        });
+        let indices: Vec<u32> = match reader.read_indices() {
+            Some(it) => it.into_u32().collect(),
+            None => (0..vertex_count as u32).collect(),
+        };
+        if let Some((i, &bad)) = indices
+            .iter()
+            .enumerate()
+            .find(|(_, i)| **i as usize >= vertex_count)
+        {
+            return Err(self.err(
+                format!("{element}.indices"),
+                format!("index {bad} at position {i} is out of range (the primitive has {vertex_count} vertices)"),
+            ));
+        }
+        if repaired > 0 {
+            self.warn(
+                element,
+                format!("{repaired} NaN/infinite normals, texture coordinates or colours replaced"),
+            );
+        }
+        let triangles = assemble_triangles(primitive.mode(), &indices);
+        if triangles.is_empty() {
+            self.warn(element, "has no non-degenerate triangles and is skipped");
+            return Ok(None);
+        }
+        let material = self.material(primitive.material())?;
+        let mut out = Mesh {
+            name: mesh
+                .name()
+                .map_or_else(|| format!("meshes[{}]", mesh.index()), str::to_string),
+            positions,
+            normals,
+            tangents: None,
+            uvs,
+            colors,
+            triangles,
+            material,
+        };
+        // Tangents only where a normal map needs them: the file's, else MikkTSpace's.
+        if let Some(normal_map) = self.scene.materials[material as usize].normal_texture {
+            let valid_tangents = tangents.filter(|t| t.iter().all(|t| t.is_finite()));
+            if let Some(t) = valid_tangents {
+                out.tangents = Some(t);
+            } else if !tangents::generate(&mut out, normal_map.tex_coord as usize) {
+                self.warn(
+                    element,
+                    "normal map ignored: the mesh has no texture coordinates for it",
+                );
+            }
+        }
+        Ok(Some(out))
+    }
+
+    fn material(&mut self, m: gltf::Material) -> Result<u32> {
+        if let Some(&index) = self.materials.get(&m.index()) {
+            return Ok(index);
+        }
+        let converted = match m.index() {
+            None => Material::default(),
+            Some(i) => self.convert_material(&m, &format!("materials[{i}]"))?,
+        };
+        self.scene.materials.push(converted);
+        let index = (self.scene.materials.len() - 1) as u32;
+        self.materials.insert(m.index(), index);
+        Ok(index)
+    }
+
+    fn convert_material(&mut self, m: &gltf::Material, element: &str) -> Result<Material> {
+        let pbr = m.pbr_metallic_roughness();
+        let finite = |v: &[f32]| v.iter().all(|x| x.is_finite());
+        let base_color = Vec4::from_array(pbr.base_color_factor());
+        let emissive = Vec3::from_array(m.emissive_factor()) * m.emissive_strength().unwrap_or(1.0);
+        if !finite(&base_color.to_array())
+            || !emissive.is_finite()
+            || !pbr.metallic_factor().is_finite()
+            || !pbr.roughness_factor().is_finite()
+        {
+            return Err(self.err(element, "a factor is not finite"));
+        }
+        let model = self.bsdf_model(m, element)?;
+        let base_color_texture = pbr
+            .base_color_texture()
+            .map(|t| {
+                self.texture_ref(
+                    t.texture(),
+                    t.tex_coord(),
+                    t.texture_transform().map(TextureTransform::from),
+                )
+            })
+            .transpose()?;
+        let metallic_roughness_texture = pbr
+            .metallic_roughness_texture()
+            .map(|t| {
+                self.texture_ref(
+                    t.texture(),
+                    t.tex_coord(),
+                    t.texture_transform().map(TextureTransform::from),
+                )
+            })
+            .transpose()?;
+        let normal = m.normal_texture();
+        let normal_texture = normal
+            .as_ref()
+            .map(|t| {
+                let transform = t
+                    .extension_value("KHR_texture_transform")
+                    .map(transform_from_json);
+                self.texture_ref(t.texture(), t.tex_coord(), transform)
+            })
+            .transpose()?;
+        let emissive_texture = m
+            .emissive_texture()
+            .map(|t| {
+                self.texture_ref(
+                    t.texture(),
+                    t.tex_coord(),
+                    t.texture_transform().map(TextureTransform::from),
+                )
+            })
+            .transpose()?;
+        if m.occlusion_texture().is_some() {
+            self.warn(
+                element,
+                "occlusionTexture ignored (a path tracer computes occlusion)",
+            );
+        }
+        let alpha_mode = match m.alpha_mode() {
+            gltf::material::AlphaMode::Opaque => AlphaMode::Opaque,
+            gltf::material::AlphaMode::Mask => AlphaMode::Mask {
+                cutoff: m.alpha_cutoff().unwrap_or(0.5),
+            },
+            gltf::material::AlphaMode::Blend => AlphaMode::Blend,
+        };
+        Ok(Material {
+            name: m.name().map_or_else(|| element.to_string(), str::to_string),
+            model,
+            base_color,
+            base_color_texture,
+            metallic: pbr.metallic_factor().clamp(0.0, 1.0),
+            roughness: pbr.roughness_factor().clamp(0.0, 1.0),
+            metallic_roughness_texture,
+            normal_texture,
+            normal_scale: normal.map_or(1.0, |n| n.scale()),
+            emissive: emissive.max(Vec3::ZERO),
+            emissive_texture,
+            ior: m.ior().unwrap_or(1.5),
+            alpha_mode,
+            double_sided: m.double_sided(),
+        })
+    }
+
+    /// The BSDF model from `extras.lucerna` (default: the glTF BRDF).
+    fn bsdf_model(&self, m: &gltf::Material, element: &str) -> Result<BsdfModel> {
+        let Some(raw) = m.extras() else {
+            return Ok(BsdfModel::GltfPbr);
+        };
+        let e = format!("{element}.extras.lucerna");
+        let value: serde_json::Value =
+            serde_json::from_str(raw.get()).map_err(|err| self.err(&e, err.to_string()))?;
+        let Some(section) = value.get("lucerna") else {
+            return Ok(BsdfModel::GltfPbr);
+        };
+        let extras: LucernaExtras =
+            serde_json::from_value(section.clone()).map_err(|err| self.err(&e, err.to_string()))?;
+        match extras.bsdf.as_str() {
+            "gltf" => Ok(BsdfModel::GltfPbr),
+            "lambert" => Ok(BsdfModel::Lambert),
+            "phong" => {
+                let exponent = extras
+                    .exponent
+                    .ok_or_else(|| self.err(&e, "phong needs an \"exponent\""))?;
+                if !(exponent.is_finite() && (0.0..=1e7).contains(&exponent)) {
+                    return Err(self.err(&e, format!("exponent {exponent} must be in [0, 1e7]")));
+                }
+                let specular = match extras.specular {
+                    None => Vec3::splat(0.04),
+                    Some(SpecularValue::Grey(g)) => Vec3::splat(g),
+                    Some(SpecularValue::Rgb(c)) => Vec3::from_array(c),
+                };
+                if !(specular.is_finite()
+                    && specular.min_element() >= 0.0
+                    && specular.max_element() <= 1.0)
+                {
+                    return Err(self.err(&e, "specular must be in [0, 1]"));
+                }
+                Ok(BsdfModel::Phong { exponent, specular })
+            }
+            other => Err(self.err(
+                &e,
+                format!("unknown bsdf {other:?} (expected gltf, lambert or phong)"),
+            )),
+        }
+    }
+
+    fn texture_ref(
+        &mut self,
+        texture: gltf::Texture,
+        tex_coord: u32,
+        transform: Option<TextureTransform>,
+    ) -> Result<TextureRef> {
+        let index = self.texture(&texture)?;
+        let (tex_coord, transform) = match transform {
+            Some(t) => {
+                if !(t.offset.is_finite() && t.rotation.is_finite() && t.scale.is_finite()) {
+                    return Err(self.err(
+                        format!("textures[{}]", texture.index()),
+                        "KHR_texture_transform is not finite",
+                    ));
+                }
+                (
+                    t.tex_coord.unwrap_or(tex_coord),
+                    Some(UvTransform::new(t.offset, t.rotation, t.scale)),
+                )
+            }
+            None => (tex_coord, None),
+        };
+        if tex_coord > 1 {
+            self.warn(
+                format!("textures[{}]", texture.index()),
+                format!("TEXCOORD_{tex_coord} is not supported; set 0 is used"),
+            );
+        }
+        Ok(TextureRef {
+            texture: index,
+            tex_coord: tex_coord.min(1),
+            transform,
+        })
+    }
+
+    fn texture(&mut self, texture: &gltf::Texture) -> Result<u32> {
+        if let Some(&index) = self.textures.get(&texture.index()) {
+            return Ok(index);
+        }
+        let image = texture.source();
+        let element = format!("images[{}]", image.index());
+        let decoded = match self.images.get(&image.index()) {
+            Some(d) => d.clone(),
+            None => {
+                let bytes: Vec<u8> = match image.source() {
+                    gltf::image::Source::View { view, .. } => {
+                        let data = self
+                            .buffers
+                            .get(view.buffer().index())
+                            .map(Vec::as_slice)
+                            .unwrap_or(&[]);
+                        let end = view.offset().checked_add(view.length());
+                        match end.and_then(|end| data.get(view.offset()..end)) {
+                            Some(slice) => slice.to_vec(),
+                            None => {
+                                return Err(self
+                                    .err(&element, "bufferView runs past the end of its buffer"));
+                            }
+                        }
+                    }
+                    gltf::image::Source::Uri { uri: u, .. } => uri::read(u, self.base)
+                        .map_err(|r| self.err(format!("{element}.uri"), r))?,
+                };
+                let d = img::decode(&bytes).map_err(|r| self.err(&element, r))?;
+                let decoded = (d.width, d.height, Arc::new(d.texels));
+                self.images.insert(image.index(), decoded.clone());
+                decoded
+            }
+        };
+        let sampler = texture.sampler();
+        let wrap = |w: gltf::texture::WrappingMode| match w {
+            gltf::texture::WrappingMode::ClampToEdge => Wrap::ClampToEdge,
+            gltf::texture::WrappingMode::MirroredRepeat => Wrap::MirroredRepeat,
+            gltf::texture::WrappingMode::Repeat => Wrap::Repeat,
+        };
+        self.scene.textures.push(scene::Texture {
+            name: image.name().map_or(element, str::to_string),
+            width: decoded.0,
+            height: decoded.1,
+            texels: decoded.2,
+            wrap_u: wrap(sampler.wrap_s()),
+            wrap_v: wrap(sampler.wrap_t()),
+            nearest: sampler.mag_filter() == Some(gltf::texture::MagFilter::Nearest),
+        });
+        let index = (self.scene.textures.len() - 1) as u32;
+        self.textures.insert(texture.index(), index);
+        Ok(index)
+    }
+
+    fn camera(&self, camera: &gltf::Camera, world: DMat4, node_name: &str) -> Result<Camera> {
+        let element = format!("cameras[{}]", camera.index());
+        let (projection, znear, zfar) = match camera.projection() {
+            gltf::camera::Projection::Perspective(p) => {
+                let yfov = p.yfov();
+                if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
+                    return Err(self.err(&element, format!("yfov {yfov} must be in (0, π)")));
+                }
+                let aspect = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+                (
+                    Projection::Perspective { yfov, aspect },
+                    p.znear(),
+                    p.zfar(),
+                )
+            }
+            gltf::camera::Projection::Orthographic(o) => {
+                let (xmag, ymag) = (o.xmag().abs(), o.ymag().abs());
+                if !(xmag > 0.0 && ymag > 0.0 && xmag.is_finite() && ymag.is_finite()) {
+                    return Err(self.err(&element, "xmag and ymag must be non-zero and finite"));
+                }
+                (
+                    Projection::Orthographic { xmag, ymag },
+                    o.znear(),
+                    Some(o.zfar()),
+                )
+            }
+        };
+        let name = camera
+            .name()
+            .map_or_else(|| node_name.to_string(), str::to_string);
+        Ok(Camera {
+            name,
+            projection,
+            transform: world,
+            aperture_radius: 0.0,
+            focus_distance: 1.0,
+            clip_near: znear.max(0.0) as f64,
+            clip_far: zfar.filter(|f| f.is_finite() && *f > znear).map(f64::from),
+        })
+    }
+
+    fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: DMat4, node_name: &str) {
+        let element = format!("KHR_lights_punctual.lights[{}]", light.index());
+        let radiant = Vec3::from_array(light.color()) * light.intensity();
+        if !radiant.is_finite() || radiant.min_element() < 0.0 {
+            self.warn(
+                &element,
+                "colour × intensity is negative or not finite; light skipped",
+            );
+            return;
+        }
+        let position = world.transform_point3(DVec3::ZERO);
+        let direction = world.transform_vector3(-DVec3::Z).normalize_or_zero();
+        if direction == DVec3::ZERO {
+            self.warn(&element, "node transform is degenerate; light skipped");
+            return;
+        }
+        let kind = match light.kind() {
+            gltf::khr_lights_punctual::Kind::Point => LightKind::Point {
+                position,
+                intensity: radiant,
+            },
+            gltf::khr_lights_punctual::Kind::Directional => LightKind::Directional {
+                direction,
+                irradiance: radiant,
+            },
+            gltf::khr_lights_punctual::Kind::Spot {
+                inner_cone_angle,
+                outer_cone_angle,
+            } => LightKind::Spot {
+                position,
+                direction,
+                intensity: radiant,
+                inner_cone: inner_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2),
+                outer_cone: outer_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2),
+            },
+        };
+        self.scene.lights.push(Light {
+            name: light
+                .name()
+                .map_or_else(|| node_name.to_string(), str::to_string),
+            kind,
+        });
+    }
+}
+
+/// A KHR_texture_transform's values.
+struct TextureTransform {
+    offset: Vec2,
+    rotation: f32,
+    scale: Vec2,
+    tex_coord: Option<u32>,
+}
+
+impl From<gltf::texture::TextureTransform<'_>> for TextureTransform {
+    fn from(t: gltf::texture::TextureTransform) -> Self {
+        Self {
+            offset: Vec2::from_array(t.offset()),
+            rotation: t.rotation(),
+            scale: Vec2::from_array(t.scale()),
+            tex_coord: t.tex_coord(),
+        }
+    }
+}
+
+/// Reads a KHR_texture_transform from raw JSON (normal textures do not expose it typed).
+fn transform_from_json(v: &serde_json::Value) -> TextureTransform {
+    let pair = |key: &str, default: f32| {
+        let get = |i: usize| {
+            v.get(key)
+                .and_then(|a| a.get(i))
+                .and_then(|x| x.as_f64())
+                .map_or(default, |x| x as f32)
+        };
+        Vec2::new(get(0), get(1))
+    };
+    TextureTransform {
+        offset: pair("offset", 0.0),
+        rotation: v
+            .get("rotation")
+            .and_then(|x| x.as_f64())
+            .map_or(0.0, |x| x as f32),
+        scale: pair("scale", 1.0),
+        tex_coord: v
+            .get("texCoord")
+            .and_then(|x| x.as_u64())
+            .map(|x| x.min(u32::MAX as u64) as u32),
+    }
+}
+
+/// Triangles of a primitive in counter-clockwise order, degenerate ones (repeated
+/// indices) dropped. Strips and fans follow the glTF specification (§3.7.2.1).
+fn assemble_triangles(mode: Mode, indices: &[u32]) -> Vec<[u32; 3]> {
+    let tris: Vec<[u32; 3]> = match mode {
+        Mode::Triangles => indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect(),
+        Mode::TriangleStrip => (0..indices.len().saturating_sub(2))
+            .map(|i| {
+                if i % 2 == 0 {
+                    [indices[i], indices[i + 1], indices[i + 2]]
+                } else {
+                    [indices[i], indices[i + 2], indices[i + 1]]
+                }
+            })
+            .collect(),
+        Mode::TriangleFan => (1..indices.len().saturating_sub(1))
+            .map(|i| [indices[i], indices[i + 1], indices[0]])
+            .collect(),
+        _ => Vec::new(),
+    };
+    tris.into_iter()
+        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn strips_and_fans_follow_the_specification() {
+        assert_eq!(
+            assemble_triangles(Mode::TriangleStrip, &[0, 1, 2, 3, 4]),
+            vec![[0, 1, 2], [1, 3, 2], [2, 3, 4]]
+        );
+        assert_eq!(
+            assemble_triangles(Mode::TriangleFan, &[0, 1, 2, 3]),
+            vec![[1, 2, 0], [2, 3, 0]]
+        );
+        assert_eq!(
+            assemble_triangles(Mode::Triangles, &[0, 1, 2, 3, 3, 4, 5]),
+            vec![[0, 1, 2]]
+        );
+    }
+}

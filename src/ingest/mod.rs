@@ -1,0 +1,91 @@
+//! Ingest: scene files to the internal [`Scene`]. glTF is read natively; the embedded
+//! default scene is the Cornell box of `scenes/cornell-box`.
+
+pub mod gltf;
+pub mod image;
+pub mod tangents;
+pub mod uri;
+
+use crate::error::{Error, Result};
+use crate::scene::{self, Scene, Texture, Wrap};
+use glam::{DMat4, Vec3};
+use std::path::Path;
+use std::sync::Arc;
+
+/// Name the embedded default scene goes by in messages and metadata.
+pub const DEFAULT_SCENE: &str = "<default: cornell-box>";
+
+const CORNELL_BOX: &[u8] = include_bytes!("../../scenes/cornell-box/cornell-box.gltf");
+
+/// The embedded default scene: the Cornell box.
+pub fn default_scene() -> Result<Scene> {
+    gltf::import(CORNELL_BOX, DEFAULT_SCENE, None)
+}
+
+/// Loads a scene file, choosing the importer by extension.
+pub fn load(path: &Path) -> Result<Scene> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    match ext.as_str() {
+        "gltf" | "glb" => gltf::load(path),
+        "usd" | "usda" | "usdc" | "usdz" => Err(Error::bad_input(
+            path,
+            "file",
+            "USD scenes are not supported yet (the usd-core plugin is planned)",
+        )),
+        _ => Err(Error::bad_input(
+            path,
+            "file",
+            "unknown scene format (expected .gltf or .glb)",
+        )),
+    }
+}
+
+/// Replaces the scene's environment with a constant radiance.
+pub fn set_constant_environment(scene: &mut Scene, radiance: Vec3) {
+    scene.environment = Some(scene::Environment::Constant(radiance));
+}
+
+/// Replaces the scene's environment with a lat-long map read from `path` (OpenEXR, PNG or
+/// JPEG; 8-bit images are taken as sRGB-encoded) times `scale`.
+pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Result<()> {
+    let decoded =
+        image::read_file(path).map_err(|r| Error::bad_input(path, "environment map", r))?;
+    let texels = match decoded.texels {
+        scene::Texels::Rgba8(t) => {
+            // Decode to linear once: the environment is sampled as linear radiance.
+            let lut = &*crate::color::SRGB8_TO_LINEAR;
+            scene::Texels::RgbaF32(
+                t.iter()
+                    .map(|p| {
+                        [
+                            lut[p[0] as usize],
+                            lut[p[1] as usize],
+                            lut[p[2] as usize],
+                            p[3] as f32 / 255.0,
+                        ]
+                    })
+                    .collect(),
+            )
+        }
+        f => f,
+    };
+    scene.textures.push(Texture {
+        name: path.display().to_string(),
+        width: decoded.width,
+        height: decoded.height,
+        texels: Arc::new(texels),
+        wrap_u: Wrap::Repeat,
+        wrap_v: Wrap::ClampToEdge,
+        nearest: false,
+    });
+    scene.environment = Some(scene::Environment::LatLong {
+        texture: (scene.textures.len() - 1) as u32,
+        scale,
+        rotation: DMat4::IDENTITY,
+    });
+    Ok(())
+}

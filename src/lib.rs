@@ -1,0 +1,26 @@
+//! lucerna: a physically based path tracer that renders glTF (and, through a plugin, USD)
+//! scenes into one multi-layer EXR.
+//!
+//! Data flow (see `../shared/design.md`): an ingest module turns a file into a [`scene::Scene`]
+//! (world units, right-handed, Y up); [`world::World`] prepares it for rendering (render space,
+//! BVH, lights); [`render`] runs the [`integrator`] over tiles and accumulates every requested
+//! AOV in a [`film::Film`], which [`film::exr`] writes atomically.
+
+pub mod camera;
+pub mod color;
+pub mod error;
+pub mod film;
+pub mod geometry;
+pub mod ingest;
+pub mod integrator;
+pub mod light;
+pub mod material;
+pub mod render;
+pub mod sampling;
+pub mod scene;
+pub mod world;
+
+pub use error::{Error, ErrorKind, Result};
+
+/// Renderer name and version, as written into EXR headers.
+pub const RENDERER: &str = concat!("lucerna ", env!("CARGO_PKG_VERSION"));

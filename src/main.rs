@@ -1,0 +1,356 @@
+//! The `lucerna` command line: `render` and `inspect`.
+
+use clap::{Parser, Subcommand};
+use glam::Vec3;
+use lucerna::error::{Error, Result};
+use lucerna::film::aov::AovSet;
+use lucerna::film::exr::Attribute;
+use lucerna::film::filter::PixelFilter;
+use lucerna::integrator::{Mis, RussianRoulette, Settings};
+use lucerna::render::{self, RenderOptions};
+use lucerna::sampling::sampler::SamplerKind;
+use lucerna::scene::{LightKind, Scene};
+use lucerna::world::World;
+use lucerna::{film, ingest};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "lucerna",
+    version,
+    about = "A physically based path tracer: glTF scenes to multi-layer EXR"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a scene (the embedded Cornell box without SCENE) to a multi-layer EXR.
+    Render(RenderArgs),
+    /// Print a summary of a scene and what rendering it needs.
+    Inspect {
+        /// A .gltf or .glb file.
+        scene: PathBuf,
+    },
+}
+
+#[derive(clap::Args)]
+struct RenderArgs {
+    /// A .gltf or .glb file; without it, the embedded Cornell box.
+    scene: Option<PathBuf>,
+    /// Output EXR file.
+    #[arg(short, long, default_value = "render.exr")]
+    output: PathBuf,
+    /// Samples per pixel.
+    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
+    spp: u32,
+    /// AOV layers to write, comma-separated (e.g. `direct,indirect,albedo`), or `all`.
+    /// The beauty is always written.
+    #[arg(long, default_value = "all", value_parser = parse_aovs)]
+    aov: AovSet,
+    /// Image size, e.g. 640x480 (default: from the camera's aspect ratio, long side 512).
+    #[arg(long, value_parser = parse_resolution)]
+    resolution: Option<(u32, u32)>,
+    /// Camera to render through (default: the scene's first camera).
+    #[arg(long)]
+    camera: Option<String>,
+    /// Random seed.
+    #[arg(long, default_value_t = 0)]
+    seed: u32,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    threads: Option<u32>,
+    /// Constant environment radiance, e.g. 0.5,0.6,0.8.
+    #[arg(long, value_parser = parse_rgb, conflicts_with = "env_map")]
+    env: Option<Vec3>,
+    /// Lat-long environment map (OpenEXR, PNG or JPEG).
+    #[arg(long)]
+    env_map: Option<PathBuf>,
+    /// Multiplier of the environment map.
+    #[arg(long, default_value = "1", value_parser = parse_rgb)]
+    env_scale: Vec3,
+    /// Also write a tone-mapped sRGB PNG of the beauty.
+    #[arg(long)]
+    preview: Option<PathBuf>,
+    /// Sample sequence: sobol (Owen-scrambled) or independent.
+    #[arg(long, default_value = "sobol", value_parser = parse_sampler)]
+    sampler: SamplerKind,
+    /// MIS heuristic: balance, power[:β], maximum, cutoff[:α], nee-only, bsdf-only.
+    #[arg(long, default_value = "power", value_parser = Mis::parse)]
+    mis: Mis,
+    /// Russian roulette: off, fixed:P, throughput[:THRESHOLD].
+    #[arg(long, default_value = "throughput", value_parser = RussianRoulette::parse)]
+    rr: RussianRoulette,
+    /// Maximum number of bounces (1 = direct light only), or `unlimited`.
+    #[arg(long, default_value = "unlimited", value_parser = parse_depth)]
+    max_depth: MaxDepth,
+    /// Pixel filter: box, blackman-harris (width 1.5) or blackman-harris:WIDTH.
+    #[arg(long, default_value = "blackman-harris", value_parser = parse_filter)]
+    filter: PixelFilter,
+    /// No progress bar.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+/// A parsed `--max-depth`.
+#[derive(Clone, Copy)]
+struct MaxDepth(Option<u32>);
+
+fn parse_aovs(s: &str) -> std::result::Result<AovSet, String> {
+    AovSet::parse(s)
+}
+
+fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .ok_or("expected WIDTHxHEIGHT, e.g. 640x480")?;
+    let parse = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .ok()
+            .filter(|v| (1..=65536).contains(v))
+    };
+    match (parse(w), parse(h)) {
+        (Some(w), Some(h)) => Ok((w, h)),
+        _ => Err("width and height must be integers in 1..=65536".into()),
+    }
+}
+
+fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
+    let values: Vec<f32> = s
+        .split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<f32>()
+                .map_err(|_| format!("{v:?} is not a number"))
+        })
+        .collect::<std::result::Result<_, _>>()?;
+    let c = match values[..] {
+        [g] => Vec3::splat(g),
+        [r, g, b] => Vec3::new(r, g, b),
+        _ => return Err("expected one value or R,G,B".into()),
+    };
+    if c.is_finite() && c.min_element() >= 0.0 {
+        Ok(c)
+    } else {
+        Err("values must be finite and non-negative".into())
+    }
+}
+
+fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
+    SamplerKind::parse(s).ok_or_else(|| format!("unknown sampler {s:?} (sobol, independent)"))
+}
+
+fn parse_depth(s: &str) -> std::result::Result<MaxDepth, String> {
+    if s == "unlimited" {
+        return Ok(MaxDepth(None));
+    }
+    s.parse::<u32>()
+        .map(|d| MaxDepth(Some(d)))
+        .map_err(|_| format!("expected a number of bounces or `unlimited`, got {s:?}"))
+}
+
+fn parse_filter(s: &str) -> std::result::Result<PixelFilter, String> {
+    PixelFilter::parse(s).ok_or_else(|| {
+        format!("unknown filter {s:?} (box, blackman-harris, blackman-harris:WIDTH)")
+    })
+}
+
+fn load_scene(path: Option<&Path>) -> Result<Scene> {
+    let scene = match path {
+        Some(p) => ingest::load(p)?,
+        None => ingest::default_scene()?,
+    };
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(scene)
+}
+
+fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        builder = builder.num_threads(n as usize);
+    }
+    builder
+        .build()
+        .map_err(|e| Error::other("", "threads", e.to_string()))
+}
+
+fn render_command(args: RenderArgs) -> Result<()> {
+    let pool = thread_pool(args.threads)?;
+    let mut scene = load_scene(args.scene.as_deref())?;
+    if let Some(radiance) = args.env {
+        ingest::set_constant_environment(&mut scene, radiance);
+    }
+    if let Some(path) = &args.env_map {
+        ingest::set_environment_map(&mut scene, path, args.env_scale)?;
+    }
+    let source = scene.source.clone();
+    let settings = Settings {
+        mis: args.mis,
+        rr: args.rr,
+        max_depth: args.max_depth.0,
+        sampler: args.sampler,
+        seed: args.seed,
+    };
+    let options = RenderOptions {
+        spp: args.spp,
+        settings,
+        aovs: args.aov,
+        filter: args.filter,
+        progress: !args.quiet,
+    };
+    let build_start = std::time::Instant::now();
+    let world = pool.install(|| World::build(scene, args.camera.as_deref(), args.resolution))?;
+    let build_seconds = build_start.elapsed().as_secs_f64();
+    let (film, stats) = pool.install(|| render::render(&world, &options));
+
+    let camera = &world.camera;
+    // glam's column-major listing of a column-vector matrix is the row-major listing of
+    // its transpose: exactly Imath's row-vector convention.
+    let imath = |m: glam::DMat4| m.as_mat4().to_cols_array();
+    let attributes = vec![
+        (
+            "lucerna/renderer".to_string(),
+            Attribute::Text(lucerna::RENDERER.into()),
+        ),
+        ("lucerna/scene".into(), Attribute::Text(source)),
+        (
+            "lucerna/settings".into(),
+            Attribute::Text(format!(
+                "{} filter={} aov={}",
+                options.settings.describe(),
+                options.filter.describe(),
+                options.aovs.describe()
+            )),
+        ),
+        (
+            "lucerna/seed".into(),
+            Attribute::Int(options.settings.seed as i32),
+        ),
+        ("lucerna/spp".into(), Attribute::Int(options.spp as i32)),
+        (
+            "lucerna/samples".into(),
+            Attribute::Double(stats.samples as f64),
+        ),
+        (
+            "lucerna/render_seconds".into(),
+            Attribute::Double(stats.seconds),
+        ),
+        (
+            "lucerna/nan_inf_discarded".into(),
+            Attribute::Double(stats.discarded as f64),
+        ),
+    ];
+    let header = film::exr::Header {
+        world_to_camera: Some(imath(camera.world_to_camera)),
+        world_to_ndc: Some(imath(camera.world_to_ndc)),
+        attributes,
+    };
+    film::exr::write(&args.output, &film, &header)?;
+    if let Some(png) = &args.preview {
+        film::preview::write(png, &film)?;
+    }
+    eprintln!(
+        "lucerna: wrote {} ({}x{}, {} spp, {} threads): scene prepared in {:.2} s; rendered in {}",
+        args.output.display(),
+        film.width,
+        film.height,
+        options.spp,
+        pool.current_num_threads(),
+        build_seconds,
+        stats.summary()
+    );
+    Ok(())
+}
+
+fn inspect_command(path: &Path) -> Result<()> {
+    let scene = load_scene(Some(path))?;
+    let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();
+    let vertices: usize = scene.meshes.iter().map(|m| m.positions.len()).sum();
+    println!("scene: {}", scene.source);
+    println!(
+        "  geometry: {} meshes, {} instances, {} triangles ({} instanced), {} vertices",
+        scene.meshes.len(),
+        scene.instances.len(),
+        triangles,
+        scene.instanced_triangle_count(),
+        vertices
+    );
+    if let Some((lo, hi)) = scene.bounds() {
+        println!(
+            "  bounds: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",
+            lo.x, lo.y, lo.z, hi.x, hi.y, hi.z
+        );
+    }
+    let mut models: Vec<&str> = scene.materials.iter().map(|m| m.model.name()).collect();
+    models.sort();
+    models.dedup();
+    let count = |f: &dyn Fn(&lucerna::scene::Material) -> bool| {
+        scene.materials.iter().filter(|m| f(m)).count()
+    };
+    println!(
+        "  materials: {} ({}); {} emissive, {} normal-mapped, {} with alpha, {} double-sided",
+        scene.materials.len(),
+        models.join(", "),
+        count(&|m| m.is_emissive()),
+        count(&|m| m.normal_texture.is_some()),
+        count(&|m| m.alpha_mode != lucerna::scene::AlphaMode::Opaque),
+        count(&|m| m.double_sided),
+    );
+    let texel_bytes: usize = scene.textures.iter().map(|t| t.memory_bytes()).sum();
+    println!(
+        "  textures: {} ({} bytes of texels)",
+        scene.textures.len(),
+        texel_bytes
+    );
+    let emissive_triangles: usize = scene
+        .instances
+        .iter()
+        .map(|i| &scene.meshes[i.mesh as usize])
+        .filter(|m| scene.materials[m.material as usize].is_emissive())
+        .map(|m| m.triangles.len())
+        .sum();
+    let kinds = |f: fn(&LightKind) -> bool| scene.lights.iter().filter(|l| f(&l.kind)).count();
+    println!(
+        "  lights: {} emissive triangles, {} point, {} spot, {} directional, environment: {}",
+        emissive_triangles,
+        kinds(|k| matches!(k, LightKind::Point { .. })),
+        kinds(|k| matches!(k, LightKind::Spot { .. })),
+        kinds(|k| matches!(k, LightKind::Directional { .. })),
+        if scene.environment.is_some() {
+            "yes"
+        } else {
+            "no"
+        }
+    );
+    let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+    println!(
+        "  cameras: {}",
+        if names.is_empty() {
+            "none (one framing the scene is used)".to_string()
+        } else {
+            names.join(", ")
+        }
+    );
+    Ok(())
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => render_command(args),
+        Command::Inspect { scene } => inspect_command(&scene),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}

@@ -1,0 +1,191 @@
+//! BSDFs and their evaluation from scene materials.
+//!
+//! Every BSDF works in the local shading frame (+z = shading normal) and offers the same
+//! three operations, which the chi-square tests check against each other:
+//! `eval` (f · cos θi), `pdf` (solid-angle density of `sample`) and `sample`
+//! (direction, weight f · cos θi / pdf). Delta lobes never appear in `eval` or `pdf`; a
+//! sampled delta lobe reports [`Lobe::Specular`] and its discrete probability as `pdf`.
+
+pub mod gltf_pbr;
+pub mod lambert;
+pub mod microfacet;
+pub mod phong;
+
+use crate::scene::{BsdfModel, Material, Texture, TextureRef};
+use glam::{Vec2, Vec3, Vec4};
+use gltf_pbr::GltfPbr;
+use lambert::Lambert;
+use phong::Phong;
+
+/// The kind of lobe a sample came from (the lobe splits of the AOVs follow it).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Lobe {
+    Diffuse,
+    Glossy,
+    /// A delta lobe (perfect mirror): only BSDF sampling can find it.
+    Specular,
+}
+
+/// A sampled direction.
+#[derive(Clone, Copy, Debug)]
+pub struct BsdfSample {
+    pub wi: Vec3,
+    /// f · |cos θi| / pdf.
+    pub weight: Vec3,
+    /// Solid-angle density, or the lobe's discrete probability for a delta lobe.
+    pub pdf: f32,
+    pub lobe: Lobe,
+}
+
+impl BsdfSample {
+    /// True if the sample came from a delta lobe.
+    pub fn is_delta(&self) -> bool {
+        self.lobe == Lobe::Specular
+    }
+}
+
+/// A BSDF at one surface point.
+#[derive(Clone, Copy, Debug)]
+pub enum Bsdf {
+    Lambert(Lambert),
+    GltfPbr(GltfPbr),
+    Phong(Phong),
+}
+
+impl Bsdf {
+    /// f(wo, wi) · cos θi over the non-delta lobes.
+    #[inline]
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match self {
+            Self::Lambert(b) => b.eval(wo, wi),
+            Self::GltfPbr(b) => b.eval(wo, wi),
+            Self::Phong(b) => b.eval(wo, wi),
+        }
+    }
+
+    /// Solid-angle density with which [`Bsdf::sample`] produces `wi` (non-delta lobes).
+    #[inline]
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match self {
+            Self::Lambert(b) => b.pdf(wo, wi),
+            Self::GltfPbr(b) => b.pdf(wo, wi),
+            Self::Phong(b) => b.pdf(wo, wi),
+        }
+    }
+
+    /// Samples a direction: `u_lobe` picks the lobe, `u` the direction in it.
+    #[inline]
+    pub fn sample(&self, wo: Vec3, u_lobe: f32, u: Vec2) -> Option<BsdfSample> {
+        match self {
+            Self::Lambert(b) => b.sample(wo, u),
+            Self::GltfPbr(b) => b.sample(wo, u_lobe, u),
+            Self::Phong(b) => b.sample(wo, u_lobe, u),
+        }
+    }
+
+    /// True if some lobe is not a delta, i.e. light sampling can contribute.
+    #[inline]
+    pub fn has_non_delta(&self) -> bool {
+        match self {
+            Self::GltfPbr(b) => b.has_non_delta(),
+            Self::Lambert(_) | Self::Phong(_) => true,
+        }
+    }
+
+    /// Directional albedo estimate at `wo`, as denoisers expect it in the albedo AOV.
+    pub fn albedo(&self, wo: Vec3) -> Vec3 {
+        match self {
+            Self::Lambert(b) => b.albedo,
+            Self::GltfPbr(b) => b.albedo(wo),
+            Self::Phong(b) => b.albedo(),
+        }
+    }
+}
+
+/// Interpolated vertex attributes at a surface point that material lookups read.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceAttributes {
+    /// Texture coordinate sets 0 and 1 (zero where the mesh has none).
+    pub uv: [Vec2; 2],
+    /// Vertex colour (white where the mesh has none).
+    pub color: Vec4,
+}
+
+/// Looks up a texture slot, applying its UV set and transform.
+#[inline]
+pub fn texture_lookup(
+    textures: &[Texture],
+    slot: &TextureRef,
+    attrs: &SurfaceAttributes,
+    srgb: bool,
+) -> Vec4 {
+    let uv = attrs.uv[(slot.tex_coord as usize).min(1)];
+    let uv = slot.transform.map_or(uv, |t| t.apply(uv));
+    textures[slot.texture as usize].sample(uv, srgb)
+}
+
+/// Base colour (factor × texture × vertex colour), linear RGBA.
+#[inline]
+pub fn base_color(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Vec4 {
+    let mut c = m.base_color * attrs.color;
+    if let Some(t) = &m.base_color_texture {
+        c *= texture_lookup(textures, t, attrs, true);
+    }
+    c
+}
+
+/// Coverage alpha of the material at a surface point.
+#[inline]
+pub fn alpha(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> f32 {
+    base_color(m, textures, attrs).w
+}
+
+/// Emitted radiance of the material at a surface point.
+#[inline]
+pub fn emission(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Vec3 {
+    let mut e = m.emissive;
+    if let Some(t) = &m.emissive_texture {
+        e *= texture_lookup(textures, t, attrs, true).truncate();
+    }
+    e
+}
+
+/// The tangent-space normal from the material's normal map (scaled in x and y as glTF
+/// specifies), or `None` without a normal map.
+#[inline]
+pub fn tangent_space_normal(
+    m: &Material,
+    textures: &[Texture],
+    attrs: &SurfaceAttributes,
+) -> Option<Vec3> {
+    let t = m.normal_texture.as_ref()?;
+    let c = texture_lookup(textures, t, attrs, false).truncate() * 2.0 - Vec3::ONE;
+    let n = Vec3::new(c.x * m.normal_scale, c.y * m.normal_scale, c.z);
+    let n = n.normalize_or_zero();
+    (n.z > 0.0).then_some(n)
+}
+
+/// The BSDF of material `m` at a surface point.
+pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bsdf {
+    let base = base_color(m, textures, attrs).truncate();
+    match m.model {
+        BsdfModel::Lambert => Bsdf::Lambert(Lambert {
+            albedo: base.clamp(Vec3::ZERO, Vec3::ONE),
+        }),
+        BsdfModel::Phong { exponent, specular } => Bsdf::Phong(Phong {
+            // kd + ks <= 1 keeps the lobe pair energy-conserving.
+            kd: base.min(Vec3::ONE - specular).max(Vec3::ZERO),
+            ks: specular,
+            exponent,
+        }),
+        BsdfModel::GltfPbr => {
+            let (mut metallic, mut roughness) = (m.metallic, m.roughness);
+            if let Some(t) = &m.metallic_roughness_texture {
+                let mr = texture_lookup(textures, t, attrs, false);
+                roughness *= mr.y;
+                metallic *= mr.z;
+            }
+            Bsdf::GltfPbr(GltfPbr::new(base, metallic, roughness, m.ior))
+        }
+    }
+}

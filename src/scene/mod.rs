@@ -1,0 +1,150 @@
+//! The internal scene: the one representation every ingest path produces. World units,
+//! right-handed, Y up (like glTF). Transforms are double precision so that a scene far from
+//! the origin keeps its detail until [`crate::world`] moves it into render space.
+
+pub mod material;
+pub mod texture;
+
+use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
+pub use material::{AlphaMode, BsdfModel, Material, TextureRef, UvTransform};
+pub use texture::{Texels, Texture, Wrap};
+
+/// A scene ready for [`crate::world::World::build`].
+#[derive(Clone, Debug, Default)]
+pub struct Scene {
+    /// Where the scene came from (a path, or a name for built-in scenes).
+    pub source: String,
+    pub meshes: Vec<Mesh>,
+    pub instances: Vec<Instance>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    pub lights: Vec<Light>,
+    pub cameras: Vec<Camera>,
+    pub environment: Option<Environment>,
+    /// Problems that did not stop the import (unsupported features, repaired data).
+    pub warnings: Vec<String>,
+}
+
+/// A triangle mesh in object space with one material.
+#[derive(Clone, Debug, Default)]
+pub struct Mesh {
+    pub name: String,
+    pub positions: Vec<Vec3>,
+    /// Shading normals; `None` means flat shading with the geometric normal.
+    pub normals: Option<Vec<Vec3>>,
+    /// Tangents with the bitangent sign in w (glTF convention); present when a normal map
+    /// needs them.
+    pub tangents: Option<Vec<Vec4>>,
+    /// Texture coordinate sets 0 and 1.
+    pub uvs: [Option<Vec<Vec2>>; 2],
+    /// Vertex colours (linear RGBA), multiplied into the base colour.
+    pub colors: Option<Vec<Vec4>>,
+    /// Counter-clockwise triangles (the front side faces the viewer).
+    pub triangles: Vec<[u32; 3]>,
+    pub material: u32,
+}
+
+/// A placement of a mesh in the world.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// Name of the node or prim that placed it.
+    pub name: String,
+    pub mesh: u32,
+    /// Object to world.
+    pub transform: DMat4,
+}
+
+/// A punctual light. Photometric glTF units are taken as radiometric ones (1 cd = 1 W/sr),
+/// consistent with emissive surfaces whose emission is read as radiance.
+#[derive(Clone, Debug)]
+pub struct Light {
+    pub name: String,
+    pub kind: LightKind,
+}
+
+/// The kinds of punctual light.
+#[derive(Clone, Debug)]
+pub enum LightKind {
+    /// Radiant intensity `intensity` in every direction from `position`.
+    Point { position: DVec3, intensity: Vec3 },
+    /// A point light restricted to a cone around `direction` with the glTF
+    /// (KHR_lights_punctual) smooth falloff between the cone angles.
+    Spot {
+        position: DVec3,
+        direction: DVec3,
+        intensity: Vec3,
+        inner_cone: f32,
+        outer_cone: f32,
+    },
+    /// Parallel light travelling along `direction` with irradiance `irradiance`.
+    Directional { direction: DVec3, irradiance: Vec3 },
+}
+
+/// Light arriving from infinitely far away.
+#[derive(Clone, Debug)]
+pub enum Environment {
+    /// The same radiance from every direction.
+    Constant(Vec3),
+    /// A latitude-longitude radiance map (`texture`, linear) times `scale`. The image's
+    /// top row is +Y, its centre column looks along -Z, u grows towards +X (see
+    /// `light::environment`). `rotation` turns the map into the world.
+    LatLong {
+        texture: u32,
+        scale: Vec3,
+        rotation: DMat4,
+    },
+}
+
+/// A camera: projection and placement (camera to world, looking down -Z, +Y up).
+#[derive(Clone, Debug)]
+pub struct Camera {
+    pub name: String,
+    pub projection: Projection,
+    pub transform: DMat4,
+    /// Thin-lens aperture radius in world units (0: pinhole).
+    pub aperture_radius: f64,
+    /// Distance to the plane in focus, world units.
+    pub focus_distance: f64,
+    /// Near clipping distance along the viewing axis (world units): nothing closer is seen.
+    pub clip_near: f64,
+    /// Far clipping distance, if any.
+    pub clip_far: Option<f64>,
+}
+
+/// Camera projections.
+#[derive(Clone, Debug)]
+pub enum Projection {
+    /// Vertical field of view in radians and, if the scene gives one, width / height.
+    Perspective { yfov: f32, aspect: Option<f32> },
+    /// Half width and half height of the view volume in world units.
+    Orthographic { xmag: f32, ymag: f32 },
+}
+
+impl Scene {
+    /// Number of triangles over all instances.
+    pub fn instanced_triangle_count(&self) -> usize {
+        self.instances
+            .iter()
+            .map(|i| self.meshes[i.mesh as usize].triangles.len())
+            .sum()
+    }
+
+    /// World-space bounds of all instanced geometry, or `None` when there is none.
+    pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for inst in &self.instances {
+            for p in &self.meshes[inst.mesh as usize].positions {
+                let w = inst.transform.transform_point3(p.as_dvec3());
+                lo = lo.min(w);
+                hi = hi.max(w);
+            }
+        }
+        (lo.x <= hi.x).then_some((lo, hi))
+    }
+
+    /// Finds a camera by name.
+    pub fn camera(&self, name: &str) -> Option<&Camera> {
+        self.cameras.iter().find(|c| c.name == name)
+    }
+}

@@ -1,0 +1,553 @@
+//! The render-ready scene: geometry moved into render space, the BVH, lights, the camera,
+//! and what a hit point needs for shading.
+//!
+//! Render space is world space translated to the centre of the scene's bounds and scaled by
+//! a power of two (exact in binary) so that the bounds fit in [-1, 1]. Both are applied in
+//! double precision before rounding to f32, so a scene placed 1e7 units from the origin
+//! renders like the same scene at the origin, and every absolute epsilon (ray offsets near
+//! the origin) is relative to the scene's size.
+
+use crate::camera::{self, Camera};
+use crate::error::{Error, Result};
+use crate::geometry::frame::Frame;
+use crate::geometry::ray::Ray;
+use crate::geometry::triangle::{TriangleHit, geometric_normal};
+use crate::geometry::{ALPHA_TESTED, Bvh, CULL_BACK, Hit};
+use crate::light::environment::{Environment, EnvironmentMap};
+use crate::light::{Light, LightSet, TriangleLight};
+use crate::material::{self, SurfaceAttributes};
+use crate::sampling::pcg::hash_u32;
+use crate::scene::{self, AlphaMode, LightKind, Material, Scene, Texture};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
+
+/// World space to render space: `(p - centre) * scale`, `scale` a power of two.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderSpace {
+    pub centre: DVec3,
+    pub scale: f64,
+}
+
+impl RenderSpace {
+    /// The render space for world bounds `(lo, hi)`.
+    pub fn from_bounds(lo: DVec3, hi: DVec3) -> Self {
+        let centre = (lo + hi) * 0.5;
+        let half_extent = ((hi - lo) * 0.5).max_element();
+        let scale = if half_extent > 0.0 && half_extent.is_finite() {
+            (-half_extent.log2().ceil()).exp2()
+        } else {
+            1.0
+        };
+        Self { centre, scale }
+    }
+
+    /// World to render space as a matrix.
+    pub fn matrix(&self) -> DMat4 {
+        DMat4::from_scale(DVec3::splat(self.scale)) * DMat4::from_translation(-self.centre)
+    }
+
+    /// A world point in render space.
+    #[inline]
+    pub fn point(&self, p: DVec3) -> Vec3 {
+        ((p - self.centre) * self.scale).as_vec3()
+    }
+
+    /// A render-space point in world space.
+    #[inline]
+    pub fn to_world(&self, p: Vec3) -> DVec3 {
+        p.as_dvec3() / self.scale + self.centre
+    }
+}
+
+/// A mesh instance flattened into render space.
+#[derive(Clone, Debug)]
+pub struct RenderMesh {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub tangents: Option<Vec<Vec4>>,
+    pub uvs: [Option<Vec<Vec2>>; 2],
+    pub colors: Option<Vec<Vec4>>,
+    pub triangles: Vec<[u32; 3]>,
+    pub material: u32,
+    /// Index of the light of triangle 0 when the material emits (triangle i is light
+    /// `first_light + i`).
+    pub first_light: Option<u32>,
+}
+
+/// What shading reads: meshes, materials, textures, and the map from BVH primitives to
+/// (mesh, triangle).
+#[derive(Clone, Debug)]
+pub struct Surfaces {
+    pub meshes: Vec<RenderMesh>,
+    pub materials: Vec<Material>,
+    pub textures: Vec<Texture>,
+    /// Primitive index (as given to the BVH) to (mesh, triangle).
+    pub prims: Vec<(u32, u32)>,
+}
+
+/// A shading point.
+#[derive(Clone, Copy, Debug)]
+pub struct Interaction {
+    pub p: Vec3,
+    /// Unit geometric normal on the side the ray came from.
+    pub ng: Vec3,
+    /// Shading frame; `frame.n` is on the same side as `ng` and sees the ray's origin.
+    pub frame: Frame,
+    pub attrs: SurfaceAttributes,
+    pub mesh: u32,
+    pub tri: u32,
+    pub material: u32,
+    /// True if the ray arrived on the counter-clockwise (front) side.
+    pub front: bool,
+}
+
+/// The scene prepared for rendering.
+pub struct World {
+    pub bvh: Bvh,
+    pub surfaces: Surfaces,
+    pub lights: LightSet,
+    pub camera: Camera,
+    pub space: RenderSpace,
+    /// Radius of the render-space bounding sphere around the origin.
+    pub radius: f32,
+}
+
+fn transform_mesh(mesh: &scene::Mesh, to_render: &DMat4) -> RenderMesh {
+    let linear = DMat3::from_mat4(*to_render);
+    let mirrored = linear.determinant() < 0.0;
+    let normal_matrix = linear.inverse().transpose();
+    let positions = mesh
+        .positions
+        .iter()
+        .map(|p| to_render.transform_point3(p.as_dvec3()).as_vec3())
+        .collect();
+    let normals = mesh.normals.as_ref().map(|ns| {
+        ns.iter()
+            .map(|n| (normal_matrix * n.as_dvec3()).normalize_or_zero().as_vec3())
+            .collect()
+    });
+    let tangents = mesh.tangents.as_ref().map(|ts| {
+        ts.iter()
+            .map(|t| {
+                let dir = (linear * t.truncate().as_dvec3())
+                    .normalize_or_zero()
+                    .as_vec3();
+                // A mirroring transform flips the bitangent's handedness.
+                dir.extend(if mirrored { -t.w } else { t.w })
+            })
+            .collect()
+    });
+    // A mirroring transform reverses the winding; swap two corners to keep fronts in front.
+    let triangles = if mirrored {
+        mesh.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect()
+    } else {
+        mesh.triangles.clone()
+    };
+    RenderMesh {
+        positions,
+        normals,
+        tangents,
+        uvs: mesh.uvs.clone(),
+        colors: mesh.colors.clone(),
+        triangles,
+        material: mesh.material,
+        first_light: None,
+    }
+}
+
+fn build_environment(scene: &Scene) -> Option<Environment> {
+    match scene.environment.as_ref()? {
+        scene::Environment::Constant(l) => Some(Environment::Constant(*l)),
+        scene::Environment::LatLong {
+            texture,
+            scale,
+            rotation,
+        } => {
+            let to_world = DMat3::from_mat4(*rotation).as_mat3();
+            Some(Environment::Map(Box::new(EnvironmentMap::new(
+                scene.textures[*texture as usize].clone(),
+                *scale,
+                to_world,
+            ))))
+        }
+    }
+}
+
+impl World {
+    /// Prepares `scene` for rendering through camera `camera_name` (else the first camera,
+    /// else one framing the scene) at `resolution` (else from the camera's aspect ratio).
+    pub fn build(
+        scene: Scene,
+        camera_name: Option<&str>,
+        resolution: Option<(u32, u32)>,
+    ) -> Result<Self> {
+        let (lo, hi) = scene
+            .bounds()
+            .ok_or_else(|| Error::bad_input(&scene.source, "scene", "contains no triangles"))?;
+        if !(lo.is_finite() && hi.is_finite()) {
+            return Err(Error::bad_input(
+                &scene.source,
+                "scene",
+                "geometry is not finite",
+            ));
+        }
+        let space = RenderSpace::from_bounds(lo, hi);
+        let to_render = space.matrix();
+
+        let mut meshes: Vec<RenderMesh> = scene
+            .instances
+            .iter()
+            .map(|inst| {
+                transform_mesh(
+                    &scene.meshes[inst.mesh as usize],
+                    &(to_render * inst.transform),
+                )
+            })
+            .collect();
+
+        // Area lights: one per triangle of every emissive mesh.
+        let mut lights = Vec::new();
+        for (mi, mesh) in meshes.iter_mut().enumerate() {
+            let mat = &scene.materials[mesh.material as usize];
+            if !mat.is_emissive() {
+                continue;
+            }
+            let mean = mat.emissive
+                * mat.emissive_texture.map_or(Vec3::ONE, |t| {
+                    scene.textures[t.texture as usize].mean(true).truncate()
+                });
+            mesh.first_light = Some(lights.len() as u32);
+            for (ti, t) in mesh.triangles.iter().enumerate() {
+                let p = t.map(|i| mesh.positions[i as usize]);
+                let n = geometric_normal(p[0], p[1], p[2]);
+                let area = 0.5 * n.length();
+                lights.push(Light::Triangle(TriangleLight {
+                    mesh: mi as u32,
+                    tri: ti as u32,
+                    p,
+                    n: n.normalize_or_zero(),
+                    area,
+                    two_sided: mat.double_sided,
+                    mean_radiance: mean,
+                }));
+            }
+        }
+        // Punctual lights: radiant intensity scales with the square of lengths.
+        let s2 = (space.scale * space.scale) as f32;
+        for l in &scene.lights {
+            lights.push(match &l.kind {
+                LightKind::Point {
+                    position,
+                    intensity,
+                } => Light::Point {
+                    position: space.point(*position),
+                    intensity: *intensity * s2,
+                },
+                LightKind::Spot {
+                    position,
+                    direction,
+                    intensity,
+                    inner_cone,
+                    outer_cone,
+                } => Light::Spot {
+                    position: space.point(*position),
+                    axis: direction.normalize().as_vec3(),
+                    intensity: *intensity * s2,
+                    cos_inner: inner_cone.cos(),
+                    cos_outer: outer_cone.cos(),
+                },
+                LightKind::Directional {
+                    direction,
+                    irradiance,
+                } => Light::Directional {
+                    direction: direction.normalize().as_vec3(),
+                    irradiance: *irradiance,
+                },
+            });
+        }
+
+        let mut triangles = Vec::with_capacity(scene.instanced_triangle_count());
+        let mut flags = Vec::with_capacity(triangles.capacity());
+        let mut prims = Vec::with_capacity(triangles.capacity());
+        let mut radius = 0.0f32;
+        for (mi, mesh) in meshes.iter().enumerate() {
+            let mat = &scene.materials[mesh.material as usize];
+            let mut f = 0;
+            if !mat.double_sided {
+                f |= CULL_BACK;
+            }
+            if mat.alpha_mode != AlphaMode::Opaque {
+                f |= ALPHA_TESTED;
+            }
+            for p in &mesh.positions {
+                radius = radius.max(p.length());
+            }
+            for (ti, t) in mesh.triangles.iter().enumerate() {
+                triangles.push(t.map(|i| mesh.positions[i as usize]));
+                flags.push(f);
+                prims.push((mi as u32, ti as u32));
+            }
+        }
+        let bvh = Bvh::build(&triangles, &flags);
+        drop(triangles);
+
+        let scene_camera = match camera_name {
+            Some(name) => scene.camera(name).cloned().ok_or_else(|| {
+                let names: Vec<&str> = scene.cameras.iter().map(|c| c.name.as_str()).collect();
+                Error::bad_input(
+                    &scene.source,
+                    format!("camera {name:?}"),
+                    format!("no such camera (the scene has: {})", names.join(", ")),
+                )
+            })?,
+            None => scene
+                .cameras
+                .first()
+                .cloned()
+                .unwrap_or_else(|| camera::framing_camera(lo, hi)),
+        };
+        let (width, height) = camera::resolve_resolution(resolution, Some(&scene_camera));
+        let camera = Camera::new(&scene_camera, &space, width, height);
+
+        let environment = build_environment(&scene);
+        Ok(Self {
+            bvh,
+            lights: LightSet::new(lights, environment, radius.max(1e-6)),
+            surfaces: Surfaces {
+                meshes,
+                materials: scene.materials,
+                textures: scene.textures,
+                prims,
+            },
+            camera,
+            space,
+            radius,
+        })
+    }
+
+    /// Closest surface along `ray`, honouring back-face culling and alpha.
+    #[inline]
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        self.bvh
+            .intersect(ray, |prim, hit| self.surfaces.alpha_passes(prim, hit, ray))
+    }
+
+    /// True if something blocks `ray` before `ray.tmax`.
+    #[inline]
+    pub fn occluded(&self, ray: &Ray) -> bool {
+        self.bvh
+            .occluded(ray, |prim, hit| self.surfaces.alpha_passes(prim, hit, ray))
+    }
+
+    /// The shading point of `hit` along `ray`.
+    #[inline]
+    pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
+        self.surfaces.interaction(ray, hit)
+    }
+
+    /// Index of the light that triangle `tri` of mesh `mesh` is, if it emits.
+    #[inline]
+    pub fn light_index(&self, mesh: u32, tri: u32) -> Option<usize> {
+        self.surfaces.meshes[mesh as usize]
+            .first_light
+            .map(|first| (first + tri) as usize)
+    }
+}
+
+impl Surfaces {
+    /// Interpolated attributes of triangle `tri` of `mesh` at barycentrics (b1, b2).
+    #[inline]
+    pub fn attributes(
+        &self,
+        mesh: &RenderMesh,
+        tri: [u32; 3],
+        b1: f32,
+        b2: f32,
+    ) -> SurfaceAttributes {
+        let b0 = 1.0 - b1 - b2;
+        let [i0, i1, i2] = tri.map(|i| i as usize);
+        let uv = |set: &Option<Vec<Vec2>>| {
+            set.as_ref()
+                .map_or(Vec2::ZERO, |uv| uv[i0] * b0 + uv[i1] * b1 + uv[i2] * b2)
+        };
+        SurfaceAttributes {
+            uv: [uv(&mesh.uvs[0]), uv(&mesh.uvs[1])],
+            color: mesh
+                .colors
+                .as_ref()
+                .map_or(Vec4::ONE, |c| c[i0] * b0 + c[i1] * b1 + c[i2] * b2),
+        }
+    }
+
+    /// Whether a hit on alpha-tested primitive `prim` counts: cut-outs compare alpha with
+    /// the cutoff; blended surfaces are hit with probability alpha, decided by a hash of the
+    /// ray so that the decision is deterministic.
+    fn alpha_passes(&self, prim: u32, hit: &TriangleHit, ray: &Ray) -> bool {
+        let (mi, ti) = self.prims[prim as usize];
+        let mesh = &self.meshes[mi as usize];
+        let mat = &self.materials[mesh.material as usize];
+        let attrs = self.attributes(mesh, mesh.triangles[ti as usize], hit.b1, hit.b2);
+        let alpha = material::alpha(mat, &self.textures, &attrs);
+        match mat.alpha_mode {
+            AlphaMode::Opaque => true,
+            AlphaMode::Mask { cutoff } => alpha >= cutoff,
+            AlphaMode::Blend => {
+                let h = hash_u32(
+                    prim ^ hash_u32(
+                        ray.origin.x.to_bits() ^ hash_u32(ray.dir.y.to_bits() ^ hit.t.to_bits()),
+                    ),
+                );
+                ((h >> 8) as f32 * (1.0 / 16_777_216.0)) < alpha
+            }
+        }
+    }
+
+    /// The shading point of `hit` along `ray`.
+    pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
+        let (mi, ti) = self.prims[hit.prim as usize];
+        let mesh = &self.meshes[mi as usize];
+        let tri = mesh.triangles[ti as usize];
+        let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
+        let (b1, b2) = (hit.b1, hit.b2);
+        let b0 = 1.0 - b1 - b2;
+        let p = p0 * b0 + p1 * b1 + p2 * b2;
+        let wo = -ray.dir.normalize();
+        let n_front = geometric_normal(p0, p1, p2).normalize();
+        let front = n_front.dot(wo) > 0.0;
+        let ng = if front { n_front } else { -n_front };
+        let attrs = self.attributes(mesh, tri, b1, b2);
+        let mat = &self.materials[mesh.material as usize];
+
+        // Shading normal in the front-side convention: interpolated, then normal-mapped.
+        let [i0, i1, i2] = tri.map(|i| i as usize);
+        let mut ns = mesh
+            .normals
+            .as_ref()
+            .map(|n| (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero())
+            .filter(|n| *n != Vec3::ZERO)
+            .unwrap_or(n_front);
+        if let (Some(tangents), Some(ts_normal)) = (
+            mesh.tangents.as_ref(),
+            material::tangent_space_normal(mat, &self.textures, &attrs),
+        ) {
+            let t = (tangents[i0] * b0 + tangents[i1] * b1 + tangents[i2] * b2).truncate();
+            let tangent_frame = Frame::from_normal_tangent(ns, t);
+            let sign = if tangents[i0].w < 0.0 { -1.0 } else { 1.0 };
+            let mapped = tangent_frame.s * ts_normal.x
+                + tangent_frame.t * (sign * ts_normal.y)
+                + tangent_frame.n * ts_normal.z;
+            ns = mapped.normalize_or_zero();
+            if ns == Vec3::ZERO {
+                ns = n_front;
+            }
+        }
+        // Onto the side the ray came from; normals that disagree with the winding are
+        // taken as flipped.
+        if !front {
+            ns = -ns;
+        }
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        let ns = facing_shading_normal(ns, ng, wo);
+        Interaction {
+            p,
+            ng,
+            frame: Frame::from_normal(ns),
+            attrs,
+            mesh: mi,
+            tri: ti,
+            material: mesh.material,
+            front,
+        }
+    }
+
+    /// Radiance emitted from `it` back along the ray that found it (zero for the back of
+    /// a one-sided emitter).
+    #[inline]
+    pub fn emitted(&self, it: &Interaction) -> Vec3 {
+        let mat = &self.materials[it.material as usize];
+        if !mat.is_emissive() || !(it.front || mat.double_sided) {
+            return Vec3::ZERO;
+        }
+        material::emission(mat, &self.textures, &it.attrs)
+    }
+
+    /// Emitted radiance of triangle `tri` of mesh `mesh` at barycentrics `b` (for light
+    /// samples, which already checked the side).
+    #[inline]
+    pub fn emission_at(&self, mesh: u32, tri: u32, b: Vec2) -> Vec3 {
+        let m = &self.meshes[mesh as usize];
+        let mat = &self.materials[m.material as usize];
+        if mat.emissive_texture.is_none() {
+            return mat.emissive;
+        }
+        let attrs = self.attributes(m, m.triangles[tri as usize], b.x, b.y);
+        material::emission(mat, &self.textures, &attrs)
+    }
+
+    /// Bytes held by meshes and textures.
+    pub fn memory_bytes(&self) -> usize {
+        let mesh_bytes: usize = self
+            .meshes
+            .iter()
+            .map(|m| {
+                m.positions.len() * 12
+                    + m.normals.as_ref().map_or(0, |v| v.len() * 12)
+                    + m.tangents.as_ref().map_or(0, |v| v.len() * 16)
+                    + m.uvs.iter().flatten().map(|v| v.len() * 8).sum::<usize>()
+                    + m.colors.as_ref().map_or(0, |v| v.len() * 16)
+                    + m.triangles.len() * 12
+            })
+            .sum();
+        mesh_bytes
+            + self.prims.len() * 8
+            + self
+                .textures
+                .iter()
+                .map(|t| t.memory_bytes())
+                .sum::<usize>()
+    }
+}
+
+/// Bends a shading normal towards the geometric normal until the viewer is above its
+/// hemisphere (cos > 0): interpolated and normal-mapped normals can face away from a
+/// viewer the geometry faces, which would make the BSDF black or reflect into the surface.
+#[inline]
+fn facing_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
+    let a = ns.dot(wo);
+    let b = ng.dot(wo);
+    let target = (0.5 * b).min(0.01);
+    if a >= target || b <= 0.0 {
+        return ns;
+    }
+    let t = (target - a) / (b - a);
+    (ns * (1.0 - t) + ng * t).normalize_or(ng)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn render_space_is_centred_and_scaled_by_a_power_of_two() {
+        let s = RenderSpace::from_bounds(
+            DVec3::new(1e7, 1e7, 1e7),
+            DVec3::new(1e7 + 0.5, 1e7 + 0.3, 1e7 + 0.1),
+        );
+        assert_eq!(s.scale, 4.0);
+        let p = s.point(DVec3::new(1e7 + 0.5, 1e7, 1e7 + 0.05));
+        assert!((p - Vec3::new(1.0, -0.6, 0.0)).length() < 1e-6, "{p}");
+        assert!((s.to_world(p) - DVec3::new(1e7 + 0.5, 1e7, 1e7 + 0.05)).length() < 1e-7);
+    }
+
+    #[test]
+    fn shading_normal_is_bent_to_face_the_viewer() {
+        let ng = Vec3::Z;
+        let ns = Vec3::new(0.9, 0.0, 0.1).normalize();
+        let wo = Vec3::new(-0.8, 0.0, 0.6).normalize();
+        assert!(ns.dot(wo) < 0.0);
+        let fixed = facing_shading_normal(ns, ng, wo);
+        assert!(fixed.dot(wo) > 0.0 && (fixed.length() - 1.0).abs() < 1e-5);
+        assert_eq!(facing_shading_normal(ng, ng, wo), ng);
+    }
+}

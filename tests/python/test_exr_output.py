@@ -1,0 +1,94 @@
+"""The renderer's EXR as a compositor sees it, read with OpenImageIO (not with the Rust
+`exr` crate that wrote it)."""
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+BIN = os.environ.get("LUCERNA_BIN", str(ROOT / "target" / "release" / "lucerna"))
+
+RGB_LAYERS = ["emission", "direct", "indirect", "nee", "bsdf", "direct_nee", "direct_bsdf",
+              "indirect_nee", "indirect_bsdf", "direct_nee_unweighted", "direct_bsdf_unweighted",
+              "albedo", "variance"]
+CORE_CHANNELS = (["R", "G", "B", "A"] + [f"{l}.{c}" for l in RGB_LAYERS for c in "RGB"]
+                 + ["normal.X", "normal.Y", "normal.Z", "depth.Z", "spp.Y"])
+
+
+def read(path):
+    inp = oiio.ImageInput.open(str(path))
+    assert inp, oiio.geterror()
+    try:
+        spec = inp.spec()
+        assert not inp.seek_subimage(1, 0), "the EXR must be single-part"
+        inp.seek_subimage(0, 0)
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, "float")
+        channels = {name: pixels[:, :, i] for i, name in enumerate(spec.channelnames)}
+        return spec, channels
+    finally:
+        inp.close()
+
+
+@pytest.fixture(scope="module")
+def default_render(tmp_path_factory):
+    """The README's render command (`lucerna render`, no arguments) in an empty directory."""
+    cwd = tmp_path_factory.mktemp("readme")
+    subprocess.run([BIN, "render"], cwd=cwd, check=True)
+    assert sorted(p.name for p in cwd.iterdir()) == ["render.exr"], "only render.exr is left"
+    return read(cwd / "render.exr")
+
+
+def test_readme_command_writes_every_core_layer(default_render):
+    spec, ch = default_render
+    missing = [c for c in CORE_CHANNELS if c not in ch]
+    assert not missing, f"missing channels: {missing}"
+    assert (spec.width, spec.height) == (512, 512)
+    for name, plane in ch.items():
+        assert np.isfinite(plane).all(), name
+        assert plane.dtype == np.float32
+
+
+def test_header_metadata(default_render):
+    spec, _ = default_render
+    assert spec.getattribute("lucerna/renderer").startswith("lucerna ")
+    assert spec.getattribute("lucerna/spp") == 64
+    assert spec.getattribute("lucerna/nan_inf_discarded") == 0
+    assert "mis=power(2)" in spec.getattribute("lucerna/settings")
+    assert spec.getattribute("lucerna/render_seconds") > 0
+    for matrix in ("worldToCamera", "worldToNDC"):
+        m = np.array(spec.getattribute(matrix), dtype=np.float64).reshape(4, 4)
+        assert np.isfinite(m).all() and abs(np.linalg.det(m)) > 0
+
+
+def test_world_to_ndc_projects_the_scene_into_the_frame(default_render):
+    """Nuke's convention: row vector times matrix, divide by w, (0,0) top-left."""
+    spec, ch = default_render
+    to_ndc = np.array(spec.getattribute("worldToNDC"), dtype=np.float64).reshape(4, 4)
+    # The world position of the centre pixel projects back onto the centre of the image.
+    y, x = spec.height // 2, spec.width // 2
+    p = np.array([ch["position.X"][y, x], ch["position.Y"][y, x], ch["position.Z"][y, x], 1.0])
+    q = p @ to_ndc
+    ndc = q[:2] / q[3]
+    assert np.allclose(ndc, [(x + 0.5) / spec.width, (y + 0.5) / spec.height], atol=2.0 / spec.width)
+
+
+def test_layer_sums(default_render):
+    _, ch = default_render
+    for c in "RGB":
+        beauty = ch[c]
+        parts = ch[f"emission.{c}"] + ch[f"direct.{c}"] + ch[f"indirect.{c}"]
+        assert np.allclose(beauty, parts, rtol=1e-4, atol=1e-5)
+        assert np.allclose(ch[f"direct.{c}"], ch[f"direct_nee.{c}"] + ch[f"direct_bsdf.{c}"], rtol=1e-4, atol=1e-5)
+
+
+def test_aov_selection_writes_only_what_was_asked(tmp_path):
+    out = tmp_path / "few.exr"
+    subprocess.run([BIN, "render", "--spp", "2", "--resolution", "32x24", "--aov", "direct,albedo",
+                    "-o", str(out), "-q"], check=True)
+    spec, ch = read(out)
+    assert sorted(ch) == sorted(["R", "G", "B", "A", "direct.R", "direct.G", "direct.B",
+                                 "albedo.R", "albedo.G", "albedo.B"])
+    assert (spec.width, spec.height) == (32, 24)

@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# Runs lucerna's whole test suite: the Rust tests (release build, so rendering tests are fast)
+# and the Python tests, which read the renderer's EXR output with OpenImageIO.
+# Python packages go into a virtual environment (.venv, or $LUCERNA_VENV) made on first use.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+venv="${LUCERNA_VENV:-.venv}"
+if [ ! -x "$venv/bin/python" ]; then
+    python3 -m venv "$venv"
+fi
+"$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r tests/requirements.txt
+
+cargo build --release --locked
+if cargo nextest --version >/dev/null 2>&1; then
+    cargo nextest run --release --locked --no-fail-fast
+else
+    cargo test --release --locked --no-fail-fast
+fi
+LUCERNA_BIN="$PWD/target/release/lucerna" "$venv/bin/python" -m pytest -q tests/python
