@@ -1,0 +1,422 @@
+//! Chi-square tests of every sampling routine against its density (see `common/chi2.rs`),
+//! plus sample/pdf/eval consistency, reciprocity and energy bounds of every BSDF.
+
+mod common;
+
+use common::chi2;
+use glam::{Mat3, Vec2, Vec3};
+use lucerna::geometry::ray::Ray;
+use lucerna::geometry::triangle::{RayShear, intersect};
+use lucerna::light::environment::{Environment, EnvironmentMap};
+use lucerna::light::{Light, TriangleLight};
+use lucerna::material::Bsdf;
+use lucerna::material::gltf_pbr::GltfPbr;
+use lucerna::material::lambert::Lambert;
+use lucerna::material::microfacet::Ggx;
+use lucerna::material::phong::Phong;
+use lucerna::sampling::pcg::Pcg32;
+use lucerna::sampling::warp;
+use lucerna::scene::{Texels, Texture, Wrap};
+use std::sync::Arc;
+
+const N: usize = 1_000_000;
+
+fn u2(rng: &mut Pcg32) -> Vec2 {
+    Vec2::new(rng.next_f32(), rng.next_f32())
+}
+
+fn direction(theta: f32) -> Vec3 {
+    Vec3::new(theta.sin(), 0.0, theta.cos())
+}
+
+#[test]
+fn cosine_hemisphere() {
+    let mut rng = Pcg32::new(1, 0);
+    chi2::sphere(
+        "cosine hemisphere",
+        N,
+        |_| Some(warp::square_to_cosine_hemisphere(u2(&mut rng))),
+        |d| warp::cosine_hemisphere_pdf(d) as f64,
+    );
+}
+
+#[test]
+fn uniform_sphere_and_hemisphere() {
+    let mut rng = Pcg32::new(2, 0);
+    chi2::sphere(
+        "uniform sphere",
+        N,
+        |_| Some(warp::square_to_uniform_sphere(u2(&mut rng))),
+        |_| warp::UNIFORM_SPHERE_PDF as f64,
+    );
+    chi2::sphere(
+        "uniform hemisphere",
+        N,
+        |_| Some(warp::square_to_uniform_hemisphere(u2(&mut rng))),
+        |d| warp::uniform_hemisphere_pdf(d) as f64,
+    );
+}
+
+#[test]
+fn phong_lobe() {
+    for exponent in [1.0f32, 10.0, 100.0] {
+        let mut rng = Pcg32::new(3, exponent as u64);
+        chi2::sphere(
+            &format!("Phong lobe n={exponent}"),
+            N,
+            |_| Some(warp::square_to_phong_lobe(u2(&mut rng), exponent)),
+            |d| warp::phong_lobe_pdf(d.z, exponent) as f64,
+        );
+    }
+}
+
+#[test]
+fn ggx_visible_normals() {
+    for alpha in [0.1f32, 0.3, 0.7, 1.0] {
+        for theta in [0.0f32, 0.8, 1.4] {
+            let ggx = Ggx { alpha };
+            let wo = direction(theta);
+            let mut rng = Pcg32::new(4, (alpha * 100.0) as u64 * 10 + (theta * 5.0) as u64);
+            chi2::sphere(
+                &format!("GGX visible normals alpha={alpha} theta_o={theta}"),
+                N,
+                |_| Some(ggx.sample_visible_normal(wo, u2(&mut rng))),
+                |h| ggx.visible_normal_pdf(wo, h) as f64,
+            );
+        }
+    }
+}
+
+#[test]
+fn uniform_disk() {
+    let mut rng = Pcg32::new(5, 0);
+    chi2::plane(
+        "concentric disk",
+        &chi2::Domain::plane((-1.0, 1.0), (-1.0, 1.0)),
+        N,
+        |_| Some(warp::square_to_uniform_disk(u2(&mut rng))),
+        |p| {
+            if p.length() <= 1.0 {
+                1.0 / std::f64::consts::PI
+            } else {
+                0.0
+            }
+        },
+    );
+}
+
+/// Is `p` inside the 2D triangle `t` (counter-clockwise)?
+fn inside(t: [Vec2; 3], p: Vec2) -> bool {
+    (0..3).all(|i| (t[(i + 1) % 3] - t[i]).perp_dot(p - t[i]) >= 0.0)
+}
+
+#[test]
+fn uniform_triangle_area() {
+    let t = [
+        Vec2::new(0.1, 0.0),
+        Vec2::new(1.0, 0.2),
+        Vec2::new(0.3, 0.9),
+    ];
+    let area = 0.5 * (t[1] - t[0]).perp_dot(t[2] - t[0]);
+    let mut rng = Pcg32::new(6, 0);
+    chi2::plane(
+        "uniform triangle (area)",
+        &chi2::Domain::plane((0.0, 1.0), (0.0, 1.0)),
+        N,
+        |_| {
+            let b = warp::square_to_uniform_triangle(u2(&mut rng));
+            Some(t[0] * (1.0 - b.x - b.y) + t[1] * b.x + t[2] * b.y)
+        },
+        |p| if inside(t, p) { 1.0 / area as f64 } else { 0.0 },
+    );
+}
+
+fn triangle_light(two_sided: bool) -> TriangleLight {
+    let p = [
+        Vec3::new(-0.5, 1.0, -0.3),
+        Vec3::new(0.7, 1.2, -0.4),
+        Vec3::new(0.1, 0.9, 0.8),
+    ];
+    let n = (p[1] - p[0]).cross(p[2] - p[0]);
+    TriangleLight {
+        mesh: 0,
+        tri: 0,
+        p,
+        n: n.normalize(),
+        area: 0.5 * n.length(),
+        two_sided,
+        mean_radiance: Vec3::ONE,
+    }
+}
+
+#[test]
+fn triangle_light_solid_angle() {
+    // The light faces down: a one-sided one is seen from below, a two-sided one also from
+    // above (its back).
+    for (two_sided, origin) in [
+        (true, Vec3::new(0.0, 3.0, 0.1)),
+        (false, Vec3::new(0.1, -0.2, 0.05)),
+    ] {
+        let tri = triangle_light(two_sided);
+        let light = Light::Triangle(tri.clone());
+        let mut rng = Pcg32::new(7, two_sided as u64);
+        let name = format!("triangle light, solid angle, two-sided={two_sided}");
+        let mut produced = 0;
+        chi2::sphere(
+            &name,
+            N,
+            |_| {
+                let s = light.sample(origin, None, u2(&mut rng))?;
+                produced += 1;
+                Some(s.wi)
+            },
+            |w| {
+                let ray = Ray::new(origin, w);
+                let hit = intersect(
+                    &RayShear::new(&ray),
+                    tri.p[0],
+                    tri.p[1],
+                    tri.p[2],
+                    f32::INFINITY,
+                );
+                match hit {
+                    Some(h) if tri.two_sided || tri.n.dot(w) < 0.0 => tri.pdf(w, h.t) as f64,
+                    _ => 0.0,
+                }
+            },
+        );
+        assert!(
+            produced > 0,
+            "{name}: the light is visible from the test point"
+        );
+    }
+}
+
+#[test]
+fn environment_map_importance_sampling() {
+    let (w, h) = (32u32, 16u32);
+    let texels: Vec<[f32; 4]> = (0..w * h)
+        .map(|i| {
+            let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+            let v = 0.05
+                + (8.0 * x).sin().abs() * (1.0 - y)
+                + if (3..5).contains(&(i % w)) { 20.0 } else { 0.0 };
+            [v, 0.5 * v, 0.2, 1.0]
+        })
+        .collect();
+    let texture = Texture {
+        name: "test".into(),
+        width: w,
+        height: h,
+        texels: Arc::new(Texels::RgbaF32(texels)),
+        wrap_u: Wrap::Repeat,
+        wrap_v: Wrap::ClampToEdge,
+        nearest: true,
+    };
+    let env = Environment::Map(Box::new(EnvironmentMap::new(
+        texture,
+        Vec3::ONE,
+        Mat3::from_rotation_y(0.7),
+    )));
+    let mut rng = Pcg32::new(8, 0);
+    chi2::sphere(
+        "environment map",
+        N,
+        |_| env.sample(u2(&mut rng)).map(|s| s.wi),
+        |d| env.pdf(d) as f64,
+    );
+    // The density returned with a sample is the density of its direction.
+    for _ in 0..1000 {
+        let s = env.sample(u2(&mut rng)).unwrap();
+        assert!(
+            (s.pdf - env.pdf(s.wi)).abs() <= 2e-3 * s.pdf,
+            "{} vs {}",
+            s.pdf,
+            env.pdf(s.wi)
+        );
+    }
+}
+
+/// The BSDF configurations every BSDF test runs over, with a name.
+fn bsdfs() -> Vec<(String, Bsdf)> {
+    let mut all = vec![(
+        "lambert".to_string(),
+        Bsdf::Lambert(Lambert {
+            albedo: Vec3::new(0.8, 0.5, 0.2),
+        }),
+    )];
+    for (base, metallic, roughness) in [
+        (Vec3::new(0.8, 0.6, 0.4), 0.0, 0.3),
+        (Vec3::new(0.8, 0.6, 0.4), 0.0, 0.8),
+        (Vec3::new(0.95, 0.64, 0.54), 1.0, 0.25),
+        (Vec3::new(0.5, 0.5, 0.5), 0.5, 1.0),
+        (Vec3::new(0.2, 0.4, 0.9), 0.0, 0.0),
+    ] {
+        all.push((
+            format!("gltf base={base} metallic={metallic} roughness={roughness}"),
+            Bsdf::GltfPbr(GltfPbr::new(base, metallic, roughness, 1.5)),
+        ));
+    }
+    for exponent in [1.0f32, 10.0, 60.0] {
+        all.push((
+            format!("phong n={exponent}"),
+            Bsdf::Phong(Phong {
+                kd: Vec3::new(0.4, 0.3, 0.2),
+                ks: Vec3::splat(0.5),
+                exponent,
+            }),
+        ));
+    }
+    all
+}
+
+#[test]
+fn bsdf_sampling_matches_pdf() {
+    for (name, bsdf) in bsdfs() {
+        for theta in [0.1f32, 0.8, 1.4] {
+            let wo = direction(theta);
+            let mut rng = Pcg32::new(9, theta.to_bits() as u64);
+            chi2::sphere(
+                &format!("{name} theta_o={theta}"),
+                N,
+                |_| {
+                    let s = bsdf.sample(wo, rng.next_f32(), u2(&mut rng))?;
+                    (!s.is_delta()).then_some(s.wi)
+                },
+                |wi| bsdf.pdf(wo, wi) as f64,
+            );
+        }
+    }
+}
+
+#[test]
+fn bsdf_sample_eval_pdf_agree_and_are_reciprocal() {
+    let mut rng = Pcg32::new(10, 0);
+    for (name, bsdf) in bsdfs() {
+        for _ in 0..20_000 {
+            let wo = warp::square_to_cosine_hemisphere(u2(&mut rng));
+            if wo.z < 1e-3 {
+                continue;
+            }
+            let Some(s) = bsdf.sample(wo, rng.next_f32(), u2(&mut rng)) else {
+                continue;
+            };
+            assert!(
+                s.weight.is_finite() && s.weight.min_element() >= 0.0,
+                "{name}: weight {}",
+                s.weight
+            );
+            if s.is_delta() {
+                continue;
+            }
+            let pdf = bsdf.pdf(wo, s.wi);
+            let f = bsdf.eval(wo, s.wi);
+            assert!(
+                (pdf - s.pdf).abs() <= 1e-4 * pdf,
+                "{name}: pdf {} vs {}",
+                s.pdf,
+                pdf
+            );
+            let expected = f / pdf;
+            assert!(
+                (expected - s.weight).abs().max_element()
+                    <= 1e-4 * expected.max_element().max(1e-6),
+                "{name}: weight {} vs f/pdf {}",
+                s.weight,
+                expected
+            );
+            // f(wo, wi) = f(wi, wo): eval includes cos θi, so compare f = eval / cos.
+            let forward = f / s.wi.z;
+            let backward = bsdf.eval(s.wi, wo) / wo.z;
+            assert!(
+                (forward - backward).abs().max_element() <= 1e-3 * forward.max_element().max(1e-4),
+                "{name}: not reciprocal: {forward} vs {backward}"
+            );
+        }
+    }
+}
+
+#[test]
+fn bsdfs_do_not_create_energy() {
+    // E[weight] is the directional albedo; it must not exceed 1 beyond 4.5 standard errors.
+    // Exempt: the glTF dielectric. Appendix B's fresnel_mix weights the diffuse base by
+    // 1 - F(v·h) per direction instead of by the specular layer's albedo, so at grazing
+    // angles base + layer reflect more than arrives (e.g. 1.12 at 86° for roughness 0.3,
+    // base 0.8). lucerna implements the specification exactly (see README).
+    for (name, bsdf) in bsdfs() {
+        if matches!(bsdf, Bsdf::GltfPbr(_)) && !name.contains("metallic=1") {
+            continue;
+        }
+        for theta in [0.0f32, 0.5, 1.0, 1.5] {
+            let wo = direction(theta);
+            let mut rng = Pcg32::new(11, theta.to_bits() as u64);
+            let n = 200_000;
+            let (mut sum, mut sum2) = (Vec3::ZERO.as_dvec3(), Vec3::ZERO.as_dvec3());
+            for _ in 0..n {
+                if let Some(s) = bsdf.sample(wo, rng.next_f32(), u2(&mut rng)) {
+                    let w = s.weight.as_dvec3();
+                    sum += w;
+                    sum2 += w * w;
+                }
+            }
+            let mean = sum / n as f64;
+            let se = ((sum2 / n as f64 - mean * mean) / n as f64).max(glam::DVec3::ZERO);
+            for c in 0..3 {
+                assert!(
+                    mean[c] <= 1.0 + 4.5 * se[c].sqrt() + 1e-6,
+                    "{name} theta={theta}: albedo {mean}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn chi_square_p_values_are_right() {
+    // Critical values from chi-square tables.
+    for (statistic, dof, p) in [
+        (3.84146, 1.0, 0.05),
+        (124.342, 100.0, 0.05),
+        (576.493, 500.0, 0.01),
+        (1106.969, 1000.0, 0.01),
+    ] {
+        let q = chi2::upper_regularized_gamma(dof / 2.0, statistic / 2.0);
+        assert!(
+            (q - p).abs() <= 0.02 * p,
+            "dof {dof} chi2 {statistic}: {q} vs {p}"
+        );
+    }
+}
+
+#[test]
+fn the_harness_rejects_slightly_wrong_densities() {
+    // Power: a 5% error in a lobe exponent or a 3% error in GGX alpha must be caught.
+    let mut rng = Pcg32::new(12, 0);
+    let outcome = chi2::test(
+        "Phong n=10 against n=10.5",
+        &chi2::Domain::sphere(),
+        N,
+        |_| {
+            Some(chi2::to_sphere(warp::square_to_phong_lobe(
+                u2(&mut rng),
+                10.0,
+            )))
+        },
+        |z, phi| warp::phong_lobe_pdf(chi2::from_sphere(z, phi).z, 10.5) as f64,
+    );
+    assert!(outcome.p_value < chi2::significance(), "{outcome:?}");
+    let (right, wrong) = (Ggx { alpha: 0.3 }, Ggx { alpha: 0.31 });
+    let wo = direction(0.8);
+    let outcome = chi2::test(
+        "GGX alpha 0.3 against 0.31",
+        &chi2::Domain::sphere(),
+        N,
+        |_| {
+            Some(chi2::to_sphere(
+                right.sample_visible_normal(wo, u2(&mut rng)),
+            ))
+        },
+        |z, phi| wrong.visible_normal_pdf(wo, chi2::from_sphere(z, phi)) as f64,
+    );
+    assert!(outcome.p_value < chi2::significance(), "{outcome:?}");
+}

@@ -1,0 +1,198 @@
+//! Scenes built in code for tests, and a render helper.
+
+use glam::{DMat4, DVec3, Vec3};
+use lucerna::film::Film;
+use lucerna::film::aov::{Aov, AovSet};
+use lucerna::film::filter::PixelFilter;
+use lucerna::integrator::Settings;
+use lucerna::render::{self, RenderOptions, RenderStats};
+use lucerna::scene::{Camera, Environment, Instance, Material, Mesh, Projection, Scene};
+use lucerna::world::World;
+use std::collections::HashMap;
+
+/// An icosphere of radius 1 with `subdivisions` levels, flat-shaded (no normals).
+pub fn icosphere(subdivisions: u32) -> Mesh {
+    let t = (1.0 + 5f32.sqrt()) / 2.0;
+    let mut positions: Vec<Vec3> = [
+        (-1.0, t, 0.0),
+        (1.0, t, 0.0),
+        (-1.0, -t, 0.0),
+        (1.0, -t, 0.0),
+        (0.0, -1.0, t),
+        (0.0, 1.0, t),
+        (0.0, -1.0, -t),
+        (0.0, 1.0, -t),
+        (t, 0.0, -1.0),
+        (t, 0.0, 1.0),
+        (-t, 0.0, -1.0),
+        (-t, 0.0, 1.0),
+    ]
+    .iter()
+    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
+    .collect();
+    let mut triangles: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    for _ in 0..subdivisions {
+        let mut midpoints: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut mid = |a: u32, b: u32, positions: &mut Vec<Vec3>| {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                positions.push(((positions[a as usize] + positions[b as usize]) * 0.5).normalize());
+                (positions.len() - 1) as u32
+            })
+        };
+        let mut next = Vec::with_capacity(triangles.len() * 4);
+        for [a, b, c] in triangles {
+            let (ab, bc, ca) = (
+                mid(a, b, &mut positions),
+                mid(b, c, &mut positions),
+                mid(c, a, &mut positions),
+            );
+            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
+        }
+        triangles = next;
+    }
+    Mesh {
+        name: "icosphere".into(),
+        positions,
+        triangles,
+        ..Default::default()
+    }
+}
+
+/// A unit square in the XY plane facing +Z, centred at the origin.
+pub fn quad() -> Mesh {
+    Mesh {
+        name: "quad".into(),
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+        triangles: vec![[0, 1, 2], [0, 2, 3]],
+        ..Default::default()
+    }
+}
+
+/// A material of the given model with base colour `base`, double-sided.
+pub fn material(
+    model: lucerna::scene::BsdfModel,
+    base: Vec3,
+    metallic: f32,
+    roughness: f32,
+) -> Material {
+    Material {
+        name: "test".into(),
+        model,
+        base_color: base.extend(1.0),
+        metallic,
+        roughness,
+        double_sided: true,
+        ..Default::default()
+    }
+}
+
+/// An orthographic camera at `eye` looking at the origin, showing a view `half` units high.
+pub fn ortho_camera(eye: DVec3, half: f32) -> Camera {
+    Camera {
+        name: "test".into(),
+        projection: Projection::Orthographic {
+            xmag: half,
+            ymag: half,
+        },
+        transform: look_at(eye, DVec3::ZERO),
+        aperture_radius: 0.0,
+        focus_distance: 1.0,
+        clip_near: 0.0,
+        clip_far: None,
+    }
+}
+
+/// Camera-to-world transform of a camera at `eye` looking at `target` with +Y up.
+pub fn look_at(eye: DVec3, target: DVec3) -> DMat4 {
+    let forward = (target - eye).normalize();
+    let right = forward.cross(DVec3::Y).normalize();
+    let up = right.cross(forward);
+    DMat4::from_cols(
+        right.extend(0.0),
+        up.extend(0.0),
+        (-forward).extend(0.0),
+        eye.extend(1.0),
+    )
+}
+
+/// A scene of `meshes` (each with its transform) sharing material `mat`, lit by a constant
+/// environment `env`, seen through `camera`.
+pub fn scene(meshes: Vec<(Mesh, DMat4)>, mat: Material, env: Vec3, camera: Camera) -> Scene {
+    let mut scene = Scene {
+        source: "test".into(),
+        materials: vec![mat],
+        environment: Some(Environment::Constant(env)),
+        cameras: vec![camera],
+        ..Default::default()
+    };
+    for (i, (mesh, transform)) in meshes.into_iter().enumerate() {
+        scene.meshes.push(mesh);
+        scene.instances.push(Instance {
+            name: format!("mesh{i}"),
+            mesh: i as u32,
+            transform,
+        });
+    }
+    scene
+}
+
+/// Renders `scene` at `res` with `spp` samples on a pool of `threads`, box filter.
+pub fn render(
+    scene: Scene,
+    res: (u32, u32),
+    spp: u32,
+    settings: Settings,
+    threads: usize,
+) -> (Film, RenderStats) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| {
+        let world = World::build(scene, None, Some(res)).expect("test scene builds");
+        let options = RenderOptions {
+            spp,
+            settings,
+            aovs: AovSet::default(),
+            filter: PixelFilter::box_filter(),
+            progress: false,
+        };
+        render::render(&world, &options)
+    })
+}
+
+/// Mean of channel `c` of `aov` over the pixels where `keep(pixel)` holds.
+pub fn mean(film: &Film, aov: Aov, c: usize, keep: impl Fn(usize) -> bool) -> f64 {
+    let plane = &film.planes(aov)[c];
+    let values: Vec<f64> = (0..plane.len())
+        .filter(|&i| keep(i))
+        .map(|i| plane[i] as f64)
+        .collect();
+    values.iter().sum::<f64>() / values.len() as f64
+}
