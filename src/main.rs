@@ -29,7 +29,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene (the embedded Cornell box without SCENE) to a multi-layer EXR.
-    Render(RenderArgs),
+    Render(Box<RenderArgs>),
     /// Print a summary of a scene and what rendering it needs.
     Inspect {
         /// A .gltf or .glb file.
@@ -343,7 +343,7 @@ fn inspect_command(path: &Path) -> Result<()> {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Render(args) => render_command(args),
+        Command::Render(args) => render_command(*args),
         Command::Inspect { scene } => inspect_command(&scene),
     };
     match result {

@@ -48,7 +48,7 @@ pub fn load(path: &Path) -> Result<Scene> {
 /// Converts glTF bytes; `source` names the file in messages, `base` is its directory
 /// (`None`: external files are refused).
 pub fn import(bytes: &[u8], source: &str, base: Option<&Path>) -> Result<Scene> {
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| parse_error(source, e))?;
+    let gltf = parse(bytes, source)?;
     let mut importer = Importer {
         source: source.to_string(),
         base,
@@ -66,6 +66,61 @@ pub fn import(bytes: &[u8], source: &str, base: Option<&Path>) -> Result<Scene> 
     };
     importer.run()?;
     Ok(importer.scene)
+}
+
+/// Parses and validates the document. gltf-json's validation indexes a primitive's POSITION
+/// accessor without a bounds check (it panics on a bad index), so that index is checked
+/// first. Missing or malformed POSITION `min`/`max` are tolerated: lucerna computes bounds
+/// itself, and several exporters omit them.
+fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
+    use gltf::json::validation::{Checked, Validate};
+    if bytes.starts_with(b"glTF") && bytes.len() >= 12 {
+        let declared = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize;
+        if declared > bytes.len() {
+            return Err(Error::bad_input(
+                source,
+                "GLB container",
+                format!(
+                    "file is truncated: {} bytes, the header declares {declared}",
+                    bytes.len()
+                ),
+            ));
+        }
+    }
+    let gltf =
+        gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error(source, e))?;
+    let root = gltf.document.as_json();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let position = primitive
+                .attributes
+                .get(&Checked::Valid(gltf::Semantic::Positions));
+            if let Some(index) = position.filter(|i| i.value() >= root.accessors.len()) {
+                return Err(Error::bad_input(
+                    source,
+                    format!("meshes[{m}].primitives[{p}].attributes.POSITION"),
+                    format!(
+                        "accessor {} does not exist (the file has {})",
+                        index.value(),
+                        root.accessors.len()
+                    ),
+                ));
+            }
+        }
+    }
+    let mut errors = Vec::new();
+    root.validate(root, gltf::json::Path::new, &mut |path, error| {
+        let path = path();
+        let bounds =
+            path.0.ends_with("[\"POSITION\"].min") || path.0.ends_with("[\"POSITION\"].max");
+        if !bounds {
+            errors.push((path, error));
+        }
+    });
+    if !errors.is_empty() {
+        return Err(parse_error(source, gltf::Error::Validation(errors)));
+    }
+    Ok(gltf)
 }
 
 fn parse_error(source: &str, e: gltf::Error) -> Error {

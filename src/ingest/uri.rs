@@ -47,18 +47,18 @@ pub fn resolve(uri: &str, base: Option<&Path>) -> Result<Resolved, String> {
             .map(Resolved::Data)
             .map_err(|e| format!("invalid base64 in data URI: {e}"));
     }
-    // A scheme is letters, digits, + - . before the first ':' (RFC 3986 §3.1).
-    if let Some((scheme, _)) = uri.split_once(':') {
-        if !scheme.is_empty()
-            && scheme
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
-            && !(scheme.len() == 1 && uri[2..].starts_with(['/', '\\']))
-        {
-            return Err(format!(
-                "URI scheme {scheme:?} is not allowed (only relative paths and data: URIs)"
-            ));
-        }
+    // A scheme is letters, digits, + - . before the first ':' (RFC 3986 §3.1); a single
+    // letter followed by a path separator is a Windows drive, refused below.
+    if let Some((scheme, _)) = uri.split_once(':')
+        && !scheme.is_empty()
+        && scheme
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c))
+        && !(scheme.len() == 1 && uri[2..].starts_with(['/', '\\']))
+    {
+        return Err(format!(
+            "URI scheme {scheme:?} is not allowed (only relative paths and data: URIs)"
+        ));
     }
     let path =
         percent_decode(uri).ok_or_else(|| "malformed percent-encoding in URI".to_string())?;

@@ -77,6 +77,7 @@ fn simpson(f: &impl Fn(f64, f64) -> f64, x0: f64, x1: f64, y0: f64, y1: f64) -> 
     (x1 - x0) * (y1 - y0) / 36.0 * (corners + 4.0 * edges + 16.0 * f(xm, ym))
 }
 
+#[allow(clippy::too_many_arguments)]
 fn adaptive(
     f: &impl Fn(f64, f64) -> f64,
     x0: f64,

@@ -2,4 +2,5 @@
 #![allow(dead_code)]
 
 pub mod chi2;
+pub mod gltf_builder;
 pub mod scenes;
