@@ -255,14 +255,19 @@ fn render_command(args: RenderArgs) -> Result<()> {
     if let Some(png) = &args.preview {
         film::preview::write(png, &film)?;
     }
+    let peak = render::peak_memory_bytes().map_or(String::new(), |b| {
+        format!(", peak memory {:.1} MB", b as f64 / 1e6)
+    });
     eprintln!(
-        "lucerna: wrote {} ({}x{}, {} spp, {} threads): scene prepared in {:.2} s; rendered in {}",
+        "lucerna: wrote {} ({}x{}, {} spp, {} threads): scene prepared in {:.2} s ({} triangles, BVH built in {:.2} s); rendered in {}{peak}",
         args.output.display(),
         film.width,
         film.height,
         options.spp,
         pool.current_num_threads(),
         build_seconds,
+        world.surfaces.prims.len(),
+        world.bvh_seconds,
         stats.summary()
     );
     Ok(())

@@ -56,6 +56,14 @@ impl RenderStats {
     }
 }
 
+/// Peak resident memory of this process in bytes (Linux's VmHWM), if known.
+pub fn peak_memory_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
 /// Renders `world` on the current rayon pool. Every pixel's value depends only on the
 /// scene, the options and the seed, not on the number of threads.
 pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {

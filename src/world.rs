@@ -109,6 +109,8 @@ pub struct World {
     pub space: RenderSpace,
     /// Radius of the render-space bounding sphere around the origin.
     pub radius: f32,
+    /// Seconds spent building the BVH.
+    pub bvh_seconds: f64,
 }
 
 fn transform_mesh(mesh: &scene::Mesh, to_render: &DMat4) -> RenderMesh {
@@ -287,7 +289,9 @@ impl World {
                 prims.push((mi as u32, ti as u32));
             }
         }
+        let bvh_start = std::time::Instant::now();
         let bvh = Bvh::build(&triangles, &flags);
+        let bvh_seconds = bvh_start.elapsed().as_secs_f64();
         drop(triangles);
 
         let scene_camera = match camera_name {
@@ -321,6 +325,7 @@ impl World {
             camera,
             space,
             radius,
+            bvh_seconds,
         })
     }
 

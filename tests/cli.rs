@@ -1,0 +1,155 @@
+//! The command line end to end: environment maps, preview PNGs, inspect, atomic output.
+
+mod common;
+
+use common::gltf_builder::{Builder, png_rgba};
+use serde_json::json;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn lucerna(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("lucerna-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A scene whose only geometry is a tiny quad far below the camera, and a camera at the
+/// origin looking along -Z (or along `forward` via a rotation about Y).
+fn empty_looking_scene(dir: &Path, yaw: f64) -> PathBuf {
+    let mut b = Builder::new();
+    let prim = b.quad_primitive(None);
+    let mesh = b.mesh(json!([prim]));
+    b.root(json!({"mesh": mesh, "translation": [0, -100, 0], "scale": [0.01, 0.01, 0.01]}));
+    b.add("cameras", json!({"type": "perspective", "perspective": {"yfov": 0.1, "aspectRatio": 1.0, "znear": 0.01}}));
+    let (s, c) = ((yaw / 2.0).sin(), (yaw / 2.0).cos());
+    b.root(json!({"camera": 0, "rotation": [0, s, 0, c]}));
+    b.write_embedded(dir, &format!("look_{yaw}"))
+}
+
+fn centre_pixel(exr: &Path) -> [f32; 3] {
+    let image = exr::prelude::read_first_flat_layer_from_file(exr).unwrap();
+    let size = image.layer_data.size;
+    let centre = (size.1 / 2) * size.0 + size.0 / 2;
+    let channel = |name: &str| {
+        let c = image
+            .layer_data
+            .channel_data
+            .list
+            .iter()
+            .find(|c| c.name.to_string() == name)
+            .unwrap();
+        c.sample_data.value_by_flat_index(centre).to_f32()
+    };
+    [channel("R"), channel("G"), channel("B")]
+}
+
+#[test]
+fn environment_map_orientation_follows_the_latlong_convention() {
+    // A 4x2 map: columns red, green, blue, white; the centre (u = 0.5) must be seen looking
+    // along -Z, u = 0.75 looking along +X.
+    let dir = temp_dir("env");
+    let row = [
+        [255, 0, 0, 255],
+        [0, 255, 0, 255],
+        [0, 0, 255, 255],
+        [255, 255, 255, 255],
+    ];
+    let map = dir.join("map.png");
+    std::fs::write(&map, png_rgba(4, 2, &[row, row].concat())).unwrap();
+    // Aim at texel centres (u = 0.375, 0.625, 0.875): the camera looks along
+    // (-sin yaw, 0, -cos yaw), whose u is 0.5 - yaw / 2π.
+    use std::f64::consts::FRAC_PI_4;
+    for (yaw, expected) in [
+        (FRAC_PI_4, [0.0, 1.0, 0.0]),
+        (-FRAC_PI_4, [0.0, 0.0, 1.0]),
+        (-3.0 * FRAC_PI_4, [1.0, 1.0, 1.0]),
+    ] {
+        let scene = empty_looking_scene(&dir, yaw);
+        let out = dir.join("env.exr");
+        let run = lucerna(&[
+            "render",
+            scene.to_str().unwrap(),
+            "--env-map",
+            map.to_str().unwrap(),
+            "--spp",
+            "4",
+            "--resolution",
+            "9x9",
+            "-q",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        let c = centre_pixel(&out);
+        for k in 0..3 {
+            assert!(
+                (c[k] - expected[k]).abs() < 0.02,
+                "yaw {yaw}: {c:?} vs {expected:?}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn preview_png_and_inspect() {
+    let dir = temp_dir("preview");
+    let exr = dir.join("a.exr");
+    let png = dir.join("a.png");
+    let run = lucerna(&[
+        "render",
+        "--spp",
+        "2",
+        "--resolution",
+        "20x10",
+        "-q",
+        "-o",
+        exr.to_str().unwrap(),
+        "--preview",
+        png.to_str().unwrap(),
+    ]);
+    assert!(run.status.success());
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&png).unwrap()));
+    let reader = decoder.read_info().unwrap();
+    assert_eq!((reader.info().width, reader.info().height), (20, 10));
+    let summary = String::from_utf8_lossy(&run.stderr);
+    for figure in [
+        "samples/s",
+        "rays/s",
+        "NaN/Inf contributions discarded",
+        "BVH built in",
+    ] {
+        assert!(summary.contains(figure), "{summary}");
+    }
+    let names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into())
+        .collect();
+    assert_eq!(names.len(), 2, "no temporary files left: {names:?}");
+
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell-box/cornell-box.gltf");
+    let run = lucerna(&["inspect", scene.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success());
+    for line in [
+        "32 triangles",
+        "materials: 4 (lambert)",
+        "2 emissive triangles",
+        "cameras: camera",
+    ] {
+        assert!(text.contains(line), "{line} missing from:\n{text}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
