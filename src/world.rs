@@ -17,7 +17,7 @@ use crate::light::environment::{Environment, EnvironmentMap};
 use crate::light::{Light, LightSet, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
 use crate::sampling::pcg::hash_u32;
-use crate::scene::{self, AlphaMode, LightKind, Material, Scene, Texture};
+use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
 use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
 
 /// World space to render space: `(p - centre) * scale`, `scale` a power of two.
@@ -58,26 +58,15 @@ impl RenderSpace {
     }
 }
 
-/// A mesh instance flattened into render space.
-#[derive(Clone, Debug)]
-pub struct RenderMesh {
-    pub positions: Vec<Vec3>,
-    pub normals: Option<Vec<Vec3>>,
-    pub tangents: Option<Vec<Vec4>>,
-    pub uvs: [Option<Vec<Vec2>>; 2],
-    pub colors: Option<Vec<Vec4>>,
-    pub triangles: Vec<[u32; 3]>,
-    pub material: u32,
-    /// Index of the light of triangle 0 when the material emits (triangle i is light
-    /// `first_light + i`).
-    pub first_light: Option<u32>,
-}
-
 /// What shading reads: meshes, materials, textures, and the map from BVH primitives to
 /// (mesh, triangle).
 #[derive(Clone, Debug)]
 pub struct Surfaces {
-    pub meshes: Vec<RenderMesh>,
+    /// Every mesh instance, flattened into render space.
+    pub meshes: Vec<Mesh>,
+    /// Per mesh: index of the light of triangle 0 when its material emits (triangle i is
+    /// light `first_light + i`).
+    pub first_light: Vec<Option<u32>>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     /// Primitive index (as given to the BVH) to (mesh, triangle).
@@ -113,7 +102,7 @@ pub struct World {
     pub bvh_seconds: f64,
 }
 
-fn transform_mesh(mesh: &scene::Mesh, to_render: &DMat4) -> RenderMesh {
+fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
     let linear = DMat3::from_mat4(*to_render);
     let mirrored = linear.determinant() < 0.0;
     let normal_matrix = linear.inverse().transpose();
@@ -144,7 +133,8 @@ fn transform_mesh(mesh: &scene::Mesh, to_render: &DMat4) -> RenderMesh {
     } else {
         mesh.triangles.clone()
     };
-    RenderMesh {
+    Mesh {
+        name: mesh.name.clone(),
         positions,
         normals,
         tangents,
@@ -152,7 +142,6 @@ fn transform_mesh(mesh: &scene::Mesh, to_render: &DMat4) -> RenderMesh {
         colors: mesh.colors.clone(),
         triangles,
         material: mesh.material,
-        first_light: None,
     }
 }
 
@@ -195,7 +184,7 @@ impl World {
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
 
-        let mut meshes: Vec<RenderMesh> = scene
+        let meshes: Vec<Mesh> = scene
             .instances
             .iter()
             .map(|inst| {
@@ -208,7 +197,8 @@ impl World {
 
         // Area lights: one per triangle of every emissive mesh.
         let mut lights = Vec::new();
-        for (mi, mesh) in meshes.iter_mut().enumerate() {
+        let mut first_light = vec![None; meshes.len()];
+        for (mi, mesh) in meshes.iter().enumerate() {
             let mat = &scene.materials[mesh.material as usize];
             if !mat.is_emissive() {
                 continue;
@@ -217,7 +207,7 @@ impl World {
                 * mat.emissive_texture.map_or(Vec3::ONE, |t| {
                     scene.textures[t.texture as usize].mean(true).truncate()
                 });
-            mesh.first_light = Some(lights.len() as u32);
+            first_light[mi] = Some(lights.len() as u32);
             for (ti, t) in mesh.triangles.iter().enumerate() {
                 let p = t.map(|i| mesh.positions[i as usize]);
                 let n = geometric_normal(p[0], p[1], p[2]);
@@ -318,6 +308,7 @@ impl World {
             lights: LightSet::new(lights, environment, radius.max(1e-6)),
             surfaces: Surfaces {
                 meshes,
+                first_light,
                 materials: scene.materials,
                 textures: scene.textures,
                 prims,
@@ -352,22 +343,14 @@ impl World {
     /// Index of the light that triangle `tri` of mesh `mesh` is, if it emits.
     #[inline]
     pub fn light_index(&self, mesh: u32, tri: u32) -> Option<usize> {
-        self.surfaces.meshes[mesh as usize]
-            .first_light
-            .map(|first| (first + tri) as usize)
+        self.surfaces.first_light[mesh as usize].map(|first| (first + tri) as usize)
     }
 }
 
 impl Surfaces {
     /// Interpolated attributes of triangle `tri` of `mesh` at barycentrics (b1, b2).
     #[inline]
-    pub fn attributes(
-        &self,
-        mesh: &RenderMesh,
-        tri: [u32; 3],
-        b1: f32,
-        b2: f32,
-    ) -> SurfaceAttributes {
+    pub fn attributes(&self, mesh: &Mesh, tri: [u32; 3], b1: f32, b2: f32) -> SurfaceAttributes {
         let b0 = 1.0 - b1 - b2;
         let [i0, i1, i2] = tri.map(|i| i as usize);
         let uv = |set: &Option<Vec<Vec2>>| {

@@ -153,3 +153,35 @@ fn preview_png_and_inspect() {
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn a_scene_without_camera_is_framed_automatically() {
+    let dir = temp_dir("nocam");
+    let mut b = Builder::new();
+    let m = b.add(
+        "materials",
+        json!({"emissiveFactor": [1, 1, 1], "doubleSided": true}),
+    );
+    let prim = b.quad_primitive(Some(m));
+    let mesh = b.mesh(json!([prim]));
+    b.root(json!({"mesh": mesh, "translation": [1000, 50, -7], "scale": [3, 3, 3]}));
+    let scene = b.write_embedded(&dir, "nocam");
+    let out = dir.join("nocam.exr");
+    let run = lucerna(&[
+        "render",
+        scene.to_str().unwrap(),
+        "--spp",
+        "1",
+        "-q",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let c = centre_pixel(&out);
+    assert_eq!(c, [1.0, 1.0, 1.0], "the framed quad fills the centre");
+    std::fs::remove_dir_all(&dir).unwrap();
+}

@@ -490,48 +490,21 @@ impl<'a> Importer<'a> {
         }
         let mut repaired = 0usize;
         let normals = reader.read_normals().map(|it| {
-            it.map(|n| {
-                let n = Vec3::from_array(n);
-                if n.is_finite() && n.length_squared() > 0.0 {
-                    n
-                } else {
-                    repaired += 1;
-                    Vec3::ZERO
-                }
-            })
-            .collect::<Vec<_>>()
+            let ok = |n: &Vec3| n.is_finite() && n.length_squared() > 0.0;
+            finite_or(it.map(Vec3::from_array), ok, Vec3::ZERO, &mut repaired)
         });
         let tangents: Option<Vec<Vec4>> = reader
             .read_tangents()
             .map(|it| it.map(Vec4::from_array).collect());
-        let mut read_uv = |set: u32| {
+        let uvs = [0, 1].map(|set| {
             reader.read_tex_coords(set).map(|it| {
-                it.into_f32()
-                    .map(|uv| {
-                        let uv = Vec2::from_array(uv);
-                        if uv.is_finite() {
-                            uv
-                        } else {
-                            repaired += 1;
-                            Vec2::ZERO
-                        }
-                    })
-                    .collect::<Vec<_>>()
+                let values = it.into_f32().map(Vec2::from_array);
+                finite_or(values, |uv| uv.is_finite(), Vec2::ZERO, &mut repaired)
             })
-        };
-        let uvs = [read_uv(0), read_uv(1)];
+        });
         let colors = reader.read_colors(0).map(|it| {
-            it.into_rgba_f32()
-                .map(|c| {
-                    let c = Vec4::from_array(c);
-                    if c.is_finite() {
-                        c
-                    } else {
-                        repaired += 1;
-                        Vec4::ONE
-                    }
-                })
-                .collect::<Vec<_>>()
+            let values = it.into_rgba_f32().map(Vec4::from_array);
+            finite_or(values, |c| c.is_finite(), Vec4::ONE, &mut repaired)
         });
         let indices: Vec<u32> = match reader.read_indices() {
             Some(it) => it.into_u32().collect(),
@@ -613,26 +586,8 @@ impl<'a> Importer<'a> {
             return Err(self.err(element, "a factor is not finite"));
         }
         let model = self.bsdf_model(m, element)?;
-        let base_color_texture = pbr
-            .base_color_texture()
-            .map(|t| {
-                self.texture_ref(
-                    t.texture(),
-                    t.tex_coord(),
-                    t.texture_transform().map(TextureTransform::from),
-                )
-            })
-            .transpose()?;
-        let metallic_roughness_texture = pbr
-            .metallic_roughness_texture()
-            .map(|t| {
-                self.texture_ref(
-                    t.texture(),
-                    t.tex_coord(),
-                    t.texture_transform().map(TextureTransform::from),
-                )
-            })
-            .transpose()?;
+        let base_color_texture = self.info_ref(pbr.base_color_texture())?;
+        let metallic_roughness_texture = self.info_ref(pbr.metallic_roughness_texture())?;
         let normal = m.normal_texture();
         let normal_texture = normal
             .as_ref()
@@ -643,16 +598,7 @@ impl<'a> Importer<'a> {
                 self.texture_ref(t.texture(), t.tex_coord(), transform)
             })
             .transpose()?;
-        let emissive_texture = m
-            .emissive_texture()
-            .map(|t| {
-                self.texture_ref(
-                    t.texture(),
-                    t.tex_coord(),
-                    t.texture_transform().map(TextureTransform::from),
-                )
-            })
-            .transpose()?;
+        let emissive_texture = self.info_ref(m.emissive_texture())?;
         if m.occlusion_texture().is_some() {
             self.warn(
                 element,
@@ -725,6 +671,18 @@ impl<'a> Importer<'a> {
                 format!("unknown bsdf {other:?} (expected gltf, lambert or phong)"),
             )),
         }
+    }
+
+    /// The texture slot of a material's texture info, if present.
+    fn info_ref(&mut self, info: Option<gltf::texture::Info>) -> Result<Option<TextureRef>> {
+        info.map(|t| {
+            self.texture_ref(
+                t.texture(),
+                t.tex_coord(),
+                t.texture_transform().map(TextureTransform::from),
+            )
+        })
+        .transpose()
     }
 
     fn texture_ref(
@@ -900,6 +858,28 @@ impl<'a> Importer<'a> {
             kind,
         });
     }
+}
+
+/// Collects attribute values, replacing those that fail `ok` by `fallback` and counting them.
+fn finite_or<T>(
+    values: impl Iterator<Item = T>,
+    ok: impl Fn(&T) -> bool,
+    fallback: T,
+    repaired: &mut usize,
+) -> Vec<T>
+where
+    T: Copy,
+{
+    values
+        .map(|v| {
+            if ok(&v) {
+                v
+            } else {
+                *repaired += 1;
+                fallback
+            }
+        })
+        .collect()
 }
 
 /// A KHR_texture_transform's values.

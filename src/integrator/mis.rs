@@ -74,16 +74,7 @@ impl Mis {
 
     /// Parses `balance`, `power[:β]`, `maximum`, `cutoff[:α]`, `nee-only` or `bsdf-only`.
     pub fn parse(s: &str) -> Result<Self, String> {
-        let (name, param) = match s.split_once(':') {
-            Some((n, p)) => (
-                n,
-                Some(
-                    p.parse::<f32>()
-                        .map_err(|_| format!("invalid number in {s:?}"))?,
-                ),
-            ),
-            None => (s, None),
-        };
+        let (name, param) = super::name_and_parameter(s)?;
         let positive = |v: f32| {
             if v.is_finite() && v > 0.0 {
                 Ok(v)

@@ -20,6 +20,19 @@ pub enum RussianRoulette {
     Throughput(f32),
 }
 
+/// Splits a setting value `name[:number]` into its name and optional parameter.
+pub(crate) fn name_and_parameter(s: &str) -> Result<(&str, Option<f32>), String> {
+    match s.split_once(':') {
+        Some((name, p)) => {
+            let value = p
+                .parse::<f32>()
+                .map_err(|_| format!("invalid number in {s:?}"))?;
+            Ok((name, Some(value)))
+        }
+        None => Ok((s, None)),
+    }
+}
+
 /// Bounces after which throughput-based roulette caps its survival probability.
 pub const ROULETTE_CAP_DEPTH: u32 = 8;
 /// The cap on survival probability after [`ROULETTE_CAP_DEPTH`] bounces.
@@ -46,16 +59,7 @@ impl RussianRoulette {
 
     /// Parses `off`, `fixed:P` or `throughput[:THRESHOLD]`.
     pub fn parse(s: &str) -> Result<Self, String> {
-        let (name, param) = match s.split_once(':') {
-            Some((n, p)) => (
-                n,
-                Some(
-                    p.parse::<f32>()
-                        .map_err(|_| format!("invalid number in {s:?}"))?,
-                ),
-            ),
-            None => (s, None),
-        };
+        let (name, param) = name_and_parameter(s)?;
         match (name, param) {
             ("off", None) => Ok(Self::Off),
             ("fixed", Some(p)) if p > 0.0 && p <= 1.0 => Ok(Self::Fixed(p)),

@@ -74,6 +74,54 @@ impl RayCounts {
     }
 }
 
+/// The state a path carries from vertex to vertex.
+struct PathState {
+    /// Throughput: product of BSDF weights and roulette compensations so far.
+    beta: Vec3,
+    /// Scattering events so far.
+    depth: u32,
+    /// Density of the BSDF sample that led to the current vertex, and whether it came from
+    /// a delta lobe.
+    prev_pdf: f32,
+    prev_delta: bool,
+}
+
+impl PathState {
+    /// The path reached an emitter of radiance `le`: seen directly by the camera, or found
+    /// by BSDF sampling, weighted against light sampling's density `light_pdf` (unless a
+    /// delta lobe led here, which light sampling cannot follow).
+    #[inline]
+    fn reached_emitter<R: Recorder>(
+        &self,
+        rec: &mut R,
+        mis: Mis,
+        le: Vec3,
+        light_pdf: impl FnOnce() -> f32,
+        single: bool,
+    ) {
+        if self.depth == 0 {
+            rec.contribution(Contribution {
+                value: self.beta * le,
+                depth: 0,
+                source: Source::Emission,
+                single_technique: None,
+            });
+        } else {
+            let p_light = if self.prev_delta { 0.0 } else { light_pdf() };
+            record(
+                rec,
+                mis,
+                Technique::Bsdf,
+                self.beta * le,
+                self.depth,
+                self.prev_pdf,
+                p_light,
+                single,
+            );
+        }
+    }
+}
+
 /// The path tracer over a world with given settings.
 pub struct PathTracer<'a> {
     world: &'a World,
@@ -98,61 +146,37 @@ impl<'a> PathTracer<'a> {
         let mis = self.settings.mis;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
         let single = rec.wants_single_technique();
-        let mut beta = Vec3::ONE;
-        let mut depth = 0u32;
-        // Density of the BSDF sample that led here, and whether it was a delta lobe.
-        let mut prev_pdf = 0.0f32;
-        let mut prev_delta = true;
+        let mut path = PathState {
+            beta: Vec3::ONE,
+            depth: 0,
+            prev_pdf: 0.0,
+            prev_delta: true,
+        };
         loop {
             rays.closest += 1;
             let Some(hit) = world.intersect(&ray) else {
                 if let (Some(env), Some(index)) =
                     (&world.lights.environment, world.lights.environment_index)
                 {
-                    let le = env.radiance(ray.dir);
-                    if depth == 0 {
-                        emit(rec, beta * le);
-                    } else {
-                        let p_light =
-                            world.lights.selection_probability(index as usize) * env.pdf(ray.dir);
-                        bsdf_hit(
-                            rec,
-                            mis,
-                            beta * le,
-                            depth,
-                            prev_pdf,
-                            prev_delta,
-                            p_light,
-                            single,
-                        );
-                    }
+                    let light_pdf =
+                        || world.lights.selection_probability(index as usize) * env.pdf(ray.dir);
+                    path.reached_emitter(rec, mis, env.radiance(ray.dir), light_pdf, single);
                 }
                 return;
             };
             let it = world.interaction(&ray, &hit);
             let le = world.surfaces.emitted(&it);
-            if le != Vec3::ZERO {
-                if depth == 0 {
-                    emit(rec, beta * le);
-                } else if let Some(index) = world.light_index(it.mesh, it.tri) {
-                    let Light::Triangle(tri) = &world.lights.lights[index] else {
-                        unreachable!("emissive triangles map to triangle lights")
-                    };
-                    let p_light =
-                        world.lights.selection_probability(index) * tri.pdf(ray.dir, hit.t);
-                    bsdf_hit(
-                        rec,
-                        mis,
-                        beta * le,
-                        depth,
-                        prev_pdf,
-                        prev_delta,
-                        p_light,
-                        single,
-                    );
-                }
+            if le != Vec3::ZERO
+                && let Some(index) = world.light_index(it.mesh, it.tri)
+            {
+                let Light::Triangle(tri) = &world.lights.lights[index] else {
+                    unreachable!("emissive triangles map to triangle lights")
+                };
+                let light_pdf =
+                    || world.lights.selection_probability(index) * tri.pdf(ray.dir, hit.t);
+                path.reached_emitter(rec, mis, le, light_pdf, single);
             }
-            if depth >= max_depth {
+            if path.depth >= max_depth {
                 return;
             }
             let surfaces = &world.surfaces;
@@ -162,7 +186,7 @@ impl<'a> PathTracer<'a> {
                 &it.attrs,
             );
             let wo = it.frame.to_local(-ray.dir);
-            if depth == 0 {
+            if path.depth == 0 {
                 rec.first_hit(FirstHit {
                     albedo: bsdf.albedo(wo),
                     normal: it.frame.n,
@@ -170,9 +194,10 @@ impl<'a> PathTracer<'a> {
                     position: world.space.to_world(it.p).as_vec3(),
                 });
             }
-            let vs = sampler.vertex(depth);
+            let vs = sampler.vertex(path.depth);
             if bsdf.has_non_delta() && !world.lights.is_empty() {
-                rays.shadow += self.next_event(&it, &bsdf, wo, beta, depth + 1, &vs, rec, single);
+                rays.shadow +=
+                    self.next_event(&it, &bsdf, wo, path.beta, path.depth + 1, &vs, rec, single);
             }
 
             let Some(bs) = bsdf.sample(wo, vs.lobe, vs.bsdf) else {
@@ -183,19 +208,19 @@ impl<'a> PathTracer<'a> {
             if wi.dot(it.ng) <= 0.0 {
                 return;
             }
-            beta *= bs.weight;
-            prev_pdf = bs.pdf;
-            prev_delta = bs.is_delta();
-            depth += 1;
+            path.beta *= bs.weight;
+            path.prev_pdf = bs.pdf;
+            path.prev_delta = bs.is_delta();
+            path.depth += 1;
 
-            let survival = self.settings.rr.survival(luminance(beta), depth);
+            let survival = self.settings.rr.survival(luminance(path.beta), path.depth);
             if survival < 1.0 {
                 if !(vs.rr < survival) {
                     return;
                 }
-                beta /= survival;
+                path.beta /= survival;
             }
-            if !(beta.max_element() > 0.0) {
+            if !(path.beta.max_element() > 0.0) {
                 return;
             }
             ray = Ray::new(offset_ray_origin(it.p, it.ng), wi);
@@ -250,69 +275,47 @@ impl<'a> PathTracer<'a> {
             return 1;
         }
         let p_light = p_select * ls.pdf;
+        // BSDF sampling cannot reach a delta light: its density there is 0.
+        let p_bsdf = if ls.delta { 0.0 } else { bsdf.pdf(wo, wi) };
         let value = beta * f * radiance / p_light;
-        let (weight, single_weights) = if ls.delta {
-            (1.0, [1.0, 1.0])
-        } else {
-            let p_bsdf = bsdf.pdf(wo, wi);
-            let mis = self.settings.mis;
-            (
-                mis.weight(Technique::Nee, p_light, p_bsdf),
-                [
-                    Mis::NeeOnly.weight(Technique::Nee, p_light, p_bsdf),
-                    Mis::BsdfOnly.weight(Technique::Nee, p_light, p_bsdf),
-                ],
-            )
-        };
-        rec.contribution(Contribution {
-            value: value * weight,
+        record(
+            rec,
+            self.settings.mis,
+            Technique::Nee,
+            value,
             depth,
-            source: Source::Nee,
-            single_technique: (single && depth == 1).then(|| single_weights.map(|w| value * w)),
-        });
+            p_light,
+            p_bsdf,
+            single,
+        );
         1
     }
 }
 
-/// Emission seen directly by the camera.
-#[inline]
-fn emit<R: Recorder>(rec: &mut R, value: Vec3) {
-    rec.contribution(Contribution {
-        value,
-        depth: 0,
-        source: Source::Emission,
-        single_technique: None,
-    });
-}
-
-/// A BSDF-sampled direction reached an emitter whose light-sampling density is `p_light`.
+/// Records `value`, found by `technique` with density `own`, where the other technique's
+/// density is `other` (0 where it cannot produce the path: delta lights, delta lobes, so
+/// that every heuristic gives weight 1 there).
 #[allow(clippy::too_many_arguments)]
 #[inline]
-fn bsdf_hit<R: Recorder>(
+fn record<R: Recorder>(
     rec: &mut R,
     mis: Mis,
+    technique: Technique,
     value: Vec3,
     depth: u32,
-    prev_pdf: f32,
-    prev_delta: bool,
-    p_light: f32,
+    own: f32,
+    other: f32,
     single: bool,
 ) {
-    let (weight, single_weights) = if prev_delta {
-        (1.0, [1.0, 1.0])
-    } else {
-        (
-            mis.weight(Technique::Bsdf, prev_pdf, p_light),
-            [
-                Mis::NeeOnly.weight(Technique::Bsdf, prev_pdf, p_light),
-                Mis::BsdfOnly.weight(Technique::Bsdf, prev_pdf, p_light),
-            ],
-        )
-    };
+    let weight = |h: Mis| h.weight(technique, own, other);
     rec.contribution(Contribution {
-        value: value * weight,
+        value: value * weight(mis),
         depth,
-        source: Source::Bsdf,
-        single_technique: (single && depth == 1).then(|| single_weights.map(|w| value * w)),
+        source: match technique {
+            Technique::Nee => Source::Nee,
+            Technique::Bsdf => Source::Bsdf,
+        },
+        single_technique: (single && depth == 1)
+            .then(|| [value * weight(Mis::NeeOnly), value * weight(Mis::BsdfOnly)]),
     });
 }

@@ -132,19 +132,10 @@ impl GltfPbr {
     }
 
     fn finish(&self, wo: Vec3, wi: Vec3, lobe: Lobe) -> Option<BsdfSample> {
-        let pdf = self.pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample {
-            wi,
-            weight: self.eval(wo, wi) / pdf,
-            pdf,
-            lobe,
-        })
+        BsdfSample::from_mixture(wi, self.eval(wo, wi), self.pdf(wo, wi), lobe)
     }
 
-    /// True if every lobe is a delta (never: the diffuse lobe always exists, maybe black).
+    /// True if some lobe is not a delta: false only for a smooth pure metal.
     pub fn has_non_delta(&self) -> bool {
         !self.smooth() || self.metallic < 1.0
     }

@@ -38,6 +38,18 @@ pub struct BsdfSample {
 }
 
 impl BsdfSample {
+    /// The sample of direction `wi` from a mixture of lobes whose combined density there is
+    /// `pdf` and whose f · cos θi is `f_cos`; `None` where the density vanishes.
+    #[inline]
+    pub fn from_mixture(wi: Vec3, f_cos: Vec3, pdf: f32, lobe: Lobe) -> Option<Self> {
+        (pdf > 0.0).then(|| Self {
+            wi,
+            weight: f_cos / pdf,
+            pdf,
+            lobe,
+        })
+    }
+
     /// True if the sample came from a delta lobe.
     pub fn is_delta(&self) -> bool {
         self.lobe == Lobe::Specular

@@ -76,16 +76,7 @@ impl Phong {
         if wi.z <= 0.0 {
             return None;
         }
-        let pdf = self.pdf(wo, wi);
-        if !(pdf > 0.0) {
-            return None;
-        }
-        Some(BsdfSample {
-            wi,
-            weight: self.eval(wo, wi) / pdf,
-            pdf,
-            lobe,
-        })
+        BsdfSample::from_mixture(wi, self.eval(wo, wi), self.pdf(wo, wi), lobe)
     }
 
     /// Directional albedo estimate (kd + ks).
