@@ -3,12 +3,8 @@
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use lucerna::error::{Error, Result};
-use lucerna::film::aov::AovSet;
-use lucerna::film::exr::Attribute;
-use lucerna::film::filter::PixelFilter;
-use lucerna::integrator::{Mis, RussianRoulette, Settings};
+use lucerna::film::exr::{Attribute, Header};
 use lucerna::render::{self, RenderOptions};
-use lucerna::sampling::sampler::SamplerKind;
 use lucerna::scene::{LightKind, Scene};
 use lucerna::world::World;
 use lucerna::{film, ingest};
@@ -44,13 +40,20 @@ struct RenderArgs {
     /// Output EXR file.
     #[arg(short, long, default_value = "render.exr")]
     output: PathBuf,
-    /// Samples per pixel.
-    #[arg(long, default_value_t = 64, value_parser = clap::value_parser!(u32).range(1..))]
-    spp: u32,
-    /// AOV layers to write, comma-separated (e.g. `direct,indirect,albedo`), or `all`.
-    /// The beauty is always written.
-    #[arg(long, default_value = "all", value_parser = parse_aovs)]
-    aov: AovSet,
+    /// A TOML settings file (keys as the flags below, e.g. `mis = "balance"`); flags given
+    /// on the command line override it.
+    #[arg(long)]
+    settings: Option<PathBuf>,
+    /// Samples per pixel (default 64; with --time, the most to take).
+    #[arg(long)]
+    spp: Option<String>,
+    /// Time budget in seconds: render passes until it is spent.
+    #[arg(long)]
+    time: Option<String>,
+    /// AOV layers to write, comma-separated (e.g. `direct,indirect,albedo`), `all`, or
+    /// per-depth layers `nee_dK`, `bsdf_dK`. The beauty is always written.
+    #[arg(long)]
+    aov: Option<String>,
     /// Image size, e.g. 640x480 (default: from the camera's aspect ratio, long side 512).
     #[arg(long, value_parser = parse_resolution)]
     resolution: Option<(u32, u32)>,
@@ -58,8 +61,8 @@ struct RenderArgs {
     #[arg(long)]
     camera: Option<String>,
     /// Random seed.
-    #[arg(long, default_value_t = 0)]
-    seed: u32,
+    #[arg(long)]
+    seed: Option<String>,
     /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     threads: Option<u32>,
@@ -75,32 +78,78 @@ struct RenderArgs {
     /// Also write a tone-mapped sRGB PNG of the beauty.
     #[arg(long)]
     preview: Option<PathBuf>,
-    /// Sample sequence: sobol (Owen-scrambled) or independent.
-    #[arg(long, default_value = "sobol", value_parser = parse_sampler)]
-    sampler: SamplerKind,
-    /// MIS heuristic: balance, power[:β], maximum, cutoff[:α], nee-only, bsdf-only.
-    #[arg(long, default_value = "power", value_parser = Mis::parse)]
-    mis: Mis,
-    /// Russian roulette: off, fixed:P, throughput[:THRESHOLD].
-    #[arg(long, default_value = "throughput", value_parser = RussianRoulette::parse)]
-    rr: RussianRoulette,
-    /// Maximum number of bounces (1 = direct light only), or `unlimited`.
-    #[arg(long, default_value = "unlimited", value_parser = parse_depth)]
-    max_depth: MaxDepth,
-    /// Pixel filter: box, blackman-harris (width 1.5) or blackman-harris:WIDTH.
-    #[arg(long, default_value = "blackman-harris", value_parser = parse_filter)]
-    filter: PixelFilter,
+    /// Sample sequence: sobol (Owen-scrambled, default) or independent.
+    #[arg(long)]
+    sampler: Option<String>,
+    /// MIS heuristic: balance, power[:β] (default power:2), maximum, cutoff[:α], nee-only,
+    /// bsdf-only.
+    #[arg(long)]
+    mis: Option<String>,
+    /// Russian roulette: off, fixed:P, throughput[:THRESHOLD] (default throughput:0.01),
+    /// efficiency.
+    #[arg(long)]
+    rr: Option<String>,
+    /// Maximum number of bounces (1 = direct light only), or `unlimited` (default).
+    #[arg(long)]
+    max_depth: Option<String>,
+    /// Light selection for light sampling: uniform, power (default), contribution.
+    #[arg(long)]
+    light_select: Option<String>,
+    /// Measure area lights are sampled in: area (default) or solid-angle.
+    #[arg(long)]
+    light_sampling: Option<String>,
+    /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1 (default 1 and 1).
+    #[arg(long)]
+    split: Option<String>,
+    /// Pixel filter: box, blackman-harris (width 1.5, default) or blackman-harris:WIDTH.
+    #[arg(long)]
+    filter: Option<String>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
 }
 
-/// A parsed `--max-depth`.
-#[derive(Clone, Copy)]
-struct MaxDepth(Option<u32>);
-
-fn parse_aovs(s: &str) -> std::result::Result<AovSet, String> {
-    AovSet::parse(s)
+impl RenderArgs {
+    /// The render options: defaults, then the settings file, then the flags.
+    fn options(&self) -> Result<RenderOptions> {
+        let mut options = RenderOptions {
+            progress: !self.quiet,
+            ..Default::default()
+        };
+        if let Some(path) = &self.settings {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| Error::bad_input(path, "file", format!("cannot read: {e}")))?;
+            options
+                .load_settings(&text)
+                .map_err(|e| Error::bad_input(path, "settings", e))?;
+        }
+        let flags = [
+            ("spp", &self.spp),
+            ("time", &self.time),
+            ("aov", &self.aov),
+            ("seed", &self.seed),
+            ("sampler", &self.sampler),
+            ("mis", &self.mis),
+            ("rr", &self.rr),
+            ("max-depth", &self.max_depth),
+            ("light-select", &self.light_select),
+            ("light-sampling", &self.light_sampling),
+            ("split", &self.split),
+            ("filter", &self.filter),
+        ];
+        for (name, value) in flags {
+            if let Some(v) = value {
+                options
+                    .set(name, v)
+                    .map_err(|e| Error::bad_input("", format!("--{name}"), e))?;
+            }
+        }
+        options
+            .settings
+            .validate()
+            .map_err(|e| Error::bad_input("", "settings", e))?;
+        Ok(options)
+    }
 }
 
 fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -118,7 +167,6 @@ fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
         _ => Err("width and height must be integers in 1..=65536".into()),
     }
 }
-
 fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
     let values: Vec<f32> = s
         .split(',')
@@ -140,25 +188,6 @@ fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
     }
 }
 
-fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
-    SamplerKind::parse(s).ok_or_else(|| format!("unknown sampler {s:?} (sobol, independent)"))
-}
-
-fn parse_depth(s: &str) -> std::result::Result<MaxDepth, String> {
-    if s == "unlimited" {
-        return Ok(MaxDepth(None));
-    }
-    s.parse::<u32>()
-        .map(|d| MaxDepth(Some(d)))
-        .map_err(|_| format!("expected a number of bounces or `unlimited`, got {s:?}"))
-}
-
-fn parse_filter(s: &str) -> std::result::Result<PixelFilter, String> {
-    PixelFilter::parse(s).ok_or_else(|| {
-        format!("unknown filter {s:?} (box, blackman-harris, blackman-harris:WIDTH)")
-    })
-}
-
 fn load_scene(path: Option<&Path>) -> Result<Scene> {
     let scene = match path {
         Some(p) => ingest::load(p)?,
@@ -169,7 +198,6 @@ fn load_scene(path: Option<&Path>) -> Result<Scene> {
     }
     Ok(scene)
 }
-
 fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
@@ -181,6 +209,7 @@ fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
 }
 
 fn render_command(args: RenderArgs) -> Result<()> {
+    let options = args.options()?;
     let pool = thread_pool(args.threads)?;
     let mut scene = load_scene(args.scene.as_deref())?;
     if let Some(radiance) = args.env {
@@ -190,66 +219,45 @@ fn render_command(args: RenderArgs) -> Result<()> {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
     let source = scene.source.clone();
-    let settings = Settings {
-        mis: args.mis,
-        rr: args.rr,
-        max_depth: args.max_depth.0,
-        sampler: args.sampler,
-        seed: args.seed,
-    };
-    let options = RenderOptions {
-        spp: args.spp,
-        settings,
-        aovs: args.aov,
-        filter: args.filter,
-        progress: !args.quiet,
-    };
     let build_start = std::time::Instant::now();
     let world = pool.install(|| World::build(scene, args.camera.as_deref(), args.resolution))?;
     let build_seconds = build_start.elapsed().as_secs_f64();
     let (film, stats) = pool.install(|| render::render(&world, &options));
 
-    let camera = &world.camera;
     // glam's column-major listing of a column-vector matrix is the row-major listing of
     // its transpose: exactly Imath's row-vector convention.
     let imath = |m: glam::DMat4| m.as_mat4().to_cols_array();
-    let attributes = vec![
-        (
-            "lucerna/renderer".to_string(),
-            Attribute::Text(lucerna::RENDERER.into()),
-        ),
-        ("lucerna/scene".into(), Attribute::Text(source)),
-        (
-            "lucerna/settings".into(),
-            Attribute::Text(format!(
-                "{} filter={} aov={}",
-                options.settings.describe(),
-                options.filter.describe(),
-                options.aovs.describe()
-            )),
-        ),
-        (
-            "lucerna/seed".into(),
-            Attribute::Int(options.settings.seed as i32),
-        ),
-        ("lucerna/spp".into(), Attribute::Int(options.spp as i32)),
-        (
-            "lucerna/samples".into(),
-            Attribute::Double(stats.samples as f64),
-        ),
-        (
-            "lucerna/render_seconds".into(),
-            Attribute::Double(stats.seconds),
-        ),
-        (
-            "lucerna/nan_inf_discarded".into(),
-            Attribute::Double(stats.discarded as f64),
-        ),
-    ];
-    let header = film::exr::Header {
-        world_to_camera: Some(imath(camera.world_to_camera)),
-        world_to_ndc: Some(imath(camera.world_to_ndc)),
-        attributes,
+    let header = Header {
+        world_to_camera: Some(imath(world.camera.world_to_camera)),
+        world_to_ndc: Some(imath(world.camera.world_to_ndc)),
+        attributes: vec![
+            (
+                "lucerna/renderer".into(),
+                Attribute::Text(lucerna::RENDERER.into()),
+            ),
+            ("lucerna/scene".into(), Attribute::Text(source)),
+            (
+                "lucerna/settings".into(),
+                Attribute::Text(options.to_toml(stats.spp)),
+            ),
+            (
+                "lucerna/seed".into(),
+                Attribute::Int(options.settings.seed as i32),
+            ),
+            ("lucerna/spp".into(), Attribute::Int(stats.spp as i32)),
+            (
+                "lucerna/samples".into(),
+                Attribute::Double(stats.samples as f64),
+            ),
+            (
+                "lucerna/render_seconds".into(),
+                Attribute::Double(stats.seconds),
+            ),
+            (
+                "lucerna/nan_inf_discarded".into(),
+                Attribute::Double(stats.discarded as f64),
+            ),
+        ],
     };
     film::exr::write(&args.output, &film, &header)?;
     if let Some(png) = &args.preview {
@@ -259,11 +267,10 @@ fn render_command(args: RenderArgs) -> Result<()> {
         format!(", peak memory {:.1} MB", b as f64 / 1e6)
     });
     eprintln!(
-        "lucerna: wrote {} ({}x{}, {} spp, {} threads): scene prepared in {:.2} s ({} triangles, BVH built in {:.2} s); rendered in {}{peak}",
+        "lucerna: wrote {} ({}x{}, {} threads): scene prepared in {:.2} s ({} triangles, BVH built in {:.2} s); rendered in {}{peak}",
         args.output.display(),
         film.width,
         film.height,
-        options.spp,
         pool.current_num_threads(),
         build_seconds,
         world.surfaces.prims.len(),

@@ -1,11 +1,12 @@
 //! The render loop: passes of samples over tiles, tiles in parallel on the current rayon
-//! pool, a progress bar, and the figures of the run.
+//! pool, an optional time budget, a progress bar, and the figures of the run.
 
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
 use crate::film::{Film, PixelAccumulator, SampleRecord};
 use crate::integrator::Settings;
 use crate::integrator::path::{PathTracer, RayCounts};
+use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
 use glam::Vec2;
@@ -14,13 +15,20 @@ use std::io::IsTerminal;
 use std::sync::Mutex;
 use std::time::Instant;
 
-/// Samples per pixel rendered in one pass over the image.
+/// Samples per pixel of a pass without a time budget.
 const PASS_SAMPLES: u32 = 16;
+/// Samples per pixel when neither a count nor a time is given.
+pub const DEFAULT_SPP: u32 = 64;
+/// Most samples per pixel a time budget may take.
+const MAX_SPP: u32 = 1 << 24;
 
-/// What to render.
+/// What to render: samples or time, integrator settings, AOVs, pixel filter.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
-    pub spp: u32,
+    /// Samples per pixel; with a time budget, the most to take.
+    pub spp: Option<u32>,
+    /// Time budget in seconds: passes continue until it is spent.
+    pub time: Option<f64>,
     pub settings: Settings,
     pub aovs: AovSet,
     pub filter: PixelFilter,
@@ -28,10 +36,105 @@ pub struct RenderOptions {
     pub progress: bool,
 }
 
+impl Default for RenderOptions {
+    fn default() -> Self {
+        Self {
+            spp: None,
+            time: None,
+            settings: Settings::default(),
+            aovs: AovSet::default(),
+            filter: PixelFilter::blackman_harris(1.5),
+            progress: false,
+        }
+    }
+}
+
+/// Names of the render-level settings (besides the integrator's).
+const RENDER_NAMES: [&str; 4] = ["spp", "time", "filter", "aov"];
+
+impl RenderOptions {
+    /// Sets `name` (a render or integrator setting) from its textual value: the one path
+    /// for the command line and settings files.
+    pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {
+        match name {
+            "spp" => {
+                let spp = value.parse().ok().filter(|s| (1..=MAX_SPP).contains(s));
+                self.spp =
+                    Some(spp.ok_or_else(|| {
+                        format!("spp: an integer in 1..={MAX_SPP}, got {value:?}")
+                    })?);
+            }
+            "time" => {
+                let t = value
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|t| t.is_finite() && *t > 0.0);
+                self.time =
+                    Some(t.ok_or_else(|| {
+                        format!("time: a positive number of seconds, got {value:?}")
+                    })?);
+            }
+            "filter" => {
+                self.filter = PixelFilter::parse(value).ok_or_else(|| {
+                    format!(
+                        "unknown filter {value:?} (box, blackman-harris, blackman-harris:WIDTH)"
+                    )
+                })?
+            }
+            "aov" => self.aovs = AovSet::parse(value)?,
+            _ => self.settings.set(name, value)?,
+        }
+        Ok(())
+    }
+
+    /// Applies a TOML settings file's keys.
+    pub fn load_settings(&mut self, text: &str) -> Result<(), String> {
+        for (name, value) in read_settings_toml(text)? {
+            self.set(&name, &value)
+                .map_err(|e| format!("{name}: {e}"))?;
+        }
+        Ok(())
+    }
+
+    /// Every setting as TOML, with `spp` the samples actually taken: the header's record
+    /// of how an image was made, readable back as a settings file.
+    pub fn to_toml(&self, spp_taken: u32) -> String {
+        let mut pairs: Vec<(String, String)> = vec![("spp".into(), spp_taken.to_string())];
+        if let Some(t) = self.time {
+            pairs.push(("time".into(), t.to_string()));
+        }
+        pairs.push(("filter".into(), self.filter.describe()));
+        pairs.push(("aov".into(), self.aovs.describe()));
+        for name in SETTING_NAMES {
+            pairs.push((
+                name.into(),
+                self.settings.get(name).expect("listed settings exist"),
+            ));
+        }
+        debug_assert!(
+            RENDER_NAMES
+                .iter()
+                .all(|n| pairs.iter().any(|(k, _)| k == n))
+        );
+        write_settings_toml(&pairs)
+    }
+
+    /// The sample count when no time budget limits it.
+    fn target_spp(&self) -> u32 {
+        match (self.spp, self.time) {
+            (Some(s), _) => s,
+            (None, Some(_)) => MAX_SPP,
+            (None, None) => DEFAULT_SPP,
+        }
+    }
+}
+
 /// Figures of a finished render.
 #[derive(Clone, Copy, Debug)]
 pub struct RenderStats {
     pub seconds: f64,
+    /// Samples per pixel taken.
+    pub spp: u32,
     pub samples: u64,
     pub rays: RayCounts,
     /// Contributions dropped for being NaN or infinite.
@@ -43,8 +146,9 @@ impl RenderStats {
     pub fn summary(&self) -> String {
         let total_rays = self.rays.closest + self.rays.shadow;
         format!(
-            "{:.2} s, {} samples ({:.3} M samples/s), {} rays ({:.2} M rays/s: {:.2} M closest + {:.2} M shadow), {} NaN/Inf contributions discarded",
+            "{:.2} s, {} spp, {} samples ({:.3} M samples/s), {} rays ({:.2} M rays/s: {:.2} M closest + {:.2} M shadow), {} NaN/Inf contributions discarded",
             self.seconds,
+            self.spp,
             self.samples,
             self.samples as f64 / self.seconds / 1e6,
             total_rays,
@@ -64,28 +168,61 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
-/// Renders `world` on the current rayon pool. Every pixel's value depends only on the
-/// scene, the options and the seed, not on the number of threads.
+/// The samples of the next pass: fixed-size passes without a budget; with one, passes
+/// sized to about a twentieth of the budget from the measured time per sample, shortened
+/// to fit what remains, and none when less than half a sample's time remains.
+fn next_pass(done: u32, target: u32, budget: Option<f64>, elapsed: f64) -> u32 {
+    let left = target - done;
+    let Some(budget) = budget else {
+        return left.min(PASS_SAMPLES);
+    };
+    if done == 0 {
+        return 1;
+    }
+    let per_sample = elapsed / done as f64;
+    let remaining = budget - elapsed;
+    if remaining < 0.5 * per_sample {
+        return 0;
+    }
+    let fit = (remaining / per_sample).round().max(1.0);
+    let slice = (budget / 20.0 / per_sample).max(1.0);
+    (fit.min(slice) as u32).clamp(1, left)
+}
+
+/// Renders `world` on the current rayon pool. Without a time budget every pixel's value
+/// depends only on the scene, the options and the seed, not on the number of threads.
 pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     let camera = &world.camera;
     let mut film = Film::new(camera.width(), camera.height(), options.aovs.clone());
     let tracer = PathTracer::new(world, &options.settings);
-    let total = film.width as u64 * film.height as u64 * options.spp as u64;
+    let target = options.target_spp();
+    let pixels = film.width as u64 * film.height as u64;
     let bar = (options.progress && std::io::stderr().is_terminal()).then(|| {
-        let bar = indicatif::ProgressBar::new(total);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template(
+        let (length, template) = match options.time {
+            Some(t) => (
+                (t * 1000.0) as u64,
+                "{elapsed_precise} [{wide_bar}] {percent:>3}% of the time budget",
+            ),
+            None => (
+                pixels * target as u64,
                 "{elapsed_precise} [{wide_bar}] {percent:>3}% eta {eta}",
-            )
-            .expect("the template is valid"),
+            ),
+        };
+        let bar = indicatif::ProgressBar::new(length);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(template).expect("the template is valid"),
         );
         bar
     });
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
     let mut done = 0;
-    while done < options.spp {
-        let pass = done..(done + PASS_SAMPLES).min(options.spp);
+    while done < target {
+        let n = next_pass(done, target, options.time, start.elapsed().as_secs_f64());
+        if n == 0 {
+            break;
+        }
+        let pass = done..done + n;
         let router = &film.router;
         film.tiles.par_iter_mut().for_each(|tile| {
             let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
@@ -113,20 +250,43 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
                 .lock()
                 .expect("no thread panicked holding the lock")
                 .add(&rays);
-            if let Some(bar) = &bar {
+            if let (Some(bar), None) = (&bar, options.time) {
                 bar.inc(tile.pixel_count() as u64 * pass.len() as u64);
             }
         });
         done = pass.end;
+        if let (Some(bar), Some(_)) = (&bar, options.time) {
+            bar.set_position(start.elapsed().as_millis() as u64);
+        }
     }
     if let Some(bar) = bar {
         bar.finish_and_clear();
     }
     let stats = RenderStats {
         seconds: start.elapsed().as_secs_f64(),
+        spp: done,
         samples: film.total_samples(),
         rays: *counts.lock().expect("no thread panicked holding the lock"),
         discarded: film.discarded(),
     };
     (film, stats)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn passes_fit_the_budget() {
+        assert_eq!(next_pass(0, 100, None, 0.0), 16);
+        assert_eq!(next_pass(96, 100, None, 0.0), 4);
+        assert_eq!(next_pass(0, MAX_SPP, Some(10.0), 0.0), 1);
+        // 0.1 s a sample, 10 s budget: passes of 5 (half a second).
+        assert_eq!(next_pass(10, MAX_SPP, Some(10.0), 1.0), 5);
+        // Near the end: what fits, then nothing.
+        assert_eq!(next_pass(97, MAX_SPP, Some(10.0), 9.7), 3);
+        assert_eq!(next_pass(100, MAX_SPP, Some(10.0), 9.97), 0);
+        // The sample count still caps a budget.
+        assert_eq!(next_pass(62, 64, Some(10.0), 0.1), 2);
+    }
 }

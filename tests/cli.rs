@@ -185,3 +185,104 @@ fn a_scene_without_camera_is_framed_automatically() {
     assert_eq!(c, [1.0, 1.0, 1.0], "the framed quad fills the centre");
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+fn header_settings(exr: &Path) -> toml::Table {
+    let image = exr::prelude::read_first_flat_layer_from_file(exr).unwrap();
+    let text = match image
+        .layer_data
+        .attributes
+        .other
+        .get(&exr::prelude::Text::from("lucerna/settings"))
+    {
+        Some(exr::prelude::AttributeValue::Text(t)) => t.to_string(),
+        other => panic!("no settings in the header: {other:?}"),
+    };
+    text.parse().unwrap()
+}
+
+#[test]
+fn settings_file_flags_and_time_budget() {
+    let dir = temp_dir("settings");
+    let file = dir.join("look.toml");
+    std::fs::write(&file, "mis = \"balance\"\nrr = \"fixed:0.5\"\nspp = 3\nlight-select = \"uniform\"\nsplit = \"nee=2\"\n").unwrap();
+    let out = dir.join("s.exr");
+    let run = lucerna(&[
+        "render",
+        "--settings",
+        file.to_str().unwrap(),
+        "--spp",
+        "5",
+        "--resolution",
+        "8x8",
+        "-q",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let s = header_settings(&out);
+    assert_eq!(s["mis"].as_str(), Some("balance"));
+    assert_eq!(s["rr"].as_str(), Some("fixed:0.5"));
+    assert_eq!(s["light-select"].as_str(), Some("uniform"));
+    assert_eq!(s["split"].as_str(), Some("nee=2,bsdf=1"));
+    assert_eq!(
+        s["spp"].as_integer(),
+        Some(5),
+        "the flag overrides the file"
+    );
+
+    // The header's settings are a settings file that reproduces the image.
+    let replay_file = dir.join("replay.toml");
+    std::fs::write(&replay_file, toml::to_string(&s).unwrap()).unwrap();
+    let replay = dir.join("replay.exr");
+    let run = lucerna(&[
+        "render",
+        "--settings",
+        replay_file.to_str().unwrap(),
+        "--resolution",
+        "8x8",
+        "-q",
+        "-o",
+        replay.to_str().unwrap(),
+    ]);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert_eq!(centre_pixel(&replay), centre_pixel(&out));
+
+    // A time budget: render until about a second has passed; the header has the count.
+    let timed = dir.join("t.exr");
+    let start = std::time::Instant::now();
+    let run = lucerna(&[
+        "render",
+        "--time",
+        "1",
+        "--resolution",
+        "32x32",
+        "-q",
+        "-o",
+        timed.to_str().unwrap(),
+    ]);
+    let seconds = start.elapsed().as_secs_f64();
+    assert!(run.status.success());
+    assert!((0.9..4.0).contains(&seconds), "{seconds} s");
+    assert!(header_settings(&timed)["spp"].as_integer().unwrap() > 1);
+
+    std::fs::write(&file, "colour = \"red\"\n").unwrap();
+    let run = lucerna(&[
+        "render",
+        "--settings",
+        file.to_str().unwrap(),
+        "-q",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("unknown setting \"colour\""));
+    std::fs::remove_dir_all(&dir).unwrap();
+}

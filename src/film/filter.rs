@@ -66,11 +66,11 @@ impl PixelFilter {
         }
     }
 
-    /// Name as written in EXR metadata.
+    /// The textual form [`PixelFilter::parse`] reads.
     pub fn describe(&self) -> String {
         match self {
             Self::Box => "box".into(),
-            Self::BlackmanHarris { width, .. } => format!("blackman-harris({width})"),
+            Self::BlackmanHarris { width, .. } => format!("blackman-harris:{width}"),
         }
     }
 }

@@ -74,7 +74,7 @@ impl Mis {
 
     /// Parses `balance`, `power[:β]`, `maximum`, `cutoff[:α]`, `nee-only` or `bsdf-only`.
     pub fn parse(s: &str) -> Result<Self, String> {
-        let (name, param) = super::name_and_parameter(s)?;
+        let (name, param) = super::settings::name_and_parameter(s)?;
         let positive = |v: f32| {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
@@ -102,13 +102,13 @@ impl Mis {
         }
     }
 
-    /// Name and parameter as written in settings and EXR metadata.
+    /// The textual form [`Mis::parse`] reads.
     pub fn describe(&self) -> String {
         match self {
             Self::Balance => "balance".into(),
-            Self::Power(b) => format!("power({b})"),
+            Self::Power(b) => format!("power:{b}"),
             Self::Maximum => "maximum".into(),
-            Self::Cutoff(a) => format!("cutoff({a})"),
+            Self::Cutoff(a) => format!("cutoff:{a}"),
             Self::NeeOnly => "nee-only".into(),
             Self::BsdfOnly => "bsdf-only".into(),
         }

@@ -177,11 +177,11 @@ pub fn render(
     pool.install(|| {
         let world = World::build(scene, None, Some(res)).expect("test scene builds");
         let options = RenderOptions {
-            spp,
+            spp: Some(spp),
             settings,
             aovs: AovSet::default(),
             filter: PixelFilter::box_filter(),
-            progress: false,
+            ..Default::default()
         };
         render::render(&world, &options)
     })

@@ -2,6 +2,7 @@
 `exr` crate that wrote it)."""
 import os
 import subprocess
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -56,7 +57,8 @@ def test_header_metadata(default_render):
     assert spec.getattribute("lucerna/renderer").startswith("lucerna ")
     assert spec.getattribute("lucerna/spp") == 64
     assert spec.getattribute("lucerna/nan_inf_discarded") == 0
-    assert "mis=power(2)" in spec.getattribute("lucerna/settings")
+    settings = tomllib.loads(spec.getattribute("lucerna/settings"))
+    assert settings["mis"] == "power:2" and settings["spp"] == 64 and settings["rr"] == "throughput:0.01"
     assert spec.getattribute("lucerna/render_seconds") > 0
     for matrix in ("worldToCamera", "worldToNDC"):
         m = np.array(spec.getattribute(matrix), dtype=np.float64).reshape(4, 4)

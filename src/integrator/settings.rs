@@ -1,0 +1,388 @@
+//! The integrator's settings: every technique of `../shared/seed-path-tracing.md` as data.
+//!
+//! Each setting has one textual form (`name[:parameter]`), used on the command line, in
+//! TOML settings files and in the EXR header, so a render can be reproduced from its file.
+
+use super::mis::Mis;
+use crate::sampling::sampler::SamplerKind;
+
+/// How paths are terminated beyond the maximum depth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RussianRoulette {
+    /// Only the maximum depth ends paths.
+    Off,
+    /// Continue with a fixed probability p at every bounce.
+    Fixed(f32),
+    /// Continue with p = min(1, luminance(throughput) / threshold); after
+    /// [`ROULETTE_CAP_DEPTH`] bounces p is also capped at [`ROULETTE_CAP`], so that paths in
+    /// closed scenes whose albedo is 1 still end (still unbiased).
+    Throughput(f32),
+    /// Efficiency-aware roulette and splitting (in the spirit of Rath et al. 2022): learned
+    /// per-region radiance moments and costs, and per-pixel variances and costs, choose the
+    /// survival or splitting factor that maximises efficiency (see `integrator::ears`).
+    Efficiency,
+}
+
+/// Bounces after which throughput-based roulette caps its survival probability.
+pub const ROULETTE_CAP_DEPTH: u32 = 8;
+/// The cap on survival probability after [`ROULETTE_CAP_DEPTH`] bounces.
+pub const ROULETTE_CAP: f32 = 0.95;
+
+/// How a light is chosen for next-event estimation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightSelect {
+    /// Every light equally likely.
+    Uniform,
+    /// In proportion to emitted power.
+    Power,
+    /// In proportion to an estimate of the unoccluded contribution at the shading point,
+    /// through a light BVH (see `light::tree`).
+    Contribution,
+}
+
+/// The measure area lights are sampled in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightSampling {
+    /// Uniformly by area.
+    Area,
+    /// Uniformly in the solid angle they subtend (triangles: spherical triangles; spheres:
+    /// the cone of directions), where that is numerically sound, else by area.
+    SolidAngle,
+}
+
+/// Shadow rays and BSDF samples at the first vertex seen from the camera.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Split {
+    pub nee: u32,
+    pub bsdf: u32,
+}
+
+/// Largest split count accepted.
+pub const MAX_SPLIT: u32 = 4096;
+
+/// The integrator's settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Settings {
+    pub mis: Mis,
+    pub rr: RussianRoulette,
+    /// Maximum number of scattering events (1 = direct illumination only); `None` for no
+    /// limit.
+    pub max_depth: Option<u32>,
+    pub light_select: LightSelect,
+    pub light_sampling: LightSampling,
+    pub split: Split,
+    pub sampler: SamplerKind,
+    pub seed: u32,
+}
+
+impl Default for Settings {
+    /// Power heuristic (β = 2), throughput roulette (threshold 0.01), no depth limit, light
+    /// selection by power, area sampling, no splitting, Owen-scrambled Sobol, seed 0.
+    fn default() -> Self {
+        Self {
+            mis: Mis::Power(2.0),
+            rr: RussianRoulette::Throughput(0.01),
+            max_depth: None,
+            light_select: LightSelect::Power,
+            light_sampling: LightSampling::Area,
+            split: Split { nee: 1, bsdf: 1 },
+            sampler: SamplerKind::Sobol,
+            seed: 0,
+        }
+    }
+}
+
+/// Splits a setting value `name[:number]` into its name and optional parameter.
+pub(crate) fn name_and_parameter(s: &str) -> Result<(&str, Option<f32>), String> {
+    match s.split_once(':') {
+        Some((name, p)) => {
+            let value = p
+                .parse::<f32>()
+                .map_err(|_| format!("invalid number in {s:?}"))?;
+            Ok((name, Some(value)))
+        }
+        None => Ok((s, None)),
+    }
+}
+
+impl RussianRoulette {
+    /// Survival probability for a path with throughput luminance `throughput` after
+    /// `depth` scattering events (the efficiency mode decides elsewhere; 1 here).
+    #[inline]
+    pub fn survival(&self, throughput: f32, depth: u32) -> f32 {
+        match *self {
+            Self::Off | Self::Efficiency => 1.0,
+            Self::Fixed(p) => p,
+            Self::Throughput(threshold) => {
+                let cap = if depth > ROULETTE_CAP_DEPTH {
+                    ROULETTE_CAP
+                } else {
+                    1.0
+                };
+                (throughput / threshold).min(cap)
+            }
+        }
+    }
+
+    /// Parses `off`, `fixed:P`, `throughput[:THRESHOLD]` or `efficiency`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let (name, param) = name_and_parameter(s)?;
+        match (name, param) {
+            ("off", None) => Ok(Self::Off),
+            ("fixed", Some(p)) if p > 0.0 && p <= 1.0 => Ok(Self::Fixed(p)),
+            ("fixed", _) => {
+                Err("fixed roulette needs a survival probability in (0, 1], e.g. fixed:0.3".into())
+            }
+            ("throughput", p) => {
+                let t = p.unwrap_or(0.01);
+                if t.is_finite() && t > 0.0 {
+                    Ok(Self::Throughput(t))
+                } else {
+                    Err(format!("threshold must be positive, got {t}"))
+                }
+            }
+            ("efficiency", None) => Ok(Self::Efficiency),
+            _ => Err(format!(
+                "unknown Russian roulette {s:?} (off, fixed:P, throughput[:T], efficiency)"
+            )),
+        }
+    }
+
+    /// The textual form [`RussianRoulette::parse`] reads.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Off => "off".into(),
+            Self::Fixed(p) => format!("fixed:{p}"),
+            Self::Throughput(t) => format!("throughput:{t}"),
+            Self::Efficiency => "efficiency".into(),
+        }
+    }
+}
+
+impl LightSelect {
+    /// Parses `uniform`, `power` or `contribution`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "uniform" => Ok(Self::Uniform),
+            "power" => Ok(Self::Power),
+            "contribution" => Ok(Self::Contribution),
+            _ => Err(format!(
+                "unknown light selection {s:?} (uniform, power, contribution)"
+            )),
+        }
+    }
+
+    /// The textual form [`LightSelect::parse`] reads.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::Uniform => "uniform",
+            Self::Power => "power",
+            Self::Contribution => "contribution",
+        }
+    }
+}
+
+impl LightSampling {
+    /// Parses `area` or `solid-angle`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "area" => Ok(Self::Area),
+            "solid-angle" => Ok(Self::SolidAngle),
+            _ => Err(format!("unknown light sampling {s:?} (area, solid-angle)")),
+        }
+    }
+
+    /// The textual form [`LightSampling::parse`] reads.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::Area => "area",
+            Self::SolidAngle => "solid-angle",
+        }
+    }
+}
+
+impl Split {
+    /// Parses `nee=N,bsdf=M` (either part may be left out: 1).
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let mut split = Split { nee: 1, bsdf: 1 };
+        for part in s.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let (key, value) = part
+                .split_once('=')
+                .ok_or_else(|| format!("expected nee=N,bsdf=M, got {s:?}"))?;
+            let n: u32 = value
+                .trim()
+                .parse()
+                .ok()
+                .filter(|n| (1..=MAX_SPLIT).contains(n))
+                .ok_or_else(|| {
+                    format!("split counts must be integers in 1..={MAX_SPLIT}, got {value:?}")
+                })?;
+            match key.trim() {
+                "nee" => split.nee = n,
+                "bsdf" => split.bsdf = n,
+                other => return Err(format!("unknown split {other:?} (nee, bsdf)")),
+            }
+        }
+        Ok(split)
+    }
+
+    /// The textual form [`Split::parse`] reads.
+    pub fn describe(&self) -> String {
+        format!("nee={},bsdf={}", self.nee, self.bsdf)
+    }
+}
+
+/// Names of the integrator's settings, in the order they are written.
+pub const SETTING_NAMES: [&str; 8] = [
+    "mis",
+    "rr",
+    "max-depth",
+    "light-select",
+    "light-sampling",
+    "split",
+    "sampler",
+    "seed",
+];
+
+impl Settings {
+    /// Sets the setting `name` from its textual value.
+    pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {
+        match name {
+            "mis" => self.mis = Mis::parse(value)?,
+            "rr" => self.rr = RussianRoulette::parse(value)?,
+            "max-depth" => {
+                self.max_depth = match value {
+                    "unlimited" => None,
+                    v => Some(v.parse().map_err(|_| {
+                        format!("max-depth: a number of bounces or `unlimited`, got {v:?}")
+                    })?),
+                }
+            }
+            "light-select" => self.light_select = LightSelect::parse(value)?,
+            "light-sampling" => self.light_sampling = LightSampling::parse(value)?,
+            "split" => self.split = Split::parse(value)?,
+            "sampler" => {
+                self.sampler = SamplerKind::parse(value)
+                    .ok_or_else(|| format!("unknown sampler {value:?} (sobol, independent)"))?
+            }
+            "seed" => {
+                self.seed = value
+                    .parse()
+                    .map_err(|_| format!("seed: an integer, got {value:?}"))?
+            }
+            _ => return Err(format!("unknown setting {name:?}")),
+        }
+        Ok(())
+    }
+
+    /// The textual value of setting `name`.
+    pub fn get(&self, name: &str) -> Option<String> {
+        Some(match name {
+            "mis" => self.mis.describe(),
+            "rr" => self.rr.describe(),
+            "max-depth" => self.max_depth.map_or("unlimited".into(), |d| d.to_string()),
+            "light-select" => self.light_select.describe().into(),
+            "light-sampling" => self.light_sampling.describe().into(),
+            "split" => self.split.describe(),
+            "sampler" => self.sampler.name().into(),
+            "seed" => self.seed.to_string(),
+            _ => return None,
+        })
+    }
+
+    /// Checks combinations that cannot work.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.rr == RussianRoulette::Off && self.max_depth.is_none() {
+            return Err("rr=off needs a finite max-depth (paths would never end)".into());
+        }
+        Ok(())
+    }
+
+    /// One line naming every setting, for logs.
+    pub fn describe(&self) -> String {
+        SETTING_NAMES
+            .iter()
+            .map(|n| {
+                format!(
+                    "{n}={}",
+                    self.get(n).expect("every listed name is a setting")
+                )
+            })
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+}
+
+/// Reads a TOML settings file into `(name, textual value)` pairs. Values may be strings or
+/// numbers; tables and arrays are refused.
+pub fn read_settings_toml(text: &str) -> Result<Vec<(String, String)>, String> {
+    let table: toml::Table = text
+        .parse()
+        .map_err(|e: toml::de::Error| e.message().to_string())?;
+    table
+        .into_iter()
+        .map(|(key, value)| {
+            let text = match value {
+                toml::Value::String(s) => s,
+                toml::Value::Integer(i) => i.to_string(),
+                toml::Value::Float(f) => f.to_string(),
+                other => {
+                    return Err(format!(
+                        "{key}: expected a string or a number, got {}",
+                        other.type_str()
+                    ));
+                }
+            };
+            Ok((key, text))
+        })
+        .collect()
+}
+
+/// Writes `(name, textual value)` pairs as TOML.
+pub fn write_settings_toml(pairs: &[(String, String)]) -> String {
+    let mut table = toml::Table::new();
+    for (key, value) in pairs {
+        let v = match value.parse::<i64>() {
+            Ok(i) if key == "seed" || key == "spp" || key == "max-depth" => toml::Value::Integer(i),
+            _ => toml::Value::String(value.clone()),
+        };
+        table.insert(key.clone(), v);
+    }
+    toml::to_string(&table).expect("a flat table of strings and integers serialises")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_setting_round_trips_through_its_text() {
+        let mut s = Settings::default();
+        for (name, value) in [
+            ("mis", "cutoff:0.2"),
+            ("rr", "fixed:0.3"),
+            ("max-depth", "10"),
+            ("light-select", "contribution"),
+            ("light-sampling", "solid-angle"),
+            ("split", "nee=4,bsdf=2"),
+            ("sampler", "independent"),
+            ("seed", "7"),
+        ] {
+            s.set(name, value).unwrap();
+            assert_eq!(s.get(name).unwrap(), value);
+        }
+        let pairs: Vec<(String, String)> = SETTING_NAMES
+            .iter()
+            .map(|n| (n.to_string(), s.get(n).unwrap()))
+            .collect();
+        let mut back = Settings::default();
+        for (k, v) in read_settings_toml(&write_settings_toml(&pairs)).unwrap() {
+            back.set(&k, &v).unwrap();
+        }
+        assert_eq!(back, s);
+        assert!(s.set("split", "nee=0").is_err() && s.set("colour", "red").is_err());
+        s.set("rr", "off").unwrap();
+        s.set("max-depth", "unlimited").unwrap();
+        assert!(s.validate().is_err());
+    }
+}
