@@ -220,7 +220,14 @@ fn render_command(args: RenderArgs) -> Result<()> {
     }
     let source = scene.source.clone();
     let build_start = std::time::Instant::now();
-    let world = pool.install(|| World::build(scene, args.camera.as_deref(), args.resolution))?;
+    let world = pool.install(|| {
+        World::build(
+            scene,
+            args.camera.as_deref(),
+            args.resolution,
+            options.settings.light_select,
+        )
+    })?;
     let build_seconds = build_start.elapsed().as_secs_f64();
     let (film, stats) = pool.install(|| render::render(&world, &options));
 

@@ -11,10 +11,11 @@ use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
 use crate::geometry::frame::Frame;
 use crate::geometry::ray::Ray;
-use crate::geometry::triangle::{TriangleHit, geometric_normal};
-use crate::geometry::{ALPHA_TESTED, Bvh, CULL_BACK, Hit};
+use crate::geometry::triangle::geometric_normal;
+use crate::geometry::{ALPHA_TESTED, Bvh, CULL_BACK, Hit, Primitive, PrimitiveHit, sphere};
+use crate::integrator::LightSelect;
 use crate::light::environment::{Environment, EnvironmentMap};
-use crate::light::{Light, LightSet, TriangleLight};
+use crate::light::{Light, LightSet, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
@@ -58,20 +59,38 @@ impl RenderSpace {
     }
 }
 
-/// What shading reads: meshes, materials, textures, and the map from BVH primitives to
-/// (mesh, triangle).
+/// What a BVH primitive is in the scene.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PrimRef {
+    Triangle { mesh: u32, tri: u32 },
+    Sphere(u32),
+}
+
+/// A sphere in render space.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderSphere {
+    pub centre: Vec3,
+    pub radius: f32,
+    pub material: u32,
+}
+
+/// What shading reads: meshes, spheres, materials, textures, and what each BVH primitive is.
 #[derive(Clone, Debug)]
 pub struct Surfaces {
     /// Every mesh instance, flattened into render space.
     pub meshes: Vec<Mesh>,
-    /// Per mesh: index of the light of triangle 0 when its material emits (triangle i is
-    /// light `first_light + i`).
-    pub first_light: Vec<Option<u32>>,
+    pub spheres: Vec<RenderSphere>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
-    /// Primitive index (as given to the BVH) to (mesh, triangle).
-    pub prims: Vec<(u32, u32)>,
+    /// Primitive index (as given to the BVH) to what it is.
+    pub prims: Vec<PrimRef>,
+    /// Primitive index to the index of the light it is ([`NO_LIGHT`] for none); empty when
+    /// nothing emits.
+    pub prim_light: Vec<u32>,
 }
+
+/// Marks a primitive that is not a light in [`Surfaces::prim_light`].
+pub const NO_LIGHT: u32 = u32::MAX;
 
 /// A shading point.
 #[derive(Clone, Copy, Debug)]
@@ -82,10 +101,10 @@ pub struct Interaction {
     /// Shading frame; `frame.n` is on the same side as `ng` and sees the ray's origin.
     pub frame: Frame,
     pub attrs: SurfaceAttributes,
-    pub mesh: u32,
-    pub tri: u32,
+    /// The BVH primitive hit.
+    pub prim: u32,
     pub material: u32,
-    /// True if the ray arrived on the counter-clockwise (front) side.
+    /// True if the ray arrived on the primitive's front (counter-clockwise side, outside).
     pub front: bool,
 }
 
@@ -163,17 +182,161 @@ fn build_environment(scene: &Scene) -> Option<Environment> {
     }
 }
 
+/// Mean emitted radiance of material `m` (the emissive texture's mean, if any).
+fn mean_emission(m: &Material, textures: &[Texture]) -> Vec3 {
+    m.emissive
+        * m.emissive_texture.map_or(Vec3::ONE, |t| {
+            textures[t.texture as usize].mean(true).truncate()
+        })
+}
+
+/// Every primitive for the BVH with its intersection flags and scene reference.
+fn primitives(
+    meshes: &[Mesh],
+    spheres: &[RenderSphere],
+    materials: &[Material],
+) -> (Vec<Primitive>, Vec<u8>, Vec<PrimRef>) {
+    let flags_of = |m: &Material| {
+        let mut f = 0;
+        if !m.double_sided {
+            f |= CULL_BACK;
+        }
+        if m.alpha_mode != AlphaMode::Opaque {
+            f |= ALPHA_TESTED;
+        }
+        f
+    };
+    let count = meshes.iter().map(|m| m.triangles.len()).sum::<usize>() + spheres.len();
+    let (mut prims, mut flags, mut refs) = (
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+    );
+    for (mi, mesh) in meshes.iter().enumerate() {
+        let f = flags_of(&materials[mesh.material as usize]);
+        for (ti, t) in mesh.triangles.iter().enumerate() {
+            prims.push(Primitive::Triangle(t.map(|i| mesh.positions[i as usize])));
+            flags.push(f);
+            refs.push(PrimRef::Triangle {
+                mesh: mi as u32,
+                tri: ti as u32,
+            });
+        }
+    }
+    for (si, s) in spheres.iter().enumerate() {
+        prims.push(Primitive::Sphere {
+            centre: s.centre,
+            radius: s.radius,
+        });
+        flags.push(flags_of(&materials[s.material as usize]));
+        refs.push(PrimRef::Sphere(si as u32));
+    }
+    (prims, flags, refs)
+}
+
+/// The area lights: one per primitive whose material emits, and the primitive-to-light map.
+fn area_lights(
+    prims: &[Primitive],
+    refs: &[PrimRef],
+    surfaces_materials: &[Material],
+    meshes: &[Mesh],
+    spheres: &[RenderSphere],
+    textures: &[Texture],
+) -> (Vec<Light>, Vec<u32>) {
+    let material_of = |r: &PrimRef| match *r {
+        PrimRef::Triangle { mesh, .. } => meshes[mesh as usize].material,
+        PrimRef::Sphere(s) => spheres[s as usize].material,
+    };
+    if !refs
+        .iter()
+        .any(|r| surfaces_materials[material_of(r) as usize].is_emissive())
+    {
+        return (Vec::new(), Vec::new());
+    }
+    let mut lights = Vec::new();
+    let mut prim_light = vec![NO_LIGHT; prims.len()];
+    for (i, (prim, r)) in prims.iter().zip(refs).enumerate() {
+        let m = &surfaces_materials[material_of(r) as usize];
+        if !m.is_emissive() {
+            continue;
+        }
+        prim_light[i] = lights.len() as u32;
+        let mean_radiance = mean_emission(m, textures);
+        lights.push(match *prim {
+            Primitive::Triangle(p) => {
+                let n = geometric_normal(p[0], p[1], p[2]);
+                Light::Triangle(TriangleLight {
+                    prim: i as u32,
+                    p,
+                    n: n.normalize_or_zero(),
+                    area: 0.5 * n.length(),
+                    two_sided: m.double_sided,
+                    mean_radiance,
+                })
+            }
+            Primitive::Sphere { centre, radius } => Light::Sphere(SphereLight {
+                prim: i as u32,
+                centre,
+                radius,
+                two_sided: m.double_sided,
+                mean_radiance,
+            }),
+        });
+    }
+    (lights, prim_light)
+}
+
+/// The punctual lights in render space: radiant intensity scales with the square of lengths.
+fn punctual_lights(scene: &Scene, space: &RenderSpace) -> Vec<Light> {
+    let s2 = (space.scale * space.scale) as f32;
+    scene
+        .lights
+        .iter()
+        .map(|l| match &l.kind {
+            LightKind::Point {
+                position,
+                intensity,
+            } => Light::Point {
+                position: space.point(*position),
+                intensity: *intensity * s2,
+            },
+            LightKind::Spot {
+                position,
+                direction,
+                intensity,
+                inner_cone,
+                outer_cone,
+            } => Light::Spot {
+                position: space.point(*position),
+                axis: direction.normalize().as_vec3(),
+                intensity: *intensity * s2,
+                cos_inner: inner_cone.cos(),
+                cos_outer: outer_cone.cos(),
+            },
+            LightKind::Directional {
+                direction,
+                irradiance,
+            } => Light::Directional {
+                direction: direction.normalize().as_vec3(),
+                irradiance: *irradiance,
+            },
+        })
+        .collect()
+}
+
 impl World {
     /// Prepares `scene` for rendering through camera `camera_name` (else the first camera,
-    /// else one framing the scene) at `resolution` (else from the camera's aspect ratio).
+    /// else one framing the scene) at `resolution` (else from the camera's aspect ratio),
+    /// choosing lights for light sampling by `light_select`.
     pub fn build(
         scene: Scene,
         camera_name: Option<&str>,
         resolution: Option<(u32, u32)>,
+        light_select: LightSelect,
     ) -> Result<Self> {
         let (lo, hi) = scene
             .bounds()
-            .ok_or_else(|| Error::bad_input(&scene.source, "scene", "contains no triangles"))?;
+            .ok_or_else(|| Error::bad_input(&scene.source, "scene", "contains no geometry"))?;
         if !(lo.is_finite() && hi.is_finite()) {
             return Err(Error::bad_input(
                 &scene.source,
@@ -183,7 +346,6 @@ impl World {
         }
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
-
         let meshes: Vec<Mesh> = scene
             .instances
             .iter()
@@ -194,95 +356,35 @@ impl World {
                 )
             })
             .collect();
+        let spheres: Vec<RenderSphere> = scene
+            .spheres
+            .iter()
+            .map(|s| RenderSphere {
+                centre: space.point(s.centre),
+                radius: (s.radius * space.scale) as f32,
+                material: s.material,
+            })
+            .collect();
+        let radius = meshes
+            .iter()
+            .flat_map(|m| m.positions.iter().map(|p| p.length()))
+            .chain(spheres.iter().map(|s| s.centre.length() + s.radius))
+            .fold(0.0f32, f32::max);
 
-        // Area lights: one per triangle of every emissive mesh.
-        let mut lights = Vec::new();
-        let mut first_light = vec![None; meshes.len()];
-        for (mi, mesh) in meshes.iter().enumerate() {
-            let mat = &scene.materials[mesh.material as usize];
-            if !mat.is_emissive() {
-                continue;
-            }
-            let mean = mat.emissive
-                * mat.emissive_texture.map_or(Vec3::ONE, |t| {
-                    scene.textures[t.texture as usize].mean(true).truncate()
-                });
-            first_light[mi] = Some(lights.len() as u32);
-            for (ti, t) in mesh.triangles.iter().enumerate() {
-                let p = t.map(|i| mesh.positions[i as usize]);
-                let n = geometric_normal(p[0], p[1], p[2]);
-                let area = 0.5 * n.length();
-                lights.push(Light::Triangle(TriangleLight {
-                    mesh: mi as u32,
-                    tri: ti as u32,
-                    p,
-                    n: n.normalize_or_zero(),
-                    area,
-                    two_sided: mat.double_sided,
-                    mean_radiance: mean,
-                }));
-            }
-        }
-        // Punctual lights: radiant intensity scales with the square of lengths.
-        let s2 = (space.scale * space.scale) as f32;
-        for l in &scene.lights {
-            lights.push(match &l.kind {
-                LightKind::Point {
-                    position,
-                    intensity,
-                } => Light::Point {
-                    position: space.point(*position),
-                    intensity: *intensity * s2,
-                },
-                LightKind::Spot {
-                    position,
-                    direction,
-                    intensity,
-                    inner_cone,
-                    outer_cone,
-                } => Light::Spot {
-                    position: space.point(*position),
-                    axis: direction.normalize().as_vec3(),
-                    intensity: *intensity * s2,
-                    cos_inner: inner_cone.cos(),
-                    cos_outer: outer_cone.cos(),
-                },
-                LightKind::Directional {
-                    direction,
-                    irradiance,
-                } => Light::Directional {
-                    direction: direction.normalize().as_vec3(),
-                    irradiance: *irradiance,
-                },
-            });
-        }
-
-        let mut triangles = Vec::with_capacity(scene.instanced_triangle_count());
-        let mut flags = Vec::with_capacity(triangles.capacity());
-        let mut prims = Vec::with_capacity(triangles.capacity());
-        let mut radius = 0.0f32;
-        for (mi, mesh) in meshes.iter().enumerate() {
-            let mat = &scene.materials[mesh.material as usize];
-            let mut f = 0;
-            if !mat.double_sided {
-                f |= CULL_BACK;
-            }
-            if mat.alpha_mode != AlphaMode::Opaque {
-                f |= ALPHA_TESTED;
-            }
-            for p in &mesh.positions {
-                radius = radius.max(p.length());
-            }
-            for (ti, t) in mesh.triangles.iter().enumerate() {
-                triangles.push(t.map(|i| mesh.positions[i as usize]));
-                flags.push(f);
-                prims.push((mi as u32, ti as u32));
-            }
-        }
+        let (prims, flags, refs) = primitives(&meshes, &spheres, &scene.materials);
+        let (mut lights, prim_light) = area_lights(
+            &prims,
+            &refs,
+            &scene.materials,
+            &meshes,
+            &spheres,
+            &scene.textures,
+        );
+        lights.extend(punctual_lights(&scene, &space));
         let bvh_start = std::time::Instant::now();
-        let bvh = Bvh::build(&triangles, &flags);
+        let bvh = Bvh::build(&prims, &flags);
         let bvh_seconds = bvh_start.elapsed().as_secs_f64();
-        drop(triangles);
+        drop(prims);
 
         let scene_camera = match camera_name {
             Some(name) => scene.camera(name).cloned().ok_or_else(|| {
@@ -301,17 +403,17 @@ impl World {
         };
         let (width, height) = camera::resolve_resolution(resolution, Some(&scene_camera));
         let camera = Camera::new(&scene_camera, &space, width, height);
-
         let environment = build_environment(&scene);
         Ok(Self {
             bvh,
-            lights: LightSet::new(lights, environment, radius.max(1e-6)),
+            lights: LightSet::new(lights, environment, radius.max(1e-6), light_select),
             surfaces: Surfaces {
                 meshes,
-                first_light,
+                spheres,
                 materials: scene.materials,
                 textures: scene.textures,
-                prims,
+                prims: refs,
+                prim_light,
             },
             camera,
             space,
@@ -340,17 +442,27 @@ impl World {
         self.surfaces.interaction(ray, hit)
     }
 
-    /// Index of the light that triangle `tri` of mesh `mesh` is, if it emits.
+    /// Index of the light that primitive `prim` is, if it emits.
     #[inline]
-    pub fn light_index(&self, mesh: u32, tri: u32) -> Option<usize> {
-        self.surfaces.first_light[mesh as usize].map(|first| (first + tri) as usize)
+    pub fn light_index(&self, prim: u32) -> Option<usize> {
+        self.surfaces
+            .prim_light
+            .get(prim as usize)
+            .filter(|&&l| l != NO_LIGHT)
+            .map(|&l| l as usize)
     }
 }
 
 impl Surfaces {
     /// Interpolated attributes of triangle `tri` of `mesh` at barycentrics (b1, b2).
     #[inline]
-    pub fn attributes(&self, mesh: &Mesh, tri: [u32; 3], b1: f32, b2: f32) -> SurfaceAttributes {
+    pub fn triangle_attributes(
+        &self,
+        mesh: &Mesh,
+        tri: [u32; 3],
+        b1: f32,
+        b2: f32,
+    ) -> SurfaceAttributes {
         let b0 = 1.0 - b1 - b2;
         let [i0, i1, i2] = tri.map(|i| i as usize);
         let uv = |set: &Option<Vec<Vec2>>| {
@@ -366,14 +478,51 @@ impl Surfaces {
         }
     }
 
+    /// Attributes of a sphere point from its lat-long coordinates (both UV sets).
+    #[inline]
+    fn sphere_attributes(uv: Vec2) -> SurfaceAttributes {
+        SurfaceAttributes {
+            uv: [uv, uv],
+            color: Vec4::ONE,
+        }
+    }
+
+    /// Material and attributes of primitive `prim` at surface coordinates `b` (triangle
+    /// barycentrics, sphere lat-long uv).
+    #[inline]
+    fn material_at(&self, prim: u32, b: Vec2) -> (&Material, SurfaceAttributes) {
+        match self.prims[prim as usize] {
+            PrimRef::Triangle { mesh, tri } => {
+                let m = &self.meshes[mesh as usize];
+                (
+                    &self.materials[m.material as usize],
+                    self.triangle_attributes(m, m.triangles[tri as usize], b.x, b.y),
+                )
+            }
+            PrimRef::Sphere(s) => (
+                &self.materials[self.spheres[s as usize].material as usize],
+                Self::sphere_attributes(b),
+            ),
+        }
+    }
+
+    /// Surface coordinates of a hit: barycentrics, or the sphere's uv at the hit point.
+    #[inline]
+    fn coords(&self, prim: u32, hit: &PrimitiveHit, ray: &Ray) -> Vec2 {
+        match self.prims[prim as usize] {
+            PrimRef::Triangle { .. } => Vec2::new(hit.b1, hit.b2),
+            PrimRef::Sphere(s) => {
+                let s = &self.spheres[s as usize];
+                sphere::uv((ray.at(hit.t) - s.centre).normalize_or(Vec3::Y))
+            }
+        }
+    }
+
     /// Whether a hit on alpha-tested primitive `prim` counts: cut-outs compare alpha with
     /// the cutoff; blended surfaces are hit with probability alpha, decided by a hash of the
     /// ray so that the decision is deterministic.
-    fn alpha_passes(&self, prim: u32, hit: &TriangleHit, ray: &Ray) -> bool {
-        let (mi, ti) = self.prims[prim as usize];
-        let mesh = &self.meshes[mi as usize];
-        let mat = &self.materials[mesh.material as usize];
-        let attrs = self.attributes(mesh, mesh.triangles[ti as usize], hit.b1, hit.b2);
+    fn alpha_passes(&self, prim: u32, hit: &PrimitiveHit, ray: &Ray) -> bool {
+        let (mat, attrs) = self.material_at(prim, self.coords(prim, hit, ray));
         let alpha = material::alpha(mat, &self.textures, &attrs);
         match mat.alpha_mode {
             AlphaMode::Opaque => true,
@@ -391,21 +540,60 @@ impl Surfaces {
 
     /// The shading point of `hit` along `ray`.
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
-        let (mi, ti) = self.prims[hit.prim as usize];
-        let mesh = &self.meshes[mi as usize];
-        let tri = mesh.triangles[ti as usize];
+        let wo = -ray.dir.normalize();
+        let (p, n_front, ns_front, attrs, material) = match self.prims[hit.prim as usize] {
+            PrimRef::Triangle { mesh, tri } => {
+                self.triangle_surface(&self.meshes[mesh as usize], tri, hit)
+            }
+            PrimRef::Sphere(s) => {
+                let s = &self.spheres[s as usize];
+                // Back onto the sphere: the hit point along the ray carries t's rounding.
+                let n = (ray.at(hit.t) - s.centre).normalize_or(Vec3::Y);
+                (
+                    s.centre + s.radius * n,
+                    n,
+                    n,
+                    Self::sphere_attributes(sphere::uv(n)),
+                    s.material,
+                )
+            }
+        };
+        let front = n_front.dot(wo) > 0.0;
+        let ng = if front { n_front } else { -n_front };
+        // Onto the side the ray came from; normals that disagree with the winding are
+        // taken as flipped.
+        let mut ns = if front { ns_front } else { -ns_front };
+        if ns.dot(ng) < 0.0 {
+            ns = -ns;
+        }
+        let ns = facing_shading_normal(ns, ng, wo);
+        Interaction {
+            p,
+            ng,
+            frame: Frame::from_normal(ns),
+            attrs,
+            prim: hit.prim,
+            material,
+            front,
+        }
+    }
+
+    /// Position, front geometric normal, front shading normal (interpolated, then
+    /// normal-mapped), attributes and material of a triangle hit.
+    fn triangle_surface(
+        &self,
+        mesh: &Mesh,
+        tri: u32,
+        hit: &Hit,
+    ) -> (Vec3, Vec3, Vec3, SurfaceAttributes, u32) {
+        let tri = mesh.triangles[tri as usize];
         let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = p0 * b0 + p1 * b1 + p2 * b2;
-        let wo = -ray.dir.normalize();
         let n_front = geometric_normal(p0, p1, p2).normalize();
-        let front = n_front.dot(wo) > 0.0;
-        let ng = if front { n_front } else { -n_front };
-        let attrs = self.attributes(mesh, tri, b1, b2);
+        let attrs = self.triangle_attributes(mesh, tri, b1, b2);
         let mat = &self.materials[mesh.material as usize];
-
-        // Shading normal in the front-side convention: interpolated, then normal-mapped.
         let [i0, i1, i2] = tri.map(|i| i as usize);
         let mut ns = mesh
             .normals
@@ -423,30 +611,9 @@ impl Surfaces {
             let mapped = tangent_frame.s * ts_normal.x
                 + tangent_frame.t * (sign * ts_normal.y)
                 + tangent_frame.n * ts_normal.z;
-            ns = mapped.normalize_or_zero();
-            if ns == Vec3::ZERO {
-                ns = n_front;
-            }
+            ns = mapped.normalize_or(n_front);
         }
-        // Onto the side the ray came from; normals that disagree with the winding are
-        // taken as flipped.
-        if !front {
-            ns = -ns;
-        }
-        if ns.dot(ng) < 0.0 {
-            ns = -ns;
-        }
-        let ns = facing_shading_normal(ns, ng, wo);
-        Interaction {
-            p,
-            ng,
-            frame: Frame::from_normal(ns),
-            attrs,
-            mesh: mi,
-            tri: ti,
-            material: mesh.material,
-            front,
-        }
+        (p, n_front, ns, attrs, mesh.material)
     }
 
     /// Radiance emitted from `it` back along the ray that found it (zero for the back of
@@ -460,40 +627,15 @@ impl Surfaces {
         material::emission(mat, &self.textures, &it.attrs)
     }
 
-    /// Emitted radiance of triangle `tri` of mesh `mesh` at barycentrics `b` (for light
-    /// samples, which already checked the side).
+    /// Emitted radiance of primitive `prim` at surface coordinates `b` (for light samples,
+    /// which already checked the side).
     #[inline]
-    pub fn emission_at(&self, mesh: u32, tri: u32, b: Vec2) -> Vec3 {
-        let m = &self.meshes[mesh as usize];
-        let mat = &self.materials[m.material as usize];
+    pub fn emission_at(&self, prim: u32, b: Vec2) -> Vec3 {
+        let (mat, attrs) = self.material_at(prim, b);
         if mat.emissive_texture.is_none() {
             return mat.emissive;
         }
-        let attrs = self.attributes(m, m.triangles[tri as usize], b.x, b.y);
         material::emission(mat, &self.textures, &attrs)
-    }
-
-    /// Bytes held by meshes and textures.
-    pub fn memory_bytes(&self) -> usize {
-        let mesh_bytes: usize = self
-            .meshes
-            .iter()
-            .map(|m| {
-                m.positions.len() * 12
-                    + m.normals.as_ref().map_or(0, |v| v.len() * 12)
-                    + m.tangents.as_ref().map_or(0, |v| v.len() * 16)
-                    + m.uvs.iter().flatten().map(|v| v.len() * 8).sum::<usize>()
-                    + m.colors.as_ref().map_or(0, |v| v.len() * 16)
-                    + m.triangles.len() * 12
-            })
-            .sum();
-        mesh_bytes
-            + self.prims.len() * 8
-            + self
-                .textures
-                .iter()
-                .map(|t| t.memory_bytes())
-                .sum::<usize>()
     }
 }
 

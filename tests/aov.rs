@@ -207,7 +207,13 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
     // Per sample, (technique alone − MIS combination) has expectation 0. Independent samples
     // over the image; |mean| within 4.5 standard errors (false alarm 7e-6 per channel).
     for scene in [ingest::default_scene().unwrap(), cornell_with_delta_paths()] {
-        let world = World::build(scene, None, Some((24, 24))).unwrap();
+        let world = World::build(
+            scene,
+            None,
+            Some((24, 24)),
+            lucerna::integrator::LightSelect::Power,
+        )
+        .unwrap();
         let settings = Settings {
             sampler: SamplerKind::Independent,
             ..Default::default()
@@ -242,4 +248,50 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
             }
         }
     }
+}
+
+#[test]
+fn per_depth_layers_partition_direct_and_indirect() {
+    let settings = Settings {
+        max_depth: Some(3),
+        ..Default::default()
+    };
+    let scene = ingest::default_scene().unwrap();
+    let aovs =
+        AovSet::parse("direct,indirect,nee_d1,bsdf_d1,nee_d2,bsdf_d2,nee_d3,bsdf_d3").unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let (film, _) = pool.install(|| {
+        let world = World::build(scene, None, Some((24, 24)), settings.light_select).unwrap();
+        let options = lucerna::render::RenderOptions {
+            spp: Some(8),
+            settings,
+            aovs,
+            ..Default::default()
+        };
+        lucerna::render::render(&world, &options)
+    });
+    let p = |name: &str| film.planes(Aov::parse(name).unwrap());
+    let (direct, indirect) = (p("direct"), p("indirect"));
+    let layers: Vec<_> = [
+        "nee_d1", "bsdf_d1", "nee_d2", "bsdf_d2", "nee_d3", "bsdf_d3",
+    ]
+    .iter()
+    .map(|n| p(n))
+    .collect();
+    for i in 0..direct[0].len() {
+        for c in 0..3 {
+            assert_close(
+                "direct = nee_d1 + bsdf_d1",
+                direct[c][i],
+                layers[0][c][i] + layers[1][c][i],
+            );
+            let deeper: f32 = layers[2..].iter().map(|l| l[c][i]).sum();
+            assert_close("indirect = d2 + d3", indirect[c][i], deeper);
+        }
+    }
+    assert!(layers[4][0].iter().any(|&v| v > 0.0), "depth 3 gets light");
+    assert_eq!(Aov::parse("nee_d17"), None);
 }

@@ -6,9 +6,11 @@ mod common;
 use common::chi2;
 use glam::{Mat3, Vec2, Vec3};
 use lucerna::geometry::ray::Ray;
+use lucerna::geometry::sphere;
 use lucerna::geometry::triangle::{RayShear, intersect};
+use lucerna::integrator::LightSampling;
 use lucerna::light::environment::{Environment, EnvironmentMap};
-use lucerna::light::{Light, TriangleLight};
+use lucerna::light::{Light, SphereLight, TriangleLight};
 use lucerna::material::Bsdf;
 use lucerna::material::gltf_pbr::GltfPbr;
 use lucerna::material::lambert::Lambert;
@@ -139,8 +141,7 @@ fn triangle_light(two_sided: bool) -> TriangleLight {
     ];
     let n = (p[1] - p[0]).cross(p[2] - p[0]);
     TriangleLight {
-        mesh: 0,
-        tri: 0,
+        prim: 0,
         p,
         n: n.normalize(),
         area: 0.5 * n.length(),
@@ -149,46 +150,143 @@ fn triangle_light(two_sided: bool) -> TriangleLight {
     }
 }
 
+/// Density of `light`'s samples from `origin` in direction `w`, by tracing to the light.
+fn area_light_density(light: &Light, origin: Vec3, w: Vec3, sampling: LightSampling) -> f64 {
+    let ray = Ray::new(origin, w);
+    let hit = match light {
+        Light::Triangle(t) => {
+            intersect(&RayShear::new(&ray), t.p[0], t.p[1], t.p[2], f32::INFINITY)
+                .filter(|_| t.two_sided || t.n.dot(w) < 0.0)
+        }
+        Light::Sphere(s) => sphere::intersect(&ray, s.centre, s.radius, f32::INFINITY)
+            .filter(|h| s.two_sided || h.front),
+        _ => unreachable!(),
+    };
+    hit.map_or(0.0, |h| light.pdf(origin, w, h.t, sampling) as f64)
+}
+
 #[test]
-fn triangle_light_solid_angle() {
-    // The light faces down: a one-sided one is seen from below, a two-sided one also from
-    // above (its back).
-    for (two_sided, origin) in [
-        (true, Vec3::new(0.0, 3.0, 0.1)),
-        (false, Vec3::new(0.1, -0.2, 0.05)),
-    ] {
-        let tri = triangle_light(two_sided);
-        let light = Light::Triangle(tri.clone());
-        let mut rng = Pcg32::new(7, two_sided as u64);
-        let name = format!("triangle light, solid angle, two-sided={two_sided}");
-        let mut produced = 0;
-        chi2::sphere(
-            &name,
-            N,
-            |_| {
-                let s = light.sample(origin, None, u2(&mut rng))?;
-                produced += 1;
-                Some(s.wi)
-            },
-            |w| {
-                let ray = Ray::new(origin, w);
-                let hit = intersect(
-                    &RayShear::new(&ray),
-                    tri.p[0],
-                    tri.p[1],
-                    tri.p[2],
-                    f32::INFINITY,
+fn area_lights_by_area_and_by_solid_angle() {
+    let sphere = |two_sided| {
+        Light::Sphere(SphereLight {
+            prim: 0,
+            centre: Vec3::new(0.3, 1.5, -0.2),
+            radius: 0.6,
+            two_sided,
+            mean_radiance: Vec3::ONE,
+        })
+    };
+    // The triangle faces down: a one-sided one is seen from below, a two-sided one also
+    // from above (its back); near (large solid angle) and far (area fallback) points.
+    let cases = [
+        (
+            "triangle two-sided above",
+            Light::Triangle(triangle_light(true)),
+            Vec3::new(0.0, 3.0, 0.1),
+        ),
+        (
+            "triangle below",
+            Light::Triangle(triangle_light(false)),
+            Vec3::new(0.1, -0.2, 0.05),
+        ),
+        (
+            "triangle close below",
+            Light::Triangle(triangle_light(false)),
+            Vec3::new(0.1, 0.85, 0.0),
+        ),
+        (
+            "triangle far below",
+            Light::Triangle(triangle_light(false)),
+            Vec3::new(0.1, -150.0, 0.05),
+        ),
+        ("sphere", sphere(false), Vec3::new(0.0, -0.5, 0.1)),
+        ("sphere close", sphere(false), Vec3::new(0.3, 0.85, -0.2)),
+    ];
+    for (name, light, origin) in &cases {
+        for sampling in [LightSampling::Area, LightSampling::SolidAngle] {
+            let mut rng = Pcg32::new(7, name.len() as u64 * 2 + sampling as u64);
+            let label = format!("{name}, {sampling:?}");
+            let mut produced = 0;
+            let sample = |rng: &mut Pcg32| light.sample(*origin, None, sampling, u2(rng));
+            if let (Light::Sphere(sp), LightSampling::Area) = (light, sampling) {
+                // Uniform over the sphere's visible cap, tested in the sphere's own
+                // equal-area coordinates: in directions the density has a 1/cos
+                // singularity at the silhouette that no quadrature integrates well.
+                let outcome = chi2::test(
+                    &label,
+                    &chi2::Domain::sphere(),
+                    N,
+                    |_| {
+                        let s = sample(&mut rng)?;
+                        produced += 1;
+                        let y = *origin + s.wi * (s.target.unwrap() - *origin).length();
+                        Some(chi2::to_sphere(y - sp.centre))
+                    },
+                    |z, phi| {
+                        let n = chi2::from_sphere(z, phi);
+                        let visible = n.dot(*origin - (sp.centre + sp.radius * n)) > 0.0;
+                        if visible {
+                            1.0 / (4.0 * std::f64::consts::PI)
+                        } else {
+                            0.0
+                        }
+                    },
                 );
-                match hit {
-                    Some(h) if tri.two_sided || tri.n.dot(w) < 0.0 => tri.pdf(w, h.t) as f64,
-                    _ => 0.0,
+                chi2::assert_passes(&label, &outcome);
+            } else {
+                chi2::sphere(
+                    &label,
+                    N,
+                    |_| {
+                        let s = sample(&mut rng)?;
+                        produced += 1;
+                        Some(s.wi)
+                    },
+                    |w| area_light_density(light, *origin, w, sampling),
+                );
+            }
+            assert!(
+                produced > N / 50,
+                "{label}: the light is visible from the test point"
+            );
+            // E[1/pdf] over all samples (failed ones count 0) is the visible solid angle.
+            let n = 200_000;
+            let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+            for _ in 0..n {
+                if let Some(s) = sample(&mut rng) {
+                    let x = 1.0 / s.pdf as f64;
+                    sum += x;
+                    sum2 += x * x;
                 }
-            },
-        );
-        assert!(
-            produced > 0,
-            "{name}: the light is visible from the test point"
-        );
+            }
+            let mean = sum / n as f64;
+            let se = ((sum2 / n as f64 - mean * mean) / n as f64).max(0.0).sqrt();
+            let omega = visible_solid_angle(light, *origin);
+            assert!(
+                (mean - omega).abs() <= 4.5 * se + 1e-6 * omega,
+                "{label}: E[1/pdf] = {mean} ± {se}, solid angle {omega}"
+            );
+        }
+    }
+}
+
+/// The solid angle of the part of `light` that emits towards `origin`.
+fn visible_solid_angle(light: &Light, origin: Vec3) -> f64 {
+    match light {
+        Light::Triangle(t) => {
+            let facing = t.two_sided || t.n.dot(origin - t.p[0]) > 0.0;
+            if facing {
+                lucerna::light::solid_angle::triangle_solid_angle(origin, &t.p) as f64
+            } else {
+                0.0
+            }
+        }
+        Light::Sphere(s) => {
+            let d2 = (s.centre - origin).length_squared() as f64;
+            let r2 = (s.radius * s.radius) as f64;
+            2.0 * std::f64::consts::PI * (1.0 - (1.0 - r2 / d2).sqrt())
+        }
+        _ => unreachable!(),
     }
 }
 

@@ -221,11 +221,30 @@ fn cameras_perspective_orthographic_and_by_name() {
         matches!(scene.cameras[1].projection, Projection::Orthographic { xmag, ymag } if xmag == 3.0 && ymag == 1.5)
     );
     // The first camera decides the default resolution (aspect 2 → 512x256).
-    let world = World::build(scene.clone(), None, None).unwrap();
+    let world = World::build(
+        scene.clone(),
+        None,
+        None,
+        lucerna::integrator::LightSelect::Power,
+    )
+    .unwrap();
     assert_eq!((world.camera.width(), world.camera.height()), (512, 256));
-    let world = World::build(scene.clone(), Some("plan"), None).unwrap();
+    let world = World::build(
+        scene.clone(),
+        Some("plan"),
+        None,
+        lucerna::integrator::LightSelect::Power,
+    )
+    .unwrap();
     assert_eq!((world.camera.width(), world.camera.height()), (512, 256));
-    let err = World::build(scene, Some("missing"), None).err().unwrap();
+    let err = World::build(
+        scene,
+        Some("missing"),
+        None,
+        lucerna::integrator::LightSelect::Power,
+    )
+    .err()
+    .unwrap();
     assert!(err.to_string().contains("wide, plan"), "{err}");
 }
 
@@ -524,4 +543,42 @@ fn extensions_required_error_used_warning() {
             && err.to_string().contains("not supported"),
         "{err}"
     );
+}
+
+#[test]
+fn sphere_meshes_in_extras_become_analytic_spheres() {
+    let dir = temp();
+    let mut b = Builder::new();
+    // An octahedron stands in for the tessellated sphere other viewers show.
+    let pos = b.floats(
+        "VEC3",
+        &[
+            1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
+            -1.0,
+        ],
+    );
+    let idx = b.indices(&[
+        0, 2, 4, 2, 1, 4, 1, 3, 4, 3, 0, 4, 2, 0, 5, 1, 2, 5, 3, 1, 5, 0, 3, 5,
+    ]);
+    let m = b.add("materials", json!({"emissiveFactor": [1, 1, 1]}));
+    b.json["meshes"] = json!([{"primitives": [{"attributes": {"POSITION": pos}, "indices": idx, "material": m}], "extras": {"lucerna": {"shape": "sphere"}}}]);
+    b.root(json!({"mesh": 0, "translation": [0.5, 0.0, 0.0], "scale": [0.8, 0.8, 0.8]}));
+    b.add("cameras", json!({"type": "orthographic", "orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.01, "zfar": 100}}));
+    b.root(json!({"camera": 0, "translation": [0.5, 0, 3]}));
+    let scene = load(&b.write_embedded(dir.path(), "sphere"));
+    assert_eq!(scene.spheres.len(), 1);
+    assert_eq!(scene.instances.len(), 0);
+    let s = &scene.spheres[0];
+    assert!(
+        (s.centre - DVec3::new(0.5, 0.0, 0.0)).length() < 1e-6 && (s.radius - 0.8).abs() < 1e-6
+    );
+    // The silhouette is exact: coverage is the disk's area, π 0.8² of the 2x2 view.
+    let (film, _) = render(scene, (64, 64), 16, Settings::default(), 2);
+    let alpha = &film.planes(Aov::Beauty)[3];
+    let covered: f64 = alpha.iter().map(|&a| a as f64).sum::<f64>() / alpha.len() as f64 * 4.0;
+    assert!(
+        (covered - std::f64::consts::PI * 0.64).abs() < 0.01,
+        "{covered}"
+    );
+    assert_eq!(film.planes(Aov::Emission)[0][32 * 64 + 32], 1.0);
 }

@@ -3,7 +3,10 @@
 
 use crate::integrator::path::{Contribution, Source};
 
-/// An AOV. The light AOVs (beauty through `direct_bsdf_unweighted`) sum contributions; the
+/// Deepest per-depth layer (`nee_d16`, `bsdf_d16`).
+pub const MAX_DEPTH_AOV: u8 = 16;
+
+/// An AOV. The light AOVs (beauty through the per-depth layers) sum contributions; the
 /// others are data.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Aov {
@@ -19,6 +22,10 @@ pub enum Aov {
     IndirectBsdf,
     DirectNeeUnweighted,
     DirectBsdfUnweighted,
+    /// Light sampling's contributions after exactly K scattering events (on request).
+    NeeDepth(u8),
+    /// BSDF sampling's contributions after exactly K scattering events (on request).
+    BsdfDepth(u8),
     Albedo,
     Normal,
     Depth,
@@ -27,7 +34,8 @@ pub enum Aov {
     Variance,
 }
 
-/// Every AOV in canonical order.
+/// Every AOV written by default (`all`), in canonical order; per-depth layers come only on
+/// request.
 pub const ALL: [Aov; 18] = [
     Aov::Beauty,
     Aov::Emission,
@@ -50,8 +58,13 @@ pub const ALL: [Aov; 18] = [
 ];
 
 impl Aov {
-    /// Layer name in the EXR (`""` for the beauty, whose channels are unprefixed).
-    pub fn name(self) -> &'static str {
+    /// Layer name in the EXR (the beauty's channels are unprefixed).
+    pub fn name(self) -> String {
+        match self {
+            Self::NeeDepth(k) => return format!("nee_d{k}"),
+            Self::BsdfDepth(k) => return format!("bsdf_d{k}"),
+            _ => {}
+        }
         match self {
             Self::Beauty => "beauty",
             Self::Emission => "emission",
@@ -71,7 +84,9 @@ impl Aov {
             Self::Position => "position",
             Self::Spp => "spp",
             Self::Variance => "variance",
+            Self::NeeDepth(_) | Self::BsdfDepth(_) => unreachable!("named above"),
         }
+        .to_string()
     }
 
     /// Channel names within the layer.
@@ -101,7 +116,10 @@ impl Aov {
 
     /// True for AOVs that sum light contributions.
     pub fn is_light(self) -> bool {
-        self <= Self::DirectBsdfUnweighted
+        !matches!(
+            self,
+            Self::Albedo | Self::Normal | Self::Depth | Self::Position | Self::Spp | Self::Variance
+        )
     }
 
     /// Whether this light AOV takes the (MIS-weighted) contribution `c`.
@@ -119,12 +137,25 @@ impl Aov {
             Self::DirectBsdf => direct && c.source == Source::Bsdf,
             Self::IndirectNee => indirect && c.source == Source::Nee,
             Self::IndirectBsdf => indirect && c.source == Source::Bsdf,
+            Self::NeeDepth(k) => c.depth == k as u32 && c.source == Source::Nee,
+            Self::BsdfDepth(k) => c.depth == k as u32 && c.source == Source::Bsdf,
             _ => false,
         }
     }
 
-    /// Parses a layer name.
+    /// Parses a layer name (including `nee_dK` and `bsdf_dK` for K in 1..=16).
     pub fn parse(name: &str) -> Option<Self> {
+        let depth = |prefix: &str| {
+            name.strip_prefix(prefix)
+                .and_then(|k| k.parse::<u8>().ok())
+                .filter(|k| (1..=MAX_DEPTH_AOV).contains(k))
+        };
+        if let Some(k) = depth("nee_d") {
+            return Some(Self::NeeDepth(k));
+        }
+        if let Some(k) = depth("bsdf_d") {
+            return Some(Self::BsdfDepth(k));
+        }
         ALL.iter().copied().find(|a| a.name() == name)
     }
 }
@@ -151,8 +182,8 @@ impl AovSet {
                 return Ok(Self::default());
             }
             let aov = Aov::parse(name).ok_or_else(|| {
-                let known: Vec<&str> = ALL.iter().map(|a| a.name()).collect();
-                format!("unknown AOV {name:?} (known: all, {})", known.join(", "))
+                let known: Vec<String> = ALL.iter().map(|a| a.name()).collect();
+                format!("unknown AOV {name:?} (known: all, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
             })?;
             aovs.push(aov);
         }
@@ -171,8 +202,11 @@ impl AovSet {
         self.aovs.contains(&aov)
     }
 
-    /// Comma-separated names.
+    /// Comma-separated names (`all` for the default set).
     pub fn describe(&self) -> String {
+        if self.aovs == ALL {
+            return "all".into();
+        }
         self.aovs
             .iter()
             .map(|a| a.name())
@@ -181,14 +215,17 @@ impl AovSet {
     }
 }
 
-/// Precomputed routing: for each (source, depth class) the light-AOV slots a contribution
-/// goes to, and the slots of the two single-technique AOVs.
+/// Rows of the routing table: depths 0 to [`MAX_DEPTH_AOV`], then one for every deeper one.
+const ROUTED_DEPTHS: usize = MAX_DEPTH_AOV as usize + 2;
+
+/// Precomputed routing: for each (source, depth) the light-AOV slots a contribution goes
+/// to, and the slots of the two single-technique AOVs.
 #[derive(Clone, Debug)]
 pub struct Router {
     /// Light AOVs in slot order (slot 0 is the beauty).
     pub slots: Vec<Aov>,
-    /// [source][depth class 0 | 1 | 2+] → slots.
-    table: [[Vec<u8>; 3]; 3],
+    /// [source][depth] → slots.
+    table: [[Vec<u8>; ROUTED_DEPTHS]; 3],
     /// Slots of `direct_nee_unweighted` and `direct_bsdf_unweighted`.
     pub single_technique: [Option<u8>; 2],
 }
@@ -233,6 +270,6 @@ impl Router {
             Source::Nee => 1,
             Source::Bsdf => 2,
         };
-        &self.table[s][(c.depth as usize).min(2)]
+        &self.table[s][(c.depth as usize).min(ROUTED_DEPTHS - 1)]
     }
 }

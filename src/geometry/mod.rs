@@ -3,20 +3,55 @@
 
 pub mod frame;
 pub mod ray;
+pub mod sphere;
 pub mod triangle;
 
 use glam::{UVec2, Vec3, Vec3A};
 use obvhs::{
     BvhBuildParams,
-    cwbvh::{CwBvh, builder::build_cwbvh_from_tris, node::CwBvhNode},
+    aabb::Aabb,
+    cwbvh::{CwBvh, builder::build_cwbvh, node::CwBvhNode},
     traverse,
 };
 use ray::Ray;
-use triangle::{RayShear, TriangleHit};
+use triangle::RayShear;
 
-/// Intersection flag: the triangle is invisible from its back side (glTF `doubleSided: false`).
+/// A primitive the BVH holds.
+#[derive(Clone, Copy, Debug)]
+pub enum Primitive {
+    /// A triangle, counter-clockwise from its front.
+    Triangle([Vec3; 3]),
+    /// A sphere; its front is the outside.
+    Sphere { centre: Vec3, radius: f32 },
+}
+
+impl Primitive {
+    fn aabb(&self) -> Aabb {
+        match *self {
+            Self::Triangle([a, b, c]) => Aabb::new(a.min(b).min(c).into(), a.max(b).max(c).into()),
+            Self::Sphere { centre, radius } => {
+                Aabb::new((centre - radius).into(), (centre + radius).into())
+            }
+        }
+    }
+}
+
+/// A primitive's intersection with a ray, before the caller's filter.
+#[derive(Clone, Copy, Debug)]
+pub struct PrimitiveHit {
+    pub t: f32,
+    /// Barycentric weights of triangle vertices 1 and 2 (vertex 0 has `1 - b1 - b2`); 0 for
+    /// spheres.
+    pub b1: f32,
+    pub b2: f32,
+    /// True when the ray arrives on the primitive's front (a triangle's counter-clockwise
+    /// side, a sphere's outside).
+    pub front: bool,
+}
+
+/// Intersection flag: the primitive is invisible from its back (glTF `doubleSided: false`).
 pub const CULL_BACK: u8 = 1;
-/// Intersection flag: the triangle's material has an alpha cut-out; the caller's filter
+/// Intersection flag: the primitive's material has an alpha cut-out; the caller's filter
 /// decides whether a hit counts.
 pub const ALPHA_TESTED: u8 = 2;
 
@@ -24,18 +59,19 @@ pub const ALPHA_TESTED: u8 = 2;
 #[derive(Clone, Copy, Debug)]
 pub struct Hit {
     pub t: f32,
-    /// Index of the triangle in the order given to [`Bvh::build`].
+    /// Index of the primitive in the order given to [`Bvh::build`].
     pub prim: u32,
     pub b1: f32,
     pub b2: f32,
     pub front: bool,
 }
 
-/// A BVH over triangles with per-triangle flags, answering closest-hit and occlusion queries.
+/// A BVH over primitives with per-primitive flags, answering closest-hit and occlusion
+/// queries.
 pub struct Bvh {
     bvh: CwBvh,
-    /// Triangle vertices in BVH leaf order, so leaves read them without indirection.
-    verts: Vec<[Vec3; 3]>,
+    /// Primitives in BVH leaf order, so leaves read them without indirection.
+    prims: Vec<Primitive>,
     flags: Vec<u8>,
     /// BVH leaf order to input order.
     order: Vec<u32>,
@@ -113,68 +149,48 @@ fn intersect_node(node: &CwBvhNode, ray: &NodeRay, oct_inv4: u32) -> u32 {
 }
 
 impl Bvh {
-    /// Builds the BVH over `triangles` (render space) with their intersection `flags`.
-    /// Runs on the current rayon pool.
-    pub fn build(triangles: &[[Vec3; 3]], flags: &[u8]) -> Self {
-        assert_eq!(triangles.len(), flags.len());
-        if triangles.is_empty() {
+    /// Builds the BVH over `prims` (render space) with their intersection `flags`. Runs on
+    /// the current rayon pool.
+    pub fn build(prims: &[Primitive], flags: &[u8]) -> Self {
+        assert_eq!(prims.len(), flags.len());
+        if prims.is_empty() {
             return Self {
                 bvh: CwBvh::default(),
-                verts: Vec::new(),
+                prims: Vec::new(),
                 flags: Vec::new(),
                 order: Vec::new(),
             };
         }
-        let tris: Vec<obvhs::triangle::Triangle> = triangles
-            .iter()
-            .map(|t| obvhs::triangle::Triangle {
-                v0: t[0].into(),
-                v1: t[1].into(),
-                v2: t[2].into(),
-            })
-            .collect();
-        let bvh = build_cwbvh_from_tris(
-            &tris,
+        let aabbs: Vec<Aabb> = prims.iter().map(Primitive::aabb).collect();
+        let bvh = build_cwbvh(
+            &aabbs,
             BvhBuildParams::medium_build(),
             &mut std::time::Duration::default(),
         );
-        drop(tris);
+        drop(aabbs);
         let order = bvh.primitive_indices.clone();
-        let verts = order.iter().map(|&i| triangles[i as usize]).collect();
-        let flags = order.iter().map(|&i| flags[i as usize]).collect();
         Self {
-            bvh,
-            verts,
-            flags,
+            prims: order.iter().map(|&i| prims[i as usize]).collect(),
+            flags: order.iter().map(|&i| flags[i as usize]).collect(),
             order,
+            bvh,
         }
     }
 
-    /// Number of BVH nodes (for statistics).
-    pub fn node_count(&self) -> usize {
-        self.bvh.nodes.len()
-    }
-
-    /// Bytes held by the BVH and its leaf data.
-    pub fn memory_bytes(&self) -> usize {
-        self.bvh.nodes.len() * std::mem::size_of::<CwBvhNode>()
-            + self.bvh.primitive_indices.len() * 4
-            + self.verts.len() * std::mem::size_of::<[Vec3; 3]>()
-            + self.flags.len()
-            + self.order.len() * 4
-    }
-
-    /// Tests one leaf triangle; `accept` is consulted only for alpha-tested triangles.
+    /// Tests one leaf primitive; `accept` is consulted only for alpha-tested ones.
     #[inline(always)]
-    fn test<F: FnMut(u32, &TriangleHit) -> bool>(
+    fn test<F: FnMut(u32, &PrimitiveHit) -> bool>(
         &self,
         leaf: usize,
+        ray: &Ray,
         shear: &RayShear,
         tmax: f32,
         accept: &mut F,
-    ) -> Option<TriangleHit> {
-        let [p0, p1, p2] = self.verts[leaf];
-        let hit = triangle::intersect(shear, p0, p1, p2, tmax)?;
+    ) -> Option<PrimitiveHit> {
+        let hit = match self.prims[leaf] {
+            Primitive::Triangle([p0, p1, p2]) => triangle::intersect(shear, p0, p1, p2, tmax)?,
+            Primitive::Sphere { centre, radius } => sphere::intersect(ray, centre, radius, tmax)?,
+        };
         let flags = self.flags[leaf];
         if flags != 0 {
             if flags & CULL_BACK != 0 && !hit.front {
@@ -189,7 +205,7 @@ impl Bvh {
 
     /// Closest hit along `ray` in `(0, ray.tmax)`. `accept(prim, hit)` filters hits on
     /// alpha-tested triangles.
-    pub fn intersect<F: FnMut(u32, &TriangleHit) -> bool>(
+    pub fn intersect<F: FnMut(u32, &PrimitiveHit) -> bool>(
         &self,
         ray: &Ray,
         mut accept: F,
@@ -199,7 +215,7 @@ impl Bvh {
         }
         let shear = RayShear::new(ray);
         let mut node_ray = NodeRay::new(ray);
-        let mut best: Option<(usize, TriangleHit)> = None;
+        let mut best: Option<(usize, PrimitiveHit)> = None;
         let mut state = self.bvh.new_traversal(Vec3A::from(ray.dir));
         let mut node;
         traverse!(
@@ -209,7 +225,7 @@ impl Bvh {
             intersect_node(node, &node_ray, state.oct_inv4),
             {
                 let leaf = state.primitive_id as usize;
-                if let Some(hit) = self.test(leaf, &shear, node_ray.tmax, &mut accept) {
+                if let Some(hit) = self.test(leaf, ray, &shear, node_ray.tmax, &mut accept) {
                     node_ray.tmax = hit.t;
                     best = Some((leaf, hit));
                 }
@@ -225,7 +241,7 @@ impl Bvh {
     }
 
     /// True if anything accepted lies along `ray` in `(0, ray.tmax)`; stops at the first hit.
-    pub fn occluded<F: FnMut(u32, &TriangleHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
+    pub fn occluded<F: FnMut(u32, &PrimitiveHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
         if self.bvh.nodes.is_empty() {
             return false;
         }
@@ -242,7 +258,10 @@ impl Bvh {
                 intersect_node(node, &node_ray, state.oct_inv4),
                 {
                     let leaf = state.primitive_id as usize;
-                    if self.test(leaf, &shear, ray.tmax, &mut accept).is_some() {
+                    if self
+                        .test(leaf, ray, &shear, ray.tmax, &mut accept)
+                        .is_some()
+                    {
                         occluded = true;
                         break 'search;
                     }
@@ -256,6 +275,39 @@ impl Bvh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn prims(tris: &[[Vec3; 3]]) -> Vec<Primitive> {
+        tris.iter().map(|&t| Primitive::Triangle(t)).collect()
+    }
+
+    #[test]
+    fn spheres_and_triangles_share_the_bvh() {
+        let mut p = prims(&cube());
+        p.push(Primitive::Sphere {
+            centre: Vec3::new(3.0, 0.5, 0.5),
+            radius: 0.5,
+        });
+        let bvh = Bvh::build(&p, &vec![0; p.len()]);
+        let hit = bvh
+            .intersect(&Ray::new(Vec3::new(5.0, 0.5, 0.5), -Vec3::X), |_, _| true)
+            .unwrap();
+        assert_eq!(hit.prim, 12);
+        assert!((hit.t - 1.5).abs() < 1e-6 && hit.front);
+        let hit = bvh
+            .intersect(&Ray::new(Vec3::new(2.9, 0.5, 0.5), -Vec3::X), |_, _| true)
+            .unwrap();
+        assert!(
+            hit.prim == 12 && (hit.t - 0.4).abs() < 1e-5 && !hit.front,
+            "the sphere's inside"
+        );
+        let hit = bvh
+            .intersect(&Ray::new(Vec3::new(2.4, 0.5, 0.5), -Vec3::X), |_, _| true)
+            .unwrap();
+        assert!(
+            hit.prim < 12 && (hit.t - 1.4).abs() < 1e-5,
+            "past the sphere, the cube"
+        );
+    }
 
     /// A closed unit cube of 12 triangles, wound outwards.
     fn cube() -> Vec<[Vec3; 3]> {
@@ -277,7 +329,7 @@ mod tests {
     #[test]
     fn rays_from_inside_a_closed_cube_always_hit_it() {
         let tris = cube();
-        let bvh = Bvh::build(&tris, &vec![0; tris.len()]);
+        let bvh = Bvh::build(&prims(&tris), &vec![0; tris.len()]);
         let mut rng = crate::sampling::pcg::Pcg32::new(7, 0);
         for _ in 0..20000 {
             let o = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
@@ -302,14 +354,14 @@ mod tests {
     fn contact_hits_and_culling_and_occlusion() {
         let tris = cube();
         let mut flags = vec![0; tris.len()];
-        let bvh = Bvh::build(&tris, &flags);
+        let bvh = Bvh::build(&prims(&tris), &flags);
         // A ray starting 1e-6 in front of a face still sees it.
         let o = Vec3::new(0.5, 0.5, 1.0 + 1e-6);
         let hit = bvh.intersect(&Ray::new(o, -Vec3::Z), |_, _| true).unwrap();
         assert!(hit.front && (hit.t - 1e-6).abs() < 1e-6);
         // Culling back faces lets rays from inside escape.
         flags.iter_mut().for_each(|f| *f = CULL_BACK);
-        let culled = Bvh::build(&tris, &flags);
+        let culled = Bvh::build(&prims(&tris), &flags);
         let inside = Ray::new(Vec3::splat(0.5), Vec3::Y);
         assert!(culled.intersect(&inside, |_, _| true).is_none());
         assert!(bvh.occluded(&inside, |_, _| true));

@@ -1,6 +1,7 @@
 //! Watertight ray/triangle intersection (Woop, Benthin & Wald 2013, "Watertight Ray/Triangle
 //! Intersection"): rays never slip through shared edges or vertices of a closed mesh.
 
+use super::PrimitiveHit;
 use super::ray::Ray;
 use glam::{DVec3, Vec3};
 
@@ -11,17 +12,6 @@ pub struct RayShear {
     origin: Vec3,
     k: [usize; 3],
     shear: Vec3,
-}
-
-/// A triangle hit: distance and barycentric weights of the three vertices.
-#[derive(Clone, Copy, Debug)]
-pub struct TriangleHit {
-    pub t: f32,
-    /// Barycentric weights of vertices 1 and 2 (vertex 0 has `1 - b1 - b2`).
-    pub b1: f32,
-    pub b2: f32,
-    /// True when the ray arrives on the side the counter-clockwise winding faces.
-    pub front: bool,
 }
 
 impl RayShear {
@@ -53,7 +43,7 @@ impl RayShear {
 
 /// Intersects the ray described by `shear` with triangle `p0 p1 p2` in `(0, tmax)`.
 #[inline]
-pub fn intersect(s: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Option<TriangleHit> {
+pub fn intersect(s: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Option<PrimitiveHit> {
     let [kx, ky, kz] = s.k;
     let a = p0 - s.origin;
     let b = p1 - s.origin;
@@ -93,7 +83,7 @@ pub fn intersect(s: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Optio
     if !(t > 0.0 && t < tmax) {
         return None;
     }
-    Some(TriangleHit {
+    Some(PrimitiveHit {
         t,
         b1: v * inv_det,
         b2: w * inv_det,
@@ -115,7 +105,7 @@ pub fn geometric_normal(p0: Vec3, p1: Vec3, p2: Vec3) -> Vec3 {
 mod tests {
     use super::*;
 
-    fn shoot(o: Vec3, d: Vec3, p: [Vec3; 3]) -> Option<TriangleHit> {
+    fn shoot(o: Vec3, d: Vec3, p: [Vec3; 3]) -> Option<PrimitiveHit> {
         let ray = Ray::new(o, d);
         intersect(&RayShear::new(&ray), p[0], p[1], p[2], f32::INFINITY)
     }

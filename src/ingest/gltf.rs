@@ -215,7 +215,7 @@ impl<'a> Importer<'a> {
         for node in gltf_scene.nodes() {
             self.visit(node, DMat4::IDENTITY, &mut path)?;
         }
-        if self.scene.instanced_triangle_count() == 0 {
+        if self.scene.instanced_triangle_count() == 0 && self.scene.spheres.is_empty() {
             return Err(self.err(
                 format!("scenes[{}]", gltf_scene.index()),
                 "contains no triangles",
@@ -271,13 +271,17 @@ impl<'a> Importer<'a> {
         let world = parent * local;
         let name = node.name().map_or_else(|| element.clone(), str::to_string);
         if let Some(mesh) = node.mesh() {
-            for primitive in mesh.primitives() {
-                if let Some(m) = self.primitive(&mesh, &primitive)? {
-                    self.scene.instances.push(Instance {
-                        name: name.clone(),
-                        mesh: m,
-                        transform: world,
-                    });
+            if self.is_sphere(&mesh)? {
+                self.sphere(&mesh, world, &name)?;
+            } else {
+                for primitive in mesh.primitives() {
+                    if let Some(m) = self.primitive(&mesh, &primitive)? {
+                        self.scene.instances.push(Instance {
+                            name: name.clone(),
+                            mesh: m,
+                            transform: world,
+                        });
+                    }
                 }
             }
         }
@@ -293,6 +297,67 @@ impl<'a> Importer<'a> {
             self.visit(child, world, path)?;
         }
         path.pop();
+        Ok(())
+    }
+
+    /// Whether the mesh's `extras` make it an analytic sphere:
+    /// `{"lucerna": {"shape": "sphere"}}`.
+    fn is_sphere(&self, mesh: &gltf::Mesh) -> Result<bool> {
+        let Some(raw) = mesh.extras() else {
+            return Ok(false);
+        };
+        let e = format!("meshes[{}].extras.lucerna", mesh.index());
+        let value: serde_json::Value =
+            serde_json::from_str(raw.get()).map_err(|err| self.err(&e, err.to_string()))?;
+        match value.get("lucerna").and_then(|l| l.get("shape")) {
+            None => Ok(false),
+            Some(shape) if shape == "sphere" => Ok(true),
+            Some(other) => {
+                Err(self.err(&e, format!("unknown shape {other} (expected \"sphere\")")))
+            }
+        }
+    }
+
+    /// Places the analytic sphere that bounds `mesh`'s vertices, with its first primitive's
+    /// material. The node's transform must scale uniformly.
+    fn sphere(&mut self, mesh: &gltf::Mesh<'a>, world: DMat4, name: &str) -> Result<()> {
+        let element = format!("meshes[{}]", mesh.index());
+        let mut positions = Vec::new();
+        let mut material = None;
+        for primitive in mesh.primitives() {
+            if let Some(m) = self.primitive(mesh, &primitive)? {
+                let m = &self.scene.meshes[m as usize];
+                positions.extend(m.positions.iter().map(|p| p.as_dvec3()));
+                material.get_or_insert(m.material);
+            }
+        }
+        let Some(material) = material else {
+            return Err(self.err(&element, "a sphere mesh needs triangles to bound"));
+        };
+        let (lo, hi) = positions
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(*p), hi.max(*p))
+            });
+        let centre = (lo + hi) * 0.5;
+        let radius = positions
+            .iter()
+            .map(|p| p.distance(centre))
+            .fold(0.0, f64::max);
+        let axes = [DVec3::X, DVec3::Y, DVec3::Z].map(|a| world.transform_vector3(a).length());
+        let scale = axes[0];
+        if !(scale > 0.0) || axes.iter().any(|a| (a - scale).abs() > 1e-6 * scale) {
+            return Err(self.err(
+                format!("nodes \"{name}\""),
+                "an analytic sphere needs a uniform scale",
+            ));
+        }
+        self.scene.spheres.push(scene::Sphere {
+            name: name.to_string(),
+            centre: world.transform_point3(centre),
+            radius: radius * scale,
+            material,
+        });
         Ok(())
     }
 

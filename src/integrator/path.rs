@@ -1,16 +1,21 @@
 //! The path tracer: next-event estimation and BSDF sampling combined by MIS at every
-//! vertex, Russian roulette, and a record of every contribution with its tags (path depth
-//! and technique) so that the film can route it to each AOV that wants it.
+//! vertex, splitting at the first vertex, Russian roulette, and a record of every
+//! contribution with its tags (path depth and technique) so that the film can route it to
+//! each AOV that wants it.
+//!
+//! With `split nee=N,bsdf=M`, the first vertex seen from the camera sends N shadow rays and
+//! M BSDF samples, each BSDF sample continuing as its own path; the MIS weights there use
+//! the densities times the sample counts (N p_light against M p_bsdf), and each estimate is
+//! divided by its count, which keeps the combination unbiased (Veach & Guibas 1995).
 
-use super::mis::Technique;
-use super::{Settings, mis::Mis};
+use super::mis::{Mis, Technique};
+use super::settings::Settings;
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
-use crate::light::Light;
 use crate::material::{self, Bsdf};
-use crate::sampling::sampler::{Sampler, VertexSample};
+use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::world::{Interaction, World};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// Where a contribution came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,30 +80,67 @@ impl RayCounts {
 }
 
 /// The state a path carries from vertex to vertex.
+#[derive(Clone, Copy, Debug)]
 struct PathState {
-    /// Throughput: product of BSDF weights and roulette compensations so far.
+    /// Throughput: product of BSDF weights and roulette or splitting factors so far.
     beta: Vec3,
     /// Scattering events so far.
     depth: u32,
-    /// Density of the BSDF sample that led to the current vertex, and whether it came from
-    /// a delta lobe.
+    /// Sample-dimension namespace of this path (0: the main path; branches get their own).
+    branch: u32,
+    /// The vertex the current ray left: where light selection and light densities are
+    /// evaluated for MIS when the ray finds an emitter.
+    prev_p: Vec3,
+    prev_n: Vec3,
+    /// Density of the BSDF sample that led here times the BSDF sample count there, and
+    /// whether it came from a delta lobe.
     prev_pdf: f32,
     prev_delta: bool,
+    /// Shadow rays sent from the previous vertex (light sampling's sample count there).
+    prev_nee_count: u32,
+}
+
+/// An emitter a path ran into: radiance towards the path, light index, and where.
+#[derive(Clone, Copy, Debug)]
+struct Emitter {
+    le: Vec3,
+    light: usize,
+    /// Direction of the ray that found it and the distance along it (infinite for the
+    /// environment).
+    dir: Vec3,
+    dist: f32,
+}
+
+/// Per-path context that does not change along it.
+struct Context {
+    mis: Mis,
+    single: bool,
+}
+
+/// The path tracer over a world with given settings.
+pub struct PathTracer<'a> {
+    world: &'a World,
+    settings: &'a Settings,
 }
 
 impl PathState {
-    /// The path reached an emitter of radiance `le`: seen directly by the camera, or found
-    /// by BSDF sampling, weighted against light sampling's density `light_pdf` (unless a
-    /// delta lobe led here, which light sampling cannot follow).
+    /// The path reached emitter `e`: seen directly by the camera, or found by BSDF
+    /// sampling and weighted against light sampling's density there (unless a delta lobe
+    /// led here, which light sampling cannot follow).
     #[inline]
     fn reached_emitter<R: Recorder>(
         &self,
+        tracer: &PathTracer,
+        ctx: &Context,
         rec: &mut R,
-        mis: Mis,
-        le: Vec3,
-        light_pdf: impl FnOnce() -> f32,
-        single: bool,
+        e: Emitter,
     ) {
+        let Emitter {
+            le,
+            light,
+            dir,
+            dist,
+        } = e;
         if self.depth == 0 {
             rec.contribution(Contribution {
                 value: self.beta * le,
@@ -106,26 +148,31 @@ impl PathState {
                 source: Source::Emission,
                 single_technique: None,
             });
-        } else {
-            let p_light = if self.prev_delta { 0.0 } else { light_pdf() };
-            record(
-                rec,
-                mis,
-                Technique::Bsdf,
-                self.beta * le,
-                self.depth,
-                self.prev_pdf,
-                p_light,
-                single,
-            );
+            return;
         }
+        let lights = &tracer.world.lights;
+        let p_light = if self.prev_delta {
+            0.0
+        } else {
+            let select = lights.selection_probability(light, self.prev_p, self.prev_n);
+            let density = match &lights.lights[light] {
+                crate::light::Light::Environment => {
+                    lights.environment.as_ref().map_or(0.0, |e| e.pdf(dir))
+                }
+                l => l.pdf(self.prev_p, dir, dist, tracer.settings.light_sampling),
+            };
+            select * density * self.prev_nee_count as f32
+        };
+        record(
+            rec,
+            ctx,
+            Technique::Bsdf,
+            self.beta * le,
+            self.depth,
+            self.prev_pdf,
+            p_light,
+        );
     }
-}
-
-/// The path tracer over a world with given settings.
-pub struct PathTracer<'a> {
-    world: &'a World,
-    settings: &'a Settings,
 }
 
 impl<'a> PathTracer<'a> {
@@ -137,44 +184,69 @@ impl<'a> PathTracer<'a> {
     /// Traces the path of camera ray `ray` using `sampler`'s current pixel sample.
     pub fn trace<R: Recorder>(
         &self,
+        ray: Ray,
+        sampler: &mut Sampler,
+        rec: &mut R,
+        rays: &mut RayCounts,
+    ) {
+        let ctx = Context {
+            mis: self.settings.mis,
+            single: rec.wants_single_technique(),
+        };
+        let camera = PathState {
+            beta: Vec3::ONE,
+            depth: 0,
+            branch: 0,
+            prev_p: ray.origin,
+            prev_n: Vec3::ZERO,
+            prev_pdf: 0.0,
+            prev_delta: true,
+            prev_nee_count: 1,
+        };
+        self.trace_from(ray, camera, &ctx, sampler, rec, rays);
+    }
+
+    /// Follows a path from `ray` until it ends; branches split off at its first vertex are
+    /// traced by recursion (one level: only the first vertex splits).
+    fn trace_from<R: Recorder>(
+        &self,
         mut ray: Ray,
+        mut path: PathState,
+        ctx: &Context,
         sampler: &mut Sampler,
         rec: &mut R,
         rays: &mut RayCounts,
     ) {
         let world = self.world;
-        let mis = self.settings.mis;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
-        let single = rec.wants_single_technique();
-        let mut path = PathState {
-            beta: Vec3::ONE,
-            depth: 0,
-            prev_pdf: 0.0,
-            prev_delta: true,
-        };
         loop {
             rays.closest += 1;
             let Some(hit) = world.intersect(&ray) else {
                 if let (Some(env), Some(index)) =
                     (&world.lights.environment, world.lights.environment_index)
                 {
-                    let light_pdf =
-                        || world.lights.selection_probability(index as usize) * env.pdf(ray.dir);
-                    path.reached_emitter(rec, mis, env.radiance(ray.dir), light_pdf, single);
+                    let e = Emitter {
+                        le: env.radiance(ray.dir),
+                        light: index as usize,
+                        dir: ray.dir,
+                        dist: f32::INFINITY,
+                    };
+                    path.reached_emitter(self, ctx, rec, e);
                 }
                 return;
             };
             let it = world.interaction(&ray, &hit);
             let le = world.surfaces.emitted(&it);
             if le != Vec3::ZERO
-                && let Some(index) = world.light_index(it.mesh, it.tri)
+                && let Some(index) = world.light_index(it.prim)
             {
-                let Light::Triangle(tri) = &world.lights.lights[index] else {
-                    unreachable!("emissive triangles map to triangle lights")
+                let e = Emitter {
+                    le,
+                    light: index,
+                    dir: ray.dir,
+                    dist: hit.t * ray.dir.length(),
                 };
-                let light_pdf =
-                    || world.lights.selection_probability(index) * tri.pdf(ray.dir, hit.t);
-                path.reached_emitter(rec, mis, le, light_pdf, single);
+                path.reached_emitter(self, ctx, rec, e);
             }
             if path.depth >= max_depth {
                 return;
@@ -186,7 +258,7 @@ impl<'a> PathTracer<'a> {
                 &it.attrs,
             );
             let wo = it.frame.to_local(-ray.dir);
-            if path.depth == 0 {
+            if path.depth == 0 && path.branch == 0 {
                 rec.first_hit(FirstHit {
                     albedo: bsdf.albedo(wo),
                     normal: it.frame.n,
@@ -194,65 +266,147 @@ impl<'a> PathTracer<'a> {
                     position: world.space.to_world(it.p).as_vec3(),
                 });
             }
-            let vs = sampler.vertex(path.depth);
+            let vs = sampler.vertex(path.depth, path.branch);
+            let first = path.depth == 0;
+            let split = self.settings.split;
+            let (n_nee, n_bsdf) = if first {
+                (split.nee, split.bsdf)
+            } else {
+                (1, 1)
+            };
+
             if bsdf.has_non_delta() && !world.lights.is_empty() {
-                rays.shadow +=
-                    self.next_event(&it, &bsdf, wo, path.beta, path.depth + 1, &vs, rec, single);
+                for j in 0..n_nee {
+                    let (u_light, u_select) = if n_nee == 1 {
+                        (vs.light, vs.light_select)
+                    } else {
+                        let p = sampler.split_point(SplitKind::Light, j);
+                        (Vec2::new(p[0], p[1]), p[2])
+                    };
+                    rays.shadow += self.next_event(
+                        &it,
+                        &bsdf,
+                        wo,
+                        &path,
+                        ctx,
+                        (n_nee, n_bsdf),
+                        u_light,
+                        u_select,
+                        rec,
+                    );
+                }
             }
 
-            let Some(bs) = bsdf.sample(wo, vs.lobe, vs.bsdf) else {
+            // Continue with n_bsdf BSDF samples: the last one in this loop, the others as
+            // branches of their own.
+            let mut next = None;
+            for k in 0..n_bsdf {
+                let sample = if n_bsdf == 1 {
+                    vs
+                } else {
+                    let p = sampler.split_point(SplitKind::Bsdf, k);
+                    VertexSample {
+                        bsdf: Vec2::new(p[0], p[1]),
+                        lobe: p[2],
+                        rr: p[3],
+                        ..vs
+                    }
+                };
+                let branch = if k == 0 { path.branch } else { k };
+                let Some(child) =
+                    self.scatter(&it, &bsdf, wo, &path, &sample, (n_nee, n_bsdf), branch)
+                else {
+                    continue;
+                };
+                if k + 1 == n_bsdf {
+                    next = Some(child);
+                } else {
+                    self.trace_from(child.0, child.1, ctx, sampler, rec, rays);
+                }
+            }
+            let Some((next_ray, next_path)) = next else {
                 return;
             };
-            let wi = it.frame.to_world(bs.wi);
-            // Reflection must leave on the side of the surface the path arrived from.
-            if wi.dot(it.ng) <= 0.0 {
-                return;
-            }
-            path.beta *= bs.weight;
-            path.prev_pdf = bs.pdf;
-            path.prev_delta = bs.is_delta();
-            path.depth += 1;
-
-            let survival = self.settings.rr.survival(luminance(path.beta), path.depth);
-            if survival < 1.0 {
-                if !(vs.rr < survival) {
-                    return;
-                }
-                path.beta /= survival;
-            }
-            if !(path.beta.max_element() > 0.0) {
-                return;
-            }
-            ray = Ray::new(offset_ray_origin(it.p, it.ng), wi);
+            ray = next_ray;
+            path = next_path;
         }
     }
 
-    /// Light sampling at `it`: one light chosen by power, one point on it, one shadow ray.
-    /// Returns the number of shadow rays traced.
+    /// Samples the BSDF at `it` for a continuation and applies Russian roulette; `None` if
+    /// the path ends there.
+    #[allow(clippy::too_many_arguments)]
+    fn scatter(
+        &self,
+        it: &Interaction,
+        bsdf: &Bsdf,
+        wo: Vec3,
+        path: &PathState,
+        vs: &VertexSample,
+        (n_nee, n_bsdf): (u32, u32),
+        branch: u32,
+    ) -> Option<(Ray, PathState)> {
+        let bs = bsdf.sample(wo, vs.lobe, vs.bsdf)?;
+        let wi = it.frame.to_world(bs.wi);
+        // Reflection must leave on the side of the surface the path arrived from.
+        if wi.dot(it.ng) <= 0.0 {
+            return None;
+        }
+        let mut beta = path.beta * bs.weight / n_bsdf as f32;
+        let depth = path.depth + 1;
+        let survival = self.settings.rr.survival(luminance(beta), depth);
+        if survival < 1.0 {
+            if !(vs.rr < survival) {
+                return None;
+            }
+            beta /= survival;
+        }
+        if !(beta.max_element() > 0.0) {
+            return None;
+        }
+        let next = PathState {
+            beta,
+            depth,
+            branch,
+            prev_p: it.p,
+            prev_n: it.frame.n,
+            prev_pdf: bs.pdf * n_bsdf as f32,
+            prev_delta: bs.is_delta(),
+            prev_nee_count: n_nee,
+        };
+        Some((Ray::new(offset_ray_origin(it.p, it.ng), wi), next))
+    }
+
+    /// One light sample at `it`: a light chosen by the selection strategy, a point on it,
+    /// a shadow ray. Returns the number of shadow rays traced.
     #[allow(clippy::too_many_arguments)]
     fn next_event<R: Recorder>(
         &self,
         it: &Interaction,
         bsdf: &Bsdf,
         wo: Vec3,
-        beta: Vec3,
-        depth: u32,
-        vs: &VertexSample,
+        path: &PathState,
+        ctx: &Context,
+        (n_nee, n_bsdf): (u32, u32),
+        u_light: Vec2,
+        u_select: f32,
         rec: &mut R,
-        single: bool,
     ) -> u64 {
         let world = self.world;
         let lights = &world.lights;
-        let Some((index, p_select)) = lights.select(vs.light_select) else {
+        let Some((index, p_select)) = lights.select(u_select, it.p, it.frame.n) else {
             return 0;
         };
-        let Some(ls) = lights.lights[index].sample(it.p, lights.environment.as_ref(), vs.light)
-        else {
+        let Some(ls) = lights.lights[index].sample(
+            it.p,
+            lights.environment.as_ref(),
+            self.settings.light_sampling,
+            u_light,
+        ) else {
             return 0;
         };
         let mut radiance = ls.radiance;
-        if let Some((mesh, tri, b)) = ls.area_point {
-            radiance *= world.surfaces.emission_at(mesh, tri, b);
+        if let Some((prim, b)) = ls.area_point {
+            radiance *= world.surfaces.emission_at(prim, b);
         }
         if radiance == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0 {
             return 0;
@@ -277,45 +431,42 @@ impl<'a> PathTracer<'a> {
         let p_light = p_select * ls.pdf;
         // BSDF sampling cannot reach a delta light: its density there is 0.
         let p_bsdf = if ls.delta { 0.0 } else { bsdf.pdf(wo, wi) };
-        let value = beta * f * radiance / p_light;
+        let value = path.beta * f * radiance / (p_light * n_nee as f32);
         record(
             rec,
-            self.settings.mis,
+            ctx,
             Technique::Nee,
             value,
-            depth,
-            p_light,
-            p_bsdf,
-            single,
+            path.depth + 1,
+            p_light * n_nee as f32,
+            p_bsdf * n_bsdf as f32,
         );
         1
     }
 }
 
 /// Records `value`, found by `technique` with density `own`, where the other technique's
-/// density is `other` (0 where it cannot produce the path: delta lights, delta lobes, so
-/// that every heuristic gives weight 1 there).
-#[allow(clippy::too_many_arguments)]
+/// density is `other` (densities times sample counts; 0 where a technique cannot produce
+/// the path: delta lights, delta lobes, so that every heuristic gives weight 1 there).
 #[inline]
 fn record<R: Recorder>(
     rec: &mut R,
-    mis: Mis,
+    ctx: &Context,
     technique: Technique,
     value: Vec3,
     depth: u32,
     own: f32,
     other: f32,
-    single: bool,
 ) {
     let weight = |h: Mis| h.weight(technique, own, other);
     rec.contribution(Contribution {
-        value: value * weight(mis),
+        value: value * weight(ctx.mis),
         depth,
         source: match technique {
             Technique::Nee => Source::Nee,
             Technique::Bsdf => Source::Bsdf,
         },
-        single_technique: (single && depth == 1)
+        single_technique: (ctx.single && depth == 1)
             .then(|| [value * weight(Mis::NeeOnly), value * weight(Mis::BsdfOnly)]),
     });
 }

@@ -1,21 +1,26 @@
-//! Lights in render space and their sampling: emissive triangles (area lights), point,
-//! spot and directional lights, and the environment. Light selection by power.
+//! Lights in render space and their sampling: emissive triangles and spheres (area lights,
+//! sampled by area or by solid angle), point, spot and directional lights, and the
+//! environment. Which light to sample is `selection`'s job.
 
 pub mod environment;
+pub mod selection;
+pub mod solid_angle;
+pub mod tree;
 
 use crate::color::luminance;
 use crate::geometry::ray::offset_ray_origin;
-use crate::sampling::distribution::AliasTable;
-use crate::sampling::warp::square_to_uniform_triangle;
+use crate::integrator::LightSampling;
+use crate::sampling::warp::{square_to_uniform_sphere, square_to_uniform_triangle};
 use environment::Environment;
 use glam::{Vec2, Vec3};
+pub use selection::LightSet;
 use std::f32::consts::PI;
 
 /// One light.
 #[derive(Clone, Debug)]
 pub enum Light {
-    /// An emissive triangle of mesh `mesh`.
     Triangle(TriangleLight),
+    Sphere(SphereLight),
     Point {
         position: Vec3,
         intensity: Vec3,
@@ -39,12 +44,24 @@ pub enum Light {
 /// An emissive triangle.
 #[derive(Clone, Debug)]
 pub struct TriangleLight {
-    pub mesh: u32,
-    pub tri: u32,
+    /// The BVH primitive it is.
+    pub prim: u32,
     pub p: [Vec3; 3],
     /// Unit normal of the front (counter-clockwise) side.
     pub n: Vec3,
     pub area: f32,
+    pub two_sided: bool,
+    /// Mean emitted radiance, for selection by power.
+    pub mean_radiance: Vec3,
+}
+
+/// An emissive sphere, emitting outwards (and inwards when two-sided).
+#[derive(Clone, Debug)]
+pub struct SphereLight {
+    /// The BVH primitive it is.
+    pub prim: u32,
+    pub centre: Vec3,
+    pub radius: f32,
     pub two_sided: bool,
     /// Mean emitted radiance, for selection by power.
     pub mean_radiance: Vec3,
@@ -58,10 +75,12 @@ pub struct LightSample {
     /// Where a shadow ray must end (already offset off the light's surface), or `None` for
     /// lights at infinity.
     pub target: Option<Vec3>,
-    /// For area lights: the triangle and the barycentrics of the sampled point, so the
-    /// caller can evaluate textured emission.
-    pub area_point: Option<(u32, u32, Vec2)>,
-    /// Radiance (area, environment) or irradiance-like quantity (delta lights) arriving.
+    /// For area lights: the primitive and its surface coordinates at the sampled point
+    /// (triangle barycentrics b1 b2, sphere lat-long uv), so the caller can evaluate
+    /// textured emission.
+    pub area_point: Option<(u32, Vec2)>,
+    /// Radiance (area, environment) or irradiance-like quantity (delta lights) arriving;
+    /// for area lights the factor that multiplies the emission at `area_point`.
     pub radiance: Vec3,
     /// Solid-angle density of the sample, excluding the light selection probability; for
     /// delta lights 1.
@@ -77,6 +96,40 @@ pub fn spot_falloff(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
     a * a
 }
 
+/// An area-light sample from a point `y` with unit normal `n` on the light, seen from `p`.
+/// `None` when `p` is behind a one-sided emitter.
+#[inline]
+fn area_sample(
+    p: Vec3,
+    y: Vec3,
+    n: Vec3,
+    two_sided: bool,
+    prim: u32,
+    coords: Vec2,
+) -> Option<(LightSample, f32)> {
+    let to_light = y - p;
+    let d2 = to_light.length_squared();
+    if !(d2 > 0.0) {
+        return None;
+    }
+    let wi = to_light / d2.sqrt();
+    let cos_light = -n.dot(wi);
+    if cos_light <= 0.0 && !two_sided || cos_light == 0.0 {
+        return None;
+    }
+    let facing = if cos_light > 0.0 { n } else { -n };
+    let sample = LightSample {
+        wi,
+        target: Some(offset_ray_origin(y, facing)),
+        area_point: Some((prim, coords)),
+        radiance: Vec3::ONE,
+        pdf: 0.0,
+        delta: false,
+    };
+    // The conversion from area to solid angle density.
+    Some((sample, d2 / cos_light.abs()))
+}
+
 impl Light {
     /// Emitted power (luminance-weighted), the weight for selection by power. `radius` is
     /// the scene's bounding radius, which scales infinite lights as in pbrt.
@@ -85,6 +138,10 @@ impl Light {
             Self::Triangle(t) => {
                 let sides = if t.two_sided { 2.0 } else { 1.0 };
                 PI * t.area * sides * luminance(t.mean_radiance)
+            }
+            Self::Sphere(s) => {
+                let sides = if s.two_sided { 2.0 } else { 1.0 };
+                PI * 4.0 * PI * s.radius * s.radius * sides * luminance(s.mean_radiance)
             }
             Self::Point { intensity, .. } => 4.0 * PI * luminance(*intensity),
             Self::Spot {
@@ -109,36 +166,70 @@ impl Light {
     }
 
     /// Samples the light from shading point `p`. Textured area emission is left to the
-    /// caller: `radiance` then holds the factor to multiply (see [`LightSample::area_point`]).
+    /// caller (see [`LightSample::area_point`]).
     pub fn sample(
         &self,
         p: Vec3,
         environment: Option<&Environment>,
+        sampling: LightSampling,
         u: Vec2,
     ) -> Option<LightSample> {
         match self {
             Self::Triangle(t) => {
+                if sampling == LightSampling::SolidAngle
+                    && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
+                {
+                    let wi = solid_angle::sample_spherical_triangle(p, &t.p, u)?;
+                    // Where wi meets the triangle's plane; directions on the spherical
+                    // triangle's edges may land a rounding error outside the triangle, so
+                    // the barycentrics are clamped rather than the sample dropped.
+                    let along = wi.dot(t.n);
+                    let dist = (t.p[0] - p).dot(t.n) / along;
+                    if !(dist > 0.0 && dist.is_finite()) {
+                        return None;
+                    }
+                    let b = solid_angle::barycentrics(&t.p, p + wi * dist);
+                    let y = t.p[0] * (1.0 - b.x - b.y) + t.p[1] * b.x + t.p[2] * b.y;
+                    let (mut s, _) = area_sample(p, y, t.n, t.two_sided, t.prim, b)?;
+                    s.pdf = 1.0 / omega;
+                    return Some(s);
+                }
                 let b = square_to_uniform_triangle(u);
                 let y = t.p[0] * (1.0 - b.x - b.y) + t.p[1] * b.x + t.p[2] * b.y;
-                let to_light = y - p;
-                let d2 = to_light.length_squared();
-                if !(d2 > 0.0) {
-                    return None;
+                let (mut s, to_solid_angle) = area_sample(p, y, t.n, t.two_sided, t.prim, b)?;
+                s.pdf = to_solid_angle / t.area;
+                Some(s)
+            }
+            Self::Sphere(sp) => {
+                if sampling == LightSampling::SolidAngle
+                    && let Some(one_minus_cos) = solid_angle::sphere_cone(p, sp.centre, sp.radius)
+                {
+                    let n =
+                        solid_angle::sample_sphere_cone(p, sp.centre, sp.radius, one_minus_cos, u);
+                    let y = sp.centre + sp.radius * n;
+                    let (mut s, _) = area_sample(
+                        p,
+                        y,
+                        n,
+                        sp.two_sided,
+                        sp.prim,
+                        crate::geometry::sphere::uv(n),
+                    )?;
+                    s.pdf = solid_angle::sphere_cone_pdf(one_minus_cos);
+                    return Some(s);
                 }
-                let wi = to_light / d2.sqrt();
-                let cos_light = -t.n.dot(wi);
-                if cos_light <= 0.0 && !t.two_sided || cos_light == 0.0 {
-                    return None;
-                }
-                let facing = if cos_light > 0.0 { t.n } else { -t.n };
-                Some(LightSample {
-                    wi,
-                    target: Some(offset_ray_origin(y, facing)),
-                    area_point: Some((t.mesh, t.tri, b)),
-                    radiance: Vec3::ONE,
-                    pdf: d2 / (cos_light.abs() * t.area),
-                    delta: false,
-                })
+                let n = square_to_uniform_sphere(u);
+                let y = sp.centre + sp.radius * n;
+                let (mut s, to_solid_angle) = area_sample(
+                    p,
+                    y,
+                    n,
+                    sp.two_sided,
+                    sp.prim,
+                    crate::geometry::sphere::uv(n),
+                )?;
+                s.pdf = to_solid_angle / (4.0 * PI * sp.radius * sp.radius);
+                Some(s)
             }
             Self::Point {
                 position,
@@ -202,66 +293,42 @@ impl Light {
             }
         }
     }
-}
 
-impl TriangleLight {
-    /// Solid-angle density with which [`Light::sample`] reaches this triangle at distance
-    /// `dist` along unit direction `wi`.
+    /// Solid-angle density with which [`Light::sample`] from `p` produces the point of this
+    /// area light found at distance `dist` along unit direction `wi` (excluding selection).
+    /// The same rules as sampling decide the measure.
     #[inline]
-    pub fn pdf(&self, wi: Vec3, dist: f32) -> f32 {
-        let cos_light = self.n.dot(wi).abs();
-        if cos_light > 0.0 {
-            dist * dist / (cos_light * self.area)
-        } else {
-            0.0
+    pub fn pdf(&self, p: Vec3, wi: Vec3, dist: f32, sampling: LightSampling) -> f32 {
+        match self {
+            Self::Triangle(t) => {
+                if sampling == LightSampling::SolidAngle
+                    && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
+                {
+                    return 1.0 / omega;
+                }
+                let cos_light = t.n.dot(wi).abs();
+                if cos_light > 0.0 {
+                    dist * dist / (cos_light * t.area)
+                } else {
+                    0.0
+                }
+            }
+            Self::Sphere(sp) => {
+                if sampling == LightSampling::SolidAngle
+                    && let Some(one_minus_cos) = solid_angle::sphere_cone(p, sp.centre, sp.radius)
+                {
+                    return solid_angle::sphere_cone_pdf(one_minus_cos);
+                }
+                let n = (p + wi * dist - sp.centre).normalize_or_zero();
+                let cos_light = n.dot(wi).abs();
+                if cos_light > 0.0 {
+                    dist * dist / (cos_light * 4.0 * PI * sp.radius * sp.radius)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
         }
-    }
-}
-
-/// All lights with their selection distribution.
-#[derive(Clone, Debug, Default)]
-pub struct LightSet {
-    pub lights: Vec<Light>,
-    pub environment: Option<Environment>,
-    /// Index of the environment in `lights`, if any.
-    pub environment_index: Option<u32>,
-    selection: Option<AliasTable>,
-}
-
-impl LightSet {
-    /// Builds the set and its selection-by-power table.
-    pub fn new(mut lights: Vec<Light>, environment: Option<Environment>, radius: f32) -> Self {
-        let environment_index = environment.as_ref().map(|_| {
-            lights.push(Light::Environment);
-            (lights.len() - 1) as u32
-        });
-        let powers: Vec<f32> = lights
-            .iter()
-            .map(|l| l.power(environment.as_ref(), radius))
-            .collect();
-        Self {
-            selection: AliasTable::new(&powers),
-            lights,
-            environment,
-            environment_index,
-        }
-    }
-
-    /// Picks a light with probability proportional to its power: (index, probability).
-    #[inline]
-    pub fn select(&self, u: f32) -> Option<(usize, f32)> {
-        self.selection.as_ref().map(|t| t.sample(u))
-    }
-
-    /// Probability that [`LightSet::select`] picks light `i`.
-    #[inline]
-    pub fn selection_probability(&self, i: usize) -> f32 {
-        self.selection.as_ref().map_or(0.0, |t| t.pmf(i))
-    }
-
-    /// True if there is nothing to sample.
-    pub fn is_empty(&self) -> bool {
-        self.selection.is_none()
     }
 }
 
@@ -278,10 +345,9 @@ mod tests {
     }
 
     #[test]
-    fn triangle_light_pdf_agrees_with_sampling() {
-        let t = TriangleLight {
-            mesh: 0,
-            tri: 0,
+    fn area_light_pdfs_agree_with_sampling() {
+        let tri = Light::Triangle(TriangleLight {
+            prim: 0,
             p: [
                 Vec3::new(-1.0, 2.0, -1.0),
                 Vec3::new(1.0, 2.0, -1.0),
@@ -291,16 +357,51 @@ mod tests {
             area: 2.0,
             two_sided: false,
             mean_radiance: Vec3::ONE,
-        };
-        let light = Light::Triangle(t.clone());
-        let s = light.sample(Vec3::ZERO, None, Vec2::new(0.3, 0.6)).unwrap();
-        let dist = (s.target.unwrap() - Vec3::ZERO).length();
-        assert!((t.pdf(s.wi, dist) - s.pdf).abs() < 1e-3 * s.pdf);
+        });
+        let sphere = Light::Sphere(SphereLight {
+            prim: 1,
+            centre: Vec3::new(0.5, 3.0, 0.2),
+            radius: 0.7,
+            two_sided: false,
+            mean_radiance: Vec3::ONE,
+        });
+        for light in [tri, sphere] {
+            for sampling in [LightSampling::Area, LightSampling::SolidAngle] {
+                for u in [Vec2::new(0.3, 0.6), Vec2::new(0.9, 0.1)] {
+                    let Some(s) = light.sample(Vec3::ZERO, None, sampling, u) else {
+                        continue;
+                    };
+                    let dist = s.target.unwrap().length();
+                    let pdf = light.pdf(Vec3::ZERO, s.wi, dist, sampling);
+                    assert!(
+                        (pdf - s.pdf).abs() < 2e-3 * s.pdf,
+                        "{sampling:?}: {pdf} vs {}",
+                        s.pdf
+                    );
+                }
+            }
+        }
         // Seen from above, a one-sided light facing down gives nothing.
+        let tri = Light::Triangle(TriangleLight {
+            prim: 0,
+            p: [
+                Vec3::new(-1.0, 2.0, -1.0),
+                Vec3::new(1.0, 2.0, -1.0),
+                Vec3::new(0.0, 2.0, 1.0),
+            ],
+            n: -Vec3::Y,
+            area: 2.0,
+            two_sided: false,
+            mean_radiance: Vec3::ONE,
+        });
         assert!(
-            light
-                .sample(Vec3::new(0.0, 3.0, 0.0), None, Vec2::new(0.3, 0.6))
-                .is_none()
+            tri.sample(
+                Vec3::new(0.0, 3.0, 0.0),
+                None,
+                LightSampling::Area,
+                Vec2::new(0.3, 0.6)
+            )
+            .is_none()
         );
     }
 }

@@ -52,15 +52,27 @@ pub struct VertexSample {
 }
 
 /// The random numbers of one pixel sample. Dimensions come in 4D sets: set 0 is the camera,
-/// sets 1 + 2k and 2 + 2k are vertex k's. Each set's (x, y) pair is the best-stratified 2D
-/// projection, so the 2D samples go there.
+/// sets 1 + 2k and 2 + 2k are vertex k's on the main path; paths branched off by splitting
+/// get their own sets. Each set's (x, y) pair is the best-stratified 2D projection, so the
+/// 2D samples go there.
 #[derive(Clone, Debug)]
 pub struct Sampler {
     kind: SamplerKind,
     seed: u32,
     pixel_seed: u32,
     index: u32,
+    /// A key of this pixel sample, seeding the points of split samples.
+    sample_key: u32,
     rng: Pcg32,
+}
+
+/// Which split samples a [`Sampler::split_point`] is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SplitKind {
+    /// Shadow rays: light position (x, y), light selection, unused.
+    Light = 0x6c,
+    /// BSDF samples: direction (x, y), lobe, Russian roulette.
+    Bsdf = 0xb5,
 }
 
 impl Sampler {
@@ -71,6 +83,7 @@ impl Sampler {
             seed,
             pixel_seed: 0,
             index: 0,
+            sample_key: 0,
             rng: Pcg32::new(0, 0),
         }
     }
@@ -80,6 +93,7 @@ impl Sampler {
     pub fn start(&mut self, x: u32, y: u32, index: u32) {
         let pixel = ((y as u64) << 32) | x as u64;
         let key = mix_u64(pixel ^ mix_u64(self.seed as u64 ^ 0x5851f42d4c957f2d));
+        self.sample_key = mix_u64(key ^ ((index as u64) << 20)) as u32;
         match self.kind {
             SamplerKind::Independent => {
                 self.rng = Pcg32::new(mix_u64(key ^ index as u64), key);
@@ -113,11 +127,17 @@ impl Sampler {
         }
     }
 
-    /// Numbers for path vertex `depth` (0 = the first hit from the camera).
+    /// Numbers for path vertex `depth` (0 = the first hit from the camera) of branch
+    /// `branch` (0: the main path).
     #[inline]
-    pub fn vertex(&mut self, depth: u32) -> VertexSample {
-        let a = self.set(1 + 2 * depth);
-        let b = self.set(2 + 2 * depth);
+    pub fn vertex(&mut self, depth: u32, branch: u32) -> VertexSample {
+        let base = if branch == 0 {
+            1
+        } else {
+            0x4000_0000 ^ hash_u32(branch).wrapping_mul(0x10000)
+        };
+        let a = self.set(base.wrapping_add(2 * depth));
+        let b = self.set(base.wrapping_add(2 * depth + 1));
         VertexSample {
             light: Vec2::new(a[0], a[1]),
             light_select: a[2],
@@ -125,6 +145,16 @@ impl Sampler {
             bsdf: Vec2::new(b[0], b[1]),
             lobe: b[2],
         }
+    }
+}
+
+impl Sampler {
+    /// Point `j` of this pixel sample's split samples of `kind`: the j-th point of an
+    /// Owen-scrambled Sobol sequence seeded per pixel sample, so every point is uniform and
+    /// the n points together are stratified (a (0, 2)-sequence in the first two numbers).
+    #[inline]
+    pub fn split_point(&self, kind: SplitKind, j: u32) -> [f32; 4] {
+        sobol_burley::sample_4d(j & 0xffff, 0, self.sample_key ^ hash_u32(kind as u32))
     }
 }
 
@@ -139,11 +169,31 @@ mod tests {
             let mut b = Sampler::new(kind, 9);
             a.start(3, 4, 17);
             b.start(3, 4, 17);
-            assert_eq!(a.vertex(2).bsdf, b.vertex(2).bsdf);
+            assert_eq!(a.vertex(2, 0).bsdf, b.vertex(2, 0).bsdf);
             b.start(4, 3, 17);
             a.start(3, 4, 17);
             assert_ne!(a.camera().film, b.camera().film);
         }
+    }
+
+    #[test]
+    fn split_points_are_stratified_and_differ_between_samples() {
+        let mut s = Sampler::new(SamplerKind::Independent, 3);
+        s.start(1, 2, 0);
+        let mut cells = [false; 64];
+        for j in 0..64 {
+            let p = s.split_point(SplitKind::Light, j);
+            let c = (p[0] * 8.0) as usize + 8 * (p[1] * 8.0) as usize;
+            assert!(!cells[c], "cell {c} twice");
+            cells[c] = true;
+        }
+        let first = s.split_point(SplitKind::Light, 0);
+        s.start(1, 2, 1);
+        assert_ne!(first, s.split_point(SplitKind::Light, 0));
+        assert_ne!(
+            s.split_point(SplitKind::Light, 0),
+            s.split_point(SplitKind::Bsdf, 0)
+        );
     }
 
     #[test]

@@ -16,6 +16,8 @@ pub struct Scene {
     pub source: String,
     pub meshes: Vec<Mesh>,
     pub instances: Vec<Instance>,
+    /// Analytic spheres (world space).
+    pub spheres: Vec<Sphere>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
@@ -52,6 +54,15 @@ pub struct Instance {
     pub mesh: u32,
     /// Object to world.
     pub transform: DMat4,
+}
+
+/// An analytic sphere: exact silhouettes, and solid-angle sampling when it emits.
+#[derive(Clone, Debug)]
+pub struct Sphere {
+    pub name: String,
+    pub centre: DVec3,
+    pub radius: f64,
+    pub material: u32,
 }
 
 /// A punctual light. Photometric glTF units are taken as radiometric ones (1 cd = 1 W/sr),
@@ -129,7 +140,8 @@ impl Scene {
             .sum()
     }
 
-    /// World-space bounds of all instanced geometry, or `None` when there is none.
+    /// World-space bounds of all instanced geometry and spheres, or `None` when there is
+    /// none.
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
@@ -139,6 +151,10 @@ impl Scene {
                 lo = lo.min(w);
                 hi = hi.max(w);
             }
+        }
+        for s in &self.spheres {
+            lo = lo.min(s.centre - s.radius);
+            hi = hi.max(s.centre + s.radius);
         }
         (lo.x <= hi.x).then_some((lo, hi))
     }

@@ -175,7 +175,8 @@ pub fn render(
         .build()
         .unwrap();
     pool.install(|| {
-        let world = World::build(scene, None, Some(res)).expect("test scene builds");
+        let world =
+            World::build(scene, None, Some(res), settings.light_select).expect("test scene builds");
         let options = RenderOptions {
             spp: Some(spp),
             settings,

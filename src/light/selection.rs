@@ -1,0 +1,176 @@
+//! Choosing which light to sample: uniformly, by power, or by estimated contribution at
+//! the shading point (bounded lights through a light BVH; infinite lights, which no bound
+//! contains, are chosen as a group alongside the tree, as in pbrt-v4).
+
+use super::Light;
+use super::environment::Environment;
+use super::tree::{LightBounds, LightTree};
+use crate::integrator::LightSelect;
+use crate::sampling::distribution::AliasTable;
+use glam::Vec3;
+
+/// How lights are chosen.
+#[derive(Clone, Debug)]
+enum Selector {
+    Uniform,
+    Power(AliasTable),
+    Contribution {
+        tree: LightTree,
+        /// Lights without bounds (environment, directional), chosen uniformly.
+        infinite: Vec<u32>,
+    },
+}
+
+/// All lights with their selection strategy.
+#[derive(Clone, Debug)]
+pub struct LightSet {
+    pub lights: Vec<Light>,
+    pub environment: Option<Environment>,
+    /// Index of the environment in `lights`, if any.
+    pub environment_index: Option<u32>,
+    selector: Option<Selector>,
+}
+
+/// What the light tree knows of light `l`; `None` for lights at infinity.
+fn bounds(l: &Light, environment: Option<&Environment>, radius: f32) -> Option<LightBounds> {
+    let phi = l.power(environment, radius);
+    let point = |p: Vec3, w: Vec3, cos_theta_o: f32, cos_theta_e: f32| LightBounds {
+        min: p,
+        max: p,
+        phi,
+        w,
+        cos_theta_o,
+        cos_theta_e,
+        two_sided: false,
+    };
+    Some(match l {
+        Light::Triangle(t) => LightBounds {
+            min: t.p[0].min(t.p[1]).min(t.p[2]),
+            max: t.p[0].max(t.p[1]).max(t.p[2]),
+            phi,
+            w: t.n,
+            cos_theta_o: 1.0,
+            cos_theta_e: 0.0,
+            two_sided: t.two_sided,
+        },
+        Light::Sphere(s) => LightBounds {
+            min: s.centre - s.radius,
+            max: s.centre + s.radius,
+            phi,
+            w: Vec3::Y,
+            cos_theta_o: -1.0,
+            cos_theta_e: 0.0,
+            two_sided: s.two_sided,
+        },
+        Light::Point { position, .. } => point(*position, Vec3::Y, -1.0, 0.0),
+        Light::Spot {
+            position,
+            axis,
+            cos_inner,
+            cos_outer,
+            ..
+        } => {
+            // Full power inside the inner cone, falling off to nothing at the outer one.
+            let cos_e =
+                (cos_outer.clamp(-1.0, 1.0).acos() - cos_inner.clamp(-1.0, 1.0).acos()).cos();
+            point(*position, *axis, *cos_inner, cos_e)
+        }
+        Light::Directional { .. } | Light::Environment => return None,
+    })
+}
+
+impl LightSet {
+    /// Builds the set with its selection strategy. `radius` is the scene's bounding radius.
+    pub fn new(
+        mut lights: Vec<Light>,
+        environment: Option<Environment>,
+        radius: f32,
+        strategy: LightSelect,
+    ) -> Self {
+        let environment_index = environment.as_ref().map(|_| {
+            lights.push(Light::Environment);
+            (lights.len() - 1) as u32
+        });
+        let powers: Vec<f32> = lights
+            .iter()
+            .map(|l| l.power(environment.as_ref(), radius))
+            .collect();
+        let selector = match strategy {
+            _ if !powers.iter().any(|&p| p > 0.0) => None,
+            LightSelect::Uniform => Some(Selector::Uniform),
+            LightSelect::Power => AliasTable::new(&powers).map(Selector::Power),
+            LightSelect::Contribution => {
+                let mut bounded = Vec::new();
+                let mut infinite = Vec::new();
+                for (i, l) in lights.iter().enumerate() {
+                    match bounds(l, environment.as_ref(), radius) {
+                        Some(b) => bounded.push((i as u32, b)),
+                        None if powers[i] > 0.0 => infinite.push(i as u32),
+                        None => {}
+                    }
+                }
+                Some(Selector::Contribution {
+                    tree: LightTree::build(&bounded, lights.len()),
+                    infinite,
+                })
+            }
+        };
+        Self {
+            lights,
+            environment,
+            environment_index,
+            selector,
+        }
+    }
+
+    /// Chooses a light for shading point `p` with shading normal `n`: (index, probability).
+    #[inline]
+    pub fn select(&self, u: f32, p: Vec3, n: Vec3) -> Option<(usize, f32)> {
+        match self.selector.as_ref()? {
+            Selector::Uniform => {
+                let count = self.lights.len();
+                Some((
+                    ((u * count as f32) as usize).min(count - 1),
+                    1.0 / count as f32,
+                ))
+            }
+            Selector::Power(table) => Some(table.sample(u)),
+            Selector::Contribution { tree, infinite } => {
+                let groups = infinite.len() + usize::from(!tree.is_empty());
+                let p_infinite = infinite.len() as f32 / groups as f32;
+                if u < p_infinite {
+                    let i =
+                        ((u / p_infinite * infinite.len() as f32) as usize).min(infinite.len() - 1);
+                    Some((infinite[i] as usize, 1.0 / groups as f32))
+                } else {
+                    let u = ((u - p_infinite) / (1.0 - p_infinite)).min(1.0 - f32::EPSILON);
+                    tree.sample(p, n, u)
+                        .map(|(i, pmf)| (i, pmf * (1.0 - p_infinite)))
+                }
+            }
+        }
+    }
+
+    /// Probability that [`LightSet::select`] picks light `i` at `p` with normal `n`.
+    #[inline]
+    pub fn selection_probability(&self, i: usize, p: Vec3, n: Vec3) -> f32 {
+        match self.selector.as_ref() {
+            None => 0.0,
+            Some(Selector::Uniform) => 1.0 / self.lights.len() as f32,
+            Some(Selector::Power(table)) => table.pmf(i),
+            Some(Selector::Contribution { tree, infinite }) => {
+                let groups = (infinite.len() + usize::from(!tree.is_empty())) as f32;
+                if infinite.contains(&(i as u32)) {
+                    1.0 / groups
+                } else {
+                    tree.pmf(p, n, i) * (1.0 - infinite.len() as f32 / groups)
+                }
+            }
+        }
+    }
+
+    /// True if there is nothing to sample.
+    pub fn is_empty(&self) -> bool {
+        self.selector.is_none()
+    }
+}
