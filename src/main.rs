@@ -86,7 +86,7 @@ struct RenderArgs {
     #[arg(long)]
     mis: Option<String>,
     /// Russian roulette: off, fixed:P, throughput[:THRESHOLD] (default throughput:0.01),
-    /// efficiency.
+    /// efficiency[:MAX_SPLIT] (learned roulette, and splitting up to MAX_SPLIT, default 1).
     #[arg(long)]
     rr: Option<String>,
     /// Maximum number of bounces (1 = direct light only), or `unlimited` (default).

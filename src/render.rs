@@ -4,9 +4,10 @@
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
 use crate::film::{Film, PixelAccumulator, SampleRecord};
-use crate::integrator::Settings;
+use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
+use crate::integrator::{RussianRoulette, Settings};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
 use glam::Vec2;
@@ -194,8 +195,13 @@ fn next_pass(done: u32, target: u32, budget: Option<f64>, elapsed: f64) -> u32 {
 pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     let camera = &world.camera;
     let mut film = Film::new(camera.width(), camera.height(), options.aovs.clone());
-    let tracer = PathTracer::new(world, &options.settings);
     let target = options.target_spp();
+    let mut ears = match options.settings.rr {
+        RussianRoulette::Efficiency(max_split) => {
+            Some(Ears::new(film.width, film.height, max_split))
+        }
+        _ => None,
+    };
     let pixels = film.width as u64 * film.height as u64;
     let bar = (options.progress && std::io::stderr().is_terminal()).then(|| {
         let (length, template) = match options.time {
@@ -218,42 +224,79 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     let start = Instant::now();
     let mut done = 0;
     while done < target {
-        let n = next_pass(done, target, options.time, start.elapsed().as_secs_f64());
+        let mut n = next_pass(done, target, options.time, start.elapsed().as_secs_f64());
+        // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
+        // deciding with everything learned before it.
+        let learning = ears.is_some() && done < LEARNING_SAMPLES;
+        if learning {
+            n = n.min(done.max(1));
+        }
         if n == 0 {
             break;
         }
         let pass = done..done + n;
         let router = &film.router;
-        film.tiles.par_iter_mut().for_each(|tile| {
-            let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
-            let mut record = SampleRecord::new(router);
-            let mut pixel = PixelAccumulator::new(router.slots.len());
-            let mut rays = RayCounts::default();
-            for ty in 0..tile.height {
-                for tx in 0..tile.width {
-                    let (x, y) = (tile.x0 + tx, tile.y0 + ty);
-                    pixel.clear();
-                    for index in pass.clone() {
-                        sampler.start(x, y, index);
-                        let cs = sampler.camera();
-                        let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                        let ray =
-                            camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
-                        record.clear();
-                        tracer.trace(ray, &mut sampler, &mut record, &mut rays);
-                        pixel.add(&mut record);
+        let tracer = PathTracer::new(world, &options.settings, ears.as_ref());
+        let width = film.width;
+        let learned: Vec<Option<Learning>> = film
+            .tiles
+            .par_iter_mut()
+            .map(|tile| {
+                let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
+                let mut record = SampleRecord::new(router);
+                let mut pixel = PixelAccumulator::new(router.slots.len());
+                let mut rays = RayCounts::default();
+                let mut tile_learning = learning.then(Learning::default);
+                for ty in 0..tile.height {
+                    for tx in 0..tile.width {
+                        let (x, y) = (tile.x0 + tx, tile.y0 + ty);
+                        let index_in_image = (y * width + x) as usize;
+                        pixel.clear();
+                        for index in pass.clone() {
+                            sampler.start(x, y, index);
+                            let cs = sampler.camera();
+                            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                            let ray = camera
+                                .generate_ray(centre + options.filter.sample(cs.film), cs.lens);
+                            record.clear();
+                            let before = rays.closest + rays.shadow;
+                            tracer.trace(
+                                ray,
+                                index_in_image,
+                                &mut sampler,
+                                &mut record,
+                                &mut rays,
+                                tile_learning.as_mut(),
+                            );
+                            if let Some(l) = tile_learning.as_mut() {
+                                l.pixel_sample(
+                                    index_in_image as u32,
+                                    record.value(0),
+                                    rays.closest + rays.shadow - before,
+                                );
+                            }
+                            pixel.add(&mut record);
+                        }
+                        tile.add((ty * tile.width + tx) as usize, &pixel);
                     }
-                    tile.add((ty * tile.width + tx) as usize, &pixel);
                 }
+                counts
+                    .lock()
+                    .expect("no thread panicked holding the lock")
+                    .add(&rays);
+                if let (Some(bar), None) = (&bar, options.time) {
+                    bar.inc(tile.pixel_count() as u64 * pass.len() as u64);
+                }
+                tile_learning
+            })
+            .collect();
+        // In tile order, whatever the thread count: the next pass decides the same way.
+        if let (Some(e), true) = (ears.as_mut(), learning) {
+            for l in learned.iter().flatten() {
+                e.merge(l);
             }
-            counts
-                .lock()
-                .expect("no thread panicked holding the lock")
-                .add(&rays);
-            if let (Some(bar), None) = (&bar, options.time) {
-                bar.inc(tile.pixel_count() as u64 * pass.len() as u64);
-            }
-        });
+            e.refresh();
+        }
         done = pass.end;
         if let (Some(bar), Some(_)) = (&bar, options.time) {
             bar.set_position(start.elapsed().as_millis() as u64);

@@ -218,7 +218,7 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
             sampler: SamplerKind::Independent,
             ..Default::default()
         };
-        let tracer = PathTracer::new(&world, &settings);
+        let tracer = PathTracer::new(&world, &settings, None);
         let mut sampler = Sampler::new(settings.sampler, 3);
         let mut stats = DirectStats::default();
         let mut rays = RayCounts::default();
@@ -230,7 +230,7 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
                     let ray = world
                         .camera
                         .generate_ray(Vec2::new(x as f32, y as f32) + cs.film, cs.lens);
-                    tracer.trace(ray, &mut sampler, &mut stats, &mut rays);
+                    tracer.trace(ray, 0, &mut sampler, &mut stats, &mut rays, None);
                     stats.end_sample();
                 }
             }

@@ -1,6 +1,7 @@
 //! The integrator: one path tracer whose techniques are settings (see `../shared/design.md`,
 //! "Render settings"), and the records it produces.
 
+pub mod ears;
 pub mod mis;
 pub mod path;
 pub mod settings;

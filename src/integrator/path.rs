@@ -7,9 +7,14 @@
 //! M BSDF samples, each BSDF sample continuing as its own path; the MIS weights there use
 //! the densities times the sample counts (N p_light against M p_bsdf), and each estimate is
 //! divided by its count, which keeps the combination unbiased (Veach & Guibas 1995).
+//!
+//! Past each vertex's light sample, the continuation is decided once: the first vertex's
+//! split, efficiency-aware roulette and splitting (`ears`) where its statistics know the
+//! place, or the configured Russian roulette.
 
+use super::ears::{self, Ears, Learning, MAX_BRANCHES};
 use super::mis::{Mis, Technique};
-use super::settings::Settings;
+use super::settings::{RussianRoulette, Settings};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::{self, Bsdf};
@@ -111,16 +116,36 @@ struct Emitter {
     dist: f32,
 }
 
-/// Per-path context that does not change along it.
-struct Context {
+/// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.
+struct Walk<'l> {
     mis: Mis,
     single: bool,
+    pixel: usize,
+    /// Paths this pixel sample has branched into so far (1: no branching).
+    paths: u32,
+    /// Where efficiency-aware roulette records what this pass learns.
+    learning: Option<&'l mut Learning>,
+}
+
+/// How a path continues past a vertex.
+#[derive(Clone, Copy, Debug)]
+struct Continuation {
+    /// Paths to continue with (0 ends the path).
+    count: u32,
+    /// Factor every continued path's throughput is multiplied by.
+    weight: f32,
+    /// BSDF sample count entering the MIS weights.
+    mis_count: u32,
+    /// Whether the configured Russian roulette still applies after the bounce.
+    roulette: bool,
 }
 
 /// The path tracer over a world with given settings.
 pub struct PathTracer<'a> {
     world: &'a World,
     settings: &'a Settings,
+    /// Learned statistics for efficiency-aware roulette (rr=efficiency only).
+    ears: Option<&'a Ears>,
 }
 
 impl PathState {
@@ -131,7 +156,7 @@ impl PathState {
     fn reached_emitter<R: Recorder>(
         &self,
         tracer: &PathTracer,
-        ctx: &Context,
+        walk: &mut Walk,
         rec: &mut R,
         e: Emitter,
     ) {
@@ -165,7 +190,7 @@ impl PathState {
         };
         record(
             rec,
-            ctx,
+            walk,
             Technique::Bsdf,
             self.beta * le,
             self.depth,
@@ -176,22 +201,32 @@ impl PathState {
 }
 
 impl<'a> PathTracer<'a> {
-    /// A path tracer for `world`.
-    pub fn new(world: &'a World, settings: &'a Settings) -> Self {
-        Self { world, settings }
+    /// A path tracer for `world`; `ears` holds the statistics of efficiency-aware roulette.
+    pub fn new(world: &'a World, settings: &'a Settings, ears: Option<&'a Ears>) -> Self {
+        Self {
+            world,
+            settings,
+            ears,
+        }
     }
 
-    /// Traces the path of camera ray `ray` using `sampler`'s current pixel sample.
+    /// Traces the paths of camera ray `ray` for pixel `pixel` using `sampler`'s current
+    /// pixel sample; `learning` receives statistics for efficiency-aware roulette.
     pub fn trace<R: Recorder>(
         &self,
         ray: Ray,
+        pixel: usize,
         sampler: &mut Sampler,
         rec: &mut R,
         rays: &mut RayCounts,
+        learning: Option<&mut Learning>,
     ) {
-        let ctx = Context {
+        let mut walk = Walk {
             mis: self.settings.mis,
             single: rec.wants_single_technique(),
+            pixel,
+            paths: 1,
+            learning,
         };
         let camera = PathState {
             beta: Vec3::ONE,
@@ -203,16 +238,32 @@ impl<'a> PathTracer<'a> {
             prev_delta: true,
             prev_nee_count: 1,
         };
-        self.trace_from(ray, camera, &ctx, sampler, rec, rays);
+        self.trace_from(ray, camera, &mut walk, sampler, rec, rays);
     }
 
-    /// Follows a path from `ray` until it ends; branches split off at its first vertex are
-    /// traced by recursion (one level: only the first vertex splits).
+    /// Follows a path from `ray` until it ends; paths split off from it are traced by
+    /// recursion. The vertices it opens for learning are closed when it ends.
     fn trace_from<R: Recorder>(
+        &self,
+        ray: Ray,
+        path: PathState,
+        walk: &mut Walk,
+        sampler: &mut Sampler,
+        rec: &mut R,
+        rays: &mut RayCounts,
+    ) {
+        let mark = walk.learning.as_ref().map(|l| l.mark());
+        self.walk_path(ray, path, walk, sampler, rec, rays);
+        if let (Some(learning), Some(mark)) = (walk.learning.as_deref_mut(), mark) {
+            learning.close(mark, rays.closest + rays.shadow);
+        }
+    }
+
+    fn walk_path<R: Recorder>(
         &self,
         mut ray: Ray,
         mut path: PathState,
-        ctx: &Context,
+        walk: &mut Walk,
         sampler: &mut Sampler,
         rec: &mut R,
         rays: &mut RayCounts,
@@ -231,7 +282,7 @@ impl<'a> PathTracer<'a> {
                         dir: ray.dir,
                         dist: f32::INFINITY,
                     };
-                    path.reached_emitter(self, ctx, rec, e);
+                    path.reached_emitter(self, walk, rec, e);
                 }
                 return;
             };
@@ -246,7 +297,7 @@ impl<'a> PathTracer<'a> {
                     dir: ray.dir,
                     dist: hit.t * ray.dir.length(),
                 };
-                path.reached_emitter(self, ctx, rec, e);
+                path.reached_emitter(self, walk, rec, e);
             }
             if path.depth >= max_depth {
                 return;
@@ -266,21 +317,27 @@ impl<'a> PathTracer<'a> {
                     position: world.space.to_world(it.p).as_vec3(),
                 });
             }
+            // The region efficiency-aware roulette keeps statistics for (only in that mode).
+            let cell = self.ears.map(|_| ears::cell(it.p, it.ng));
+            if let (Some(learning), Some(cell)) = (walk.learning.as_deref_mut(), cell) {
+                learning.open(
+                    cell,
+                    path.depth,
+                    luminance(path.beta),
+                    rays.closest + rays.shadow,
+                );
+            }
             let vs = sampler.vertex(path.depth, path.branch);
             let first = path.depth == 0;
-            let split = self.settings.split;
-            let (n_nee, n_bsdf) = if first {
-                (split.nee, split.bsdf)
-            } else {
-                (1, 1)
-            };
+            let n_nee = if first { self.settings.split.nee } else { 1 };
+            let continuation = self.continuation(&path, walk, cell, vs.rr);
 
             if bsdf.has_non_delta() && !world.lights.is_empty() {
                 for j in 0..n_nee {
                     let (u_light, u_select) = if n_nee == 1 {
                         (vs.light, vs.light_select)
                     } else {
-                        let p = sampler.split_point(SplitKind::Light, j);
+                        let p = sampler.split_point(SplitKind::Light, 0, j);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
                     rays.shadow += self.next_event(
@@ -288,8 +345,8 @@ impl<'a> PathTracer<'a> {
                         &bsdf,
                         wo,
                         &path,
-                        ctx,
-                        (n_nee, n_bsdf),
+                        walk,
+                        (n_nee, continuation.mis_count),
                         u_light,
                         u_select,
                         rec,
@@ -297,14 +354,18 @@ impl<'a> PathTracer<'a> {
                 }
             }
 
-            // Continue with n_bsdf BSDF samples: the last one in this loop, the others as
-            // branches of their own.
+            // Continue: the last path in this loop, the others as branches of their own.
             let mut next = None;
-            for k in 0..n_bsdf {
-                let sample = if n_bsdf == 1 {
+            for k in 0..continuation.count {
+                let sample = if continuation.count == 1 {
                     vs
                 } else {
-                    let p = sampler.split_point(SplitKind::Bsdf, k);
+                    let vertex = if first {
+                        0
+                    } else {
+                        1 + path.branch * 4096 + path.depth
+                    };
+                    let p = sampler.split_point(SplitKind::Bsdf, vertex, k);
                     VertexSample {
                         bsdf: Vec2::new(p[0], p[1]),
                         lobe: p[2],
@@ -312,16 +373,21 @@ impl<'a> PathTracer<'a> {
                         ..vs
                     }
                 };
-                let branch = if k == 0 { path.branch } else { k };
+                let branch = if k == 0 {
+                    path.branch
+                } else {
+                    walk.paths += 1;
+                    walk.paths - 1
+                };
                 let Some(child) =
-                    self.scatter(&it, &bsdf, wo, &path, &sample, (n_nee, n_bsdf), branch)
+                    self.scatter(&it, &bsdf, wo, &path, &sample, &continuation, n_nee, branch)
                 else {
                     continue;
                 };
-                if k + 1 == n_bsdf {
+                if k + 1 == continuation.count {
                     next = Some(child);
                 } else {
-                    self.trace_from(child.0, child.1, ctx, sampler, rec, rays);
+                    self.trace_from(child.0, child.1, walk, sampler, rec, rays);
                 }
             }
             let Some((next_ray, next_path)) = next else {
@@ -332,8 +398,56 @@ impl<'a> PathTracer<'a> {
         }
     }
 
-    /// Samples the BSDF at `it` for a continuation and applies Russian roulette; `None` if
-    /// the path ends there.
+    /// How the path continues past its current vertex (after the light samples there).
+    fn continuation(
+        &self,
+        path: &PathState,
+        walk: &Walk,
+        cell: Option<u32>,
+        u: f32,
+    ) -> Continuation {
+        let split = self.settings.split.bsdf;
+        if path.depth == 0 && split > 1 {
+            return Continuation {
+                count: split,
+                weight: 1.0 / split as f32,
+                mis_count: split,
+                roulette: true,
+            };
+        }
+        let learned = match (self.settings.rr, self.ears, cell) {
+            (RussianRoulette::Efficiency(_), Some(e), Some(cell)) => {
+                e.factor(walk.pixel, cell, luminance(path.beta))
+            }
+            _ => None,
+        };
+        match learned {
+            Some(q) => {
+                // No more splitting once the pixel sample has branched enough.
+                let q = if walk.paths >= MAX_BRANCHES {
+                    q.min(1.0)
+                } else {
+                    q
+                };
+                let count = q.floor() as u32 + u32::from(u < q.fract());
+                Continuation {
+                    count: count.min(MAX_BRANCHES),
+                    weight: 1.0 / q,
+                    mis_count: 1,
+                    roulette: false,
+                }
+            }
+            None => Continuation {
+                count: 1,
+                weight: 1.0,
+                mis_count: 1,
+                roulette: true,
+            },
+        }
+    }
+
+    /// Samples the BSDF at `it` for one continued path, applying the continuation's weight
+    /// and, where it still applies, Russian roulette; `None` if the path ends there.
     #[allow(clippy::too_many_arguments)]
     fn scatter(
         &self,
@@ -342,7 +456,8 @@ impl<'a> PathTracer<'a> {
         wo: Vec3,
         path: &PathState,
         vs: &VertexSample,
-        (n_nee, n_bsdf): (u32, u32),
+        c: &Continuation,
+        n_nee: u32,
         branch: u32,
     ) -> Option<(Ray, PathState)> {
         let bs = bsdf.sample(wo, vs.lobe, vs.bsdf)?;
@@ -351,14 +466,21 @@ impl<'a> PathTracer<'a> {
         if wi.dot(it.ng) <= 0.0 {
             return None;
         }
-        let mut beta = path.beta * bs.weight / n_bsdf as f32;
+        let mut beta = path.beta * bs.weight * c.weight;
         let depth = path.depth + 1;
-        let survival = self.settings.rr.survival(luminance(beta), depth);
-        if survival < 1.0 {
-            if !(vs.rr < survival) {
-                return None;
+        if c.roulette {
+            let rr = match self.settings.rr {
+                // Efficiency mode where its statistics are missing: throughput roulette.
+                RussianRoulette::Efficiency(_) => RussianRoulette::Throughput(0.01),
+                rr => rr,
+            };
+            let survival = rr.survival(luminance(beta), depth);
+            if survival < 1.0 {
+                if !(vs.rr < survival) {
+                    return None;
+                }
+                beta /= survival;
             }
-            beta /= survival;
         }
         if !(beta.max_element() > 0.0) {
             return None;
@@ -369,7 +491,7 @@ impl<'a> PathTracer<'a> {
             branch,
             prev_p: it.p,
             prev_n: it.frame.n,
-            prev_pdf: bs.pdf * n_bsdf as f32,
+            prev_pdf: bs.pdf * c.mis_count as f32,
             prev_delta: bs.is_delta(),
             prev_nee_count: n_nee,
         };
@@ -385,7 +507,7 @@ impl<'a> PathTracer<'a> {
         bsdf: &Bsdf,
         wo: Vec3,
         path: &PathState,
-        ctx: &Context,
+        walk: &mut Walk,
         (n_nee, n_bsdf): (u32, u32),
         u_light: Vec2,
         u_select: f32,
@@ -434,7 +556,7 @@ impl<'a> PathTracer<'a> {
         let value = path.beta * f * radiance / (p_light * n_nee as f32);
         record(
             rec,
-            ctx,
+            walk,
             Technique::Nee,
             value,
             path.depth + 1,
@@ -451,7 +573,7 @@ impl<'a> PathTracer<'a> {
 #[inline]
 fn record<R: Recorder>(
     rec: &mut R,
-    ctx: &Context,
+    walk: &mut Walk,
     technique: Technique,
     value: Vec3,
     depth: u32,
@@ -459,14 +581,18 @@ fn record<R: Recorder>(
     other: f32,
 ) {
     let weight = |h: Mis| h.weight(technique, own, other);
+    let weighted = value * weight(walk.mis);
+    if let Some(learning) = walk.learning.as_deref_mut() {
+        learning.gathered(weighted, depth);
+    }
     rec.contribution(Contribution {
-        value: value * weight(ctx.mis),
+        value: weighted,
         depth,
         source: match technique {
             Technique::Nee => Source::Nee,
             Technique::Bsdf => Source::Bsdf,
         },
-        single_technique: (ctx.single && depth == 1)
+        single_technique: (walk.single && depth == 1)
             .then(|| [value * weight(Mis::NeeOnly), value * weight(Mis::BsdfOnly)]),
     });
 }

@@ -19,8 +19,9 @@ pub enum RussianRoulette {
     Throughput(f32),
     /// Efficiency-aware roulette and splitting (in the spirit of Rath et al. 2022): learned
     /// per-region radiance moments and costs, and per-pixel variances and costs, choose the
-    /// survival or splitting factor that maximises efficiency (see `integrator::ears`).
-    Efficiency,
+    /// survival or splitting factor that maximises efficiency (see `integrator::ears`); the
+    /// parameter is the largest splitting factor (default 1: roulette only).
+    Efficiency(f32),
 }
 
 /// Bounces after which throughput-based roulette caps its survival probability.
@@ -111,7 +112,7 @@ impl RussianRoulette {
     #[inline]
     pub fn survival(&self, throughput: f32, depth: u32) -> f32 {
         match *self {
-            Self::Off | Self::Efficiency => 1.0,
+            Self::Off | Self::Efficiency(_) => 1.0,
             Self::Fixed(p) => p,
             Self::Throughput(threshold) => {
                 let cap = if depth > ROULETTE_CAP_DEPTH {
@@ -124,7 +125,7 @@ impl RussianRoulette {
         }
     }
 
-    /// Parses `off`, `fixed:P`, `throughput[:THRESHOLD]` or `efficiency`.
+    /// Parses `off`, `fixed:P`, `throughput[:THRESHOLD]` or `efficiency[:MAX_SPLIT]`.
     pub fn parse(s: &str) -> Result<Self, String> {
         let (name, param) = name_and_parameter(s)?;
         match (name, param) {
@@ -141,9 +142,18 @@ impl RussianRoulette {
                     Err(format!("threshold must be positive, got {t}"))
                 }
             }
-            ("efficiency", None) => Ok(Self::Efficiency),
+            ("efficiency", s) => {
+                let s = s.unwrap_or(1.0);
+                if s.is_finite() && s >= 1.0 {
+                    Ok(Self::Efficiency(s))
+                } else {
+                    Err(format!(
+                        "the largest splitting factor must be at least 1, got {s}"
+                    ))
+                }
+            }
             _ => Err(format!(
-                "unknown Russian roulette {s:?} (off, fixed:P, throughput[:T], efficiency)"
+                "unknown Russian roulette {s:?} (off, fixed:P, throughput[:T], efficiency[:MAX_SPLIT])"
             )),
         }
     }
@@ -154,7 +164,7 @@ impl RussianRoulette {
             Self::Off => "off".into(),
             Self::Fixed(p) => format!("fixed:{p}"),
             Self::Throughput(t) => format!("throughput:{t}"),
-            Self::Efficiency => "efficiency".into(),
+            Self::Efficiency(s) => format!("efficiency:{s}"),
         }
     }
 }
@@ -381,6 +391,9 @@ mod tests {
         }
         assert_eq!(back, s);
         assert!(s.set("split", "nee=0").is_err() && s.set("colour", "red").is_err());
+        s.set("rr", "efficiency").unwrap();
+        assert_eq!(s.get("rr").unwrap(), "efficiency:1");
+        assert!(s.set("rr", "efficiency:0.5").is_err());
         s.set("rr", "off").unwrap();
         s.set("max-depth", "unlimited").unwrap();
         assert!(s.validate().is_err());

@@ -149,12 +149,14 @@ impl Sampler {
 }
 
 impl Sampler {
-    /// Point `j` of this pixel sample's split samples of `kind`: the j-th point of an
-    /// Owen-scrambled Sobol sequence seeded per pixel sample, so every point is uniform and
-    /// the n points together are stratified (a (0, 2)-sequence in the first two numbers).
+    /// Point `j` of the split samples of `kind` at the vertex with key `vertex` (0 for the
+    /// first vertex): the j-th point of an Owen-scrambled Sobol sequence seeded per pixel
+    /// sample and vertex, so every point is uniform and the n points together are
+    /// stratified (a (0, 2)-sequence in the first two numbers).
     #[inline]
-    pub fn split_point(&self, kind: SplitKind, j: u32) -> [f32; 4] {
-        sobol_burley::sample_4d(j & 0xffff, 0, self.sample_key ^ hash_u32(kind as u32))
+    pub fn split_point(&self, kind: SplitKind, vertex: u32, j: u32) -> [f32; 4] {
+        let seed = self.sample_key ^ hash_u32(kind as u32 ^ vertex.wrapping_mul(0x2c1b3c6d));
+        sobol_burley::sample_4d(j & 0xffff, 0, seed)
     }
 }
 
@@ -182,17 +184,21 @@ mod tests {
         s.start(1, 2, 0);
         let mut cells = [false; 64];
         for j in 0..64 {
-            let p = s.split_point(SplitKind::Light, j);
+            let p = s.split_point(SplitKind::Light, 0, j);
             let c = (p[0] * 8.0) as usize + 8 * (p[1] * 8.0) as usize;
             assert!(!cells[c], "cell {c} twice");
             cells[c] = true;
         }
-        let first = s.split_point(SplitKind::Light, 0);
+        let first = s.split_point(SplitKind::Light, 0, 0);
         s.start(1, 2, 1);
-        assert_ne!(first, s.split_point(SplitKind::Light, 0));
+        assert_ne!(first, s.split_point(SplitKind::Light, 0, 0));
         assert_ne!(
-            s.split_point(SplitKind::Light, 0),
-            s.split_point(SplitKind::Bsdf, 0)
+            s.split_point(SplitKind::Light, 0, 0),
+            s.split_point(SplitKind::Bsdf, 0, 0)
+        );
+        assert_ne!(
+            s.split_point(SplitKind::Bsdf, 0, 0),
+            s.split_point(SplitKind::Bsdf, 1, 0)
         );
     }
 
