@@ -1,0 +1,116 @@
+"""Shared helpers of lucerna's experiment and benchmark tools: render through the binary,
+read EXRs with OpenImageIO, error metrics, cached references, labelled image grids.
+
+Error metric (../shared/design.md): relMSE = mean over pixels and channels of
+(x - ref)^2 / (ref^2 + 0.01); efficiency = 1 / (seconds x relMSE).
+"""
+import hashlib
+import json
+import os
+import subprocess
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+BINARY = os.environ.get("LUCERNA_BIN", str(ROOT / "target" / "release" / "lucerna"))
+CACHE = Path(os.environ.get("LUCERNA_CACHE", ROOT / "tools" / ".cache"))
+
+
+def read_exr(path):
+    """(channels by name as float64 arrays, header attributes as a dict)."""
+    import OpenImageIO as oiio
+    inp = oiio.ImageInput.open(str(path))
+    if not inp:
+        raise RuntimeError(oiio.geterror())
+    try:
+        spec = inp.spec()
+        pixels = np.array(inp.read_image(0, 0, 0, spec.nchannels, "float"), dtype=np.float64)
+        channels = {name: pixels[:, :, i] for i, name in enumerate(spec.channelnames)}
+        header = {a.name: a.value for a in spec.extra_attribs}
+        return channels, header
+    finally:
+        inp.close()
+
+
+def rgb(channels, layer=None):
+    names = ["R", "G", "B"] if layer is None else [f"{layer}.{c}" for c in "RGB"]
+    return np.stack([channels[n] for n in names], axis=-1)
+
+
+def render(scene, out, resolution, **settings):
+    """Renders `scene` (None: the default scene) to `out` with settings given as keyword
+    arguments (underscores for dashes: max_depth=10). Returns (beauty, header, channels)."""
+    cmd = [BINARY, "render"] + ([str(scene)] if scene else [])
+    cmd += ["-o", str(out), "-q", "--resolution", f"{resolution[0]}x{resolution[1]}"]
+    for key, value in settings.items():
+        cmd += [f"--{key.replace('_', '-')}", str(value)]
+    subprocess.run(cmd, check=True, stderr=subprocess.DEVNULL)
+    channels, header = read_exr(out)
+    return rgb(channels), header, channels
+
+
+def settings_of(header):
+    return tomllib.loads(header["lucerna/settings"])
+
+
+def relmse(x, ref):
+    return float(np.mean((x - ref) ** 2 / (ref ** 2 + 0.01)))
+
+
+def mse(x, ref):
+    return float(np.mean((x - ref) ** 2))
+
+
+def mape(x, ref):
+    return float(np.mean(np.abs(x - ref) / (np.abs(ref) + 0.01)))
+
+
+def reference(scene, resolution, spp, **settings):
+    """A high-sample reference, cached under tools/.cache by scene contents, resolution,
+    sample count and settings. Returns (image, info) where info records the sample count,
+    the render seconds and the reference's own noise: its expected relMSE against the
+    true image, estimated from the variance layer."""
+    scene_bytes = Path(scene).read_bytes() if scene else b"default"
+    key = hashlib.sha256(scene_bytes + json.dumps([resolution, spp, sorted(settings.items())]).encode()).hexdigest()[:16]
+    CACHE.mkdir(parents=True, exist_ok=True)
+    exr = CACHE / f"ref-{key}.exr"
+    meta = CACHE / f"ref-{key}.json"
+    if not (exr.exists() and meta.exists()):
+        _, header, channels = render(scene, exr, resolution, spp=spp, aov="beauty,variance", **settings)
+        image = rgb(channels)
+        noise = float(np.mean(rgb(channels, "variance") / (image ** 2 + 0.01)))
+        info = {"scene": str(scene), "resolution": list(resolution), "spp": spp, "settings": settings,
+                "seconds": header["lucerna/render_seconds"], "relmse_noise": noise}
+        meta.write_text(json.dumps(info, indent=1))
+    channels, _ = read_exr(exr)
+    return rgb(channels), json.loads(meta.read_text())
+
+
+def tonemap(image):
+    """Clamp and sRGB-encode linear RGB to uint8."""
+    x = np.clip(image, 0.0, 1.0)
+    srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return (srgb * 255 + 0.5).astype(np.uint8)
+
+
+def grid_png(images, labels, path, columns=3, title=None):
+    """A labelled grid of tone-mapped images."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = (len(images) + columns - 1) // columns
+    h, w = images[0].shape[:2]
+    scale = 4.0 / w
+    fig, axes = plt.subplots(rows, columns, figsize=(columns * w * scale, rows * (h * scale + 0.45)), squeeze=False)
+    for ax in axes.flat:
+        ax.axis("off")
+    for ax, image, label in zip(axes.flat, images, labels):
+        ax.imshow(tonemap(image), interpolation="nearest")
+        ax.set_title(label, fontsize=8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
