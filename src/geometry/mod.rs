@@ -162,19 +162,27 @@ impl Bvh {
             };
         }
         let aabbs: Vec<Aabb> = prims.iter().map(Primitive::aabb).collect();
-        let bvh = build_cwbvh(
+        let mut bvh = build_cwbvh(
             &aabbs,
             BvhBuildParams::medium_build(),
             &mut std::time::Duration::default(),
         );
         drop(aabbs);
-        let order = bvh.primitive_indices.clone();
+        // Leaves index `prims` directly; the BVH's own copy of the order is not needed.
+        let order = std::mem::take(&mut bvh.primitive_indices);
         Self {
             prims: order.iter().map(|&i| prims[i as usize]).collect(),
             flags: order.iter().map(|&i| flags[i as usize]).collect(),
             order,
             bvh,
         }
+    }
+
+    /// Bytes the structure holds: wide nodes, and per primitive its data, flags and index.
+    pub fn bytes(&self) -> usize {
+        use std::mem::size_of;
+        self.bvh.nodes.len() * size_of::<CwBvhNode>()
+            + self.prims.len() * (size_of::<Primitive>() + size_of::<u8>() + size_of::<u32>())
     }
 
     /// Tests one leaf primitive; `accept` is consulted only for alpha-tested ones.

@@ -1,0 +1,201 @@
+//! Ray throughput benchmark: BVH build time, closest-hit and shadow rays per second with 1
+//! and 2 threads for coherent and incoherent rays, and memory per triangle, on the Cornell
+//! box and the ~1M-triangle sphere field.
+//!
+//!     cargo bench --bench throughput [-- --out FILE.md]
+//!
+//! Rays are generated up front and traced in chunks on a rayon pool, so the figures are the
+//! traversal and intersection cost alone (no shading, no sampling):
+//! - coherent closest-hit: one camera ray through each pixel centre of a 1024×1024 image;
+//! - incoherent closest-hit: from each camera hit, a cosine-distributed direction around the
+//!   geometric normal (a diffuse bounce);
+//! - coherent shadow: segments from the camera hits to one point (the centre of the first
+//!   light, or above the scene), like shadow rays towards a small light;
+//! - incoherent shadow: segments between two random camera hits.
+//!
+//! Each figure is the best of three runs (the machine is shared; the best run is the least
+//! disturbed one).
+
+use glam::{Vec2, Vec3};
+use lucerna::geometry::ray::{Ray, offset_ray_origin};
+use lucerna::ingest;
+use lucerna::integrator::LightSelect;
+use lucerna::light::Light;
+use lucerna::render::peak_memory_bytes;
+use lucerna::sampling::pcg::Pcg32;
+use lucerna::sampling::warp::square_to_cosine_hemisphere;
+use lucerna::world::World;
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::Instant;
+
+const SIDE: u32 = 1024;
+const RUNS: usize = 3;
+const CHUNK: usize = 4096;
+
+/// The four ray sets of one scene.
+struct RaySets {
+    coherent: Vec<Ray>,
+    incoherent: Vec<Ray>,
+    shadow_coherent: Vec<Ray>,
+    shadow_incoherent: Vec<Ray>,
+}
+
+fn ray_sets(world: &World) -> RaySets {
+    let camera = &world.camera;
+    let (w, h) = (camera.width(), camera.height());
+    let coherent: Vec<Ray> = (0..w * h)
+        .map(|i| {
+            camera.generate_ray(
+                Vec2::new((i % w) as f32 + 0.5, (i / w) as f32 + 0.5),
+                Vec2::splat(0.5),
+            )
+        })
+        .collect();
+    let hits: Vec<(Vec3, Vec3)> = coherent
+        .iter()
+        .filter_map(|ray| {
+            let hit = world.intersect(ray)?;
+            let it = world.interaction(ray, &hit);
+            Some((offset_ray_origin(it.p, it.ng), it.ng))
+        })
+        .collect();
+    let mut rng = Pcg32::new(7, 1);
+    let mut u2 = || Vec2::new(rng.next_f32(), rng.next_f32());
+    let incoherent = hits
+        .iter()
+        .map(|&(p, n)| {
+            let local = square_to_cosine_hemisphere(u2());
+            let frame = lucerna::geometry::frame::Frame::from_normal(n);
+            Ray::new(p, frame.to_world(local))
+        })
+        .collect();
+    let target = match world.lights.lights.first() {
+        Some(Light::Triangle(t)) => (t.p[0] + t.p[1] + t.p[2]) / 3.0,
+        Some(Light::Sphere(s)) => s.centre,
+        Some(Light::Point { position, .. } | Light::Spot { position, .. }) => *position,
+        _ => Vec3::new(0.0, world.radius, 0.0),
+    };
+    let segment = |from: Vec3, to: Vec3| Ray {
+        origin: from,
+        dir: to - from,
+        tmax: 1.0,
+    };
+    let shadow_coherent = hits.iter().map(|&(p, _)| segment(p, target)).collect();
+    let mut rng = Pcg32::new(11, 3);
+    let shadow_incoherent = hits
+        .iter()
+        .map(|&(p, _)| segment(p, hits[rng.next_u32() as usize % hits.len()].0))
+        .collect();
+    RaySets {
+        coherent,
+        incoherent,
+        shadow_coherent,
+        shadow_incoherent,
+    }
+}
+
+/// Best rays per second of `RUNS` runs of tracing `rays` with `trace` on `threads` threads.
+fn rays_per_second(rays: &[Ray], threads: usize, trace: &(dyn Fn(&Ray) -> bool + Sync)) -> f64 {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut best = f64::INFINITY;
+    let mut hits = 0;
+    for _ in 0..RUNS {
+        let start = Instant::now();
+        hits = pool.install(|| {
+            rays.par_chunks(CHUNK)
+                .map(|chunk| chunk.iter().filter(|r| trace(r)).count())
+                .sum::<usize>()
+        });
+        best = best.min(start.elapsed().as_secs_f64());
+    }
+    std::hint::black_box(hits);
+    rays.len() as f64 / best
+}
+
+fn main() {
+    let mut out = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        if a == "--out" {
+            out = args.next();
+        }
+    }
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut report = String::from(
+        "| scene | triangles | BVH build 1 thr (s/Mtri) | BVH build 2 thr (s/Mtri) | rays | closest 1 thr (Mrays/s) | closest 2 thr | shadow 1 thr (Mrays/s) | shadow 2 thr |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut memory = String::new();
+    for (name, path) in [
+        ("cornell-box", None),
+        (
+            "sphere-field",
+            Some(root.join("scenes/sphere-field/sphere-field.glb")),
+        ),
+    ] {
+        let load = || match &path {
+            Some(p) => ingest::load(p).expect("scene loads"),
+            None => ingest::default_scene().unwrap(),
+        };
+        let rss_before = peak_memory_bytes().unwrap_or(0);
+        let mut build = [0.0; 2];
+        let mut world = None;
+        for (i, threads) in [1, 2].into_iter().enumerate() {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut best = f64::INFINITY;
+            for _ in 0..RUNS {
+                drop(world.take()); // one world alive at a time: the peak is one scene's
+                let scene = load();
+                let w = pool.install(|| {
+                    World::build(scene, None, Some((SIDE, SIDE)), LightSelect::Power).unwrap()
+                });
+                best = best.min(w.bvh_seconds);
+                world = Some(w);
+            }
+            build[i] = best;
+        }
+        let world = world.unwrap();
+        let triangles = world.surfaces.prims.len();
+        let peak = peak_memory_bytes().unwrap_or(0);
+        memory += &format!(
+            "- {name}: {triangles} triangles, BVH {} bytes per triangle (nodes and primitives), process peak {:.0} MB ({} bytes per triangle above the {} MB before loading)\n",
+            world.bvh.bytes() / triangles.max(1),
+            peak as f64 / 1e6,
+            peak.saturating_sub(rss_before) / triangles.max(1) as u64,
+            rss_before / 1_000_000
+        );
+        let m_tri = triangles as f64 / 1e6;
+        let sets = ray_sets(&world);
+        let closest = |r: &Ray| world.intersect(r).is_some();
+        let shadow = |r: &Ray| world.occluded(r);
+        for (kind, primary, secondary) in [
+            ("coherent", &sets.coherent, &sets.shadow_coherent),
+            ("incoherent", &sets.incoherent, &sets.shadow_incoherent),
+        ] {
+            let c = [1, 2].map(|t| rays_per_second(primary, t, &closest) / 1e6);
+            let s = [1, 2].map(|t| rays_per_second(secondary, t, &shadow) / 1e6);
+            let line = format!(
+                "| {name} | {triangles} | {:.3} | {:.3} | {kind} | {:.2} | {:.2} | {:.2} | {:.2} |\n",
+                build[0] / m_tri,
+                build[1] / m_tri,
+                c[0],
+                c[1],
+                s[0],
+                s[1]
+            );
+            eprint!("{line}");
+            report += &line;
+        }
+    }
+    let text = format!("{report}\nMemory:\n{memory}");
+    println!("{text}");
+    if let Some(out) = out {
+        std::fs::write(&out, text).expect("report written");
+    }
+}
