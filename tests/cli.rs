@@ -14,6 +14,16 @@ fn lucerna(args: &[&str]) -> std::process::Output {
         .unwrap()
 }
 
+/// Runs the binary with `args` and asserts that it succeeded (showing its stderr if not).
+fn lucerna_ok(args: &[&str]) {
+    let run = lucerna(args);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("lucerna-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -74,7 +84,7 @@ fn environment_map_orientation_follows_the_latlong_convention() {
     ] {
         let scene = empty_looking_scene(&dir, yaw);
         let out = dir.join("env.exr");
-        let run = lucerna(&[
+        lucerna_ok(&[
             "render",
             scene.to_str().unwrap(),
             "--env-map",
@@ -87,11 +97,6 @@ fn environment_map_orientation_follows_the_latlong_convention() {
             "-o",
             out.to_str().unwrap(),
         ]);
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
         let c = centre_pixel(&out);
         for k in 0..3 {
             assert!(
@@ -167,7 +172,7 @@ fn a_scene_without_camera_is_framed_automatically() {
     b.root(json!({"mesh": mesh, "translation": [1000, 50, -7], "scale": [3, 3, 3]}));
     let scene = b.write_embedded(&dir, "nocam");
     let out = dir.join("nocam.exr");
-    let run = lucerna(&[
+    lucerna_ok(&[
         "render",
         scene.to_str().unwrap(),
         "--spp",
@@ -176,11 +181,6 @@ fn a_scene_without_camera_is_framed_automatically() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
     let c = centre_pixel(&out);
     assert_eq!(c, [1.0, 1.0, 1.0], "the framed quad fills the centre");
     std::fs::remove_dir_all(&dir).unwrap();
@@ -206,7 +206,7 @@ fn settings_file_flags_and_time_budget() {
     let file = dir.join("look.toml");
     std::fs::write(&file, "mis = \"balance\"\nrr = \"fixed:0.5\"\nspp = 3\nlight-select = \"uniform\"\nsplit = \"nee=2\"\n").unwrap();
     let out = dir.join("s.exr");
-    let run = lucerna(&[
+    lucerna_ok(&[
         "render",
         "--settings",
         file.to_str().unwrap(),
@@ -218,11 +218,6 @@ fn settings_file_flags_and_time_budget() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
     let s = header_settings(&out);
     assert_eq!(s["mis"].as_str(), Some("balance"));
     assert_eq!(s["rr"].as_str(), Some("fixed:0.5"));
@@ -238,7 +233,7 @@ fn settings_file_flags_and_time_budget() {
     let replay_file = dir.join("replay.toml");
     std::fs::write(&replay_file, toml::to_string(&s).unwrap()).unwrap();
     let replay = dir.join("replay.exr");
-    let run = lucerna(&[
+    lucerna_ok(&[
         "render",
         "--settings",
         replay_file.to_str().unwrap(),
@@ -248,11 +243,6 @@ fn settings_file_flags_and_time_budget() {
         "-o",
         replay.to_str().unwrap(),
     ]);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
     assert_eq!(centre_pixel(&replay), centre_pixel(&out));
 
     // A time budget: render until about a second has passed; the header has the count.
