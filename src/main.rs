@@ -1,4 +1,4 @@
-//! The `lucerna` command line: `render` and `inspect`.
+//! The `lucerna` command line: `render`, `inspect` and `convert`.
 
 use clap::{Parser, Subcommand};
 use glam::Vec3;
@@ -28,14 +28,23 @@ enum Command {
     Render(Box<RenderArgs>),
     /// Print a summary of a scene and what rendering it needs.
     Inspect {
-        /// A .gltf or .glb file.
+        /// A .gltf, .glb or .lucerna scene file.
         scene: PathBuf,
+    },
+    /// Write a scene as a lucerna scene file (a JSON manifest and a binary buffer beside it),
+    /// exactly as the renderer sees it.
+    Convert {
+        /// A .gltf, .glb or .lucerna scene file.
+        scene: PathBuf,
+        /// The manifest to write, e.g. shot.lucerna (its buffer goes to shot.lucerna.bin).
+        #[arg(short, long)]
+        output: PathBuf,
     },
 }
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// A .gltf or .glb file; without it, the embedded Cornell box.
+    /// A .gltf, .glb or .lucerna scene file; without it, the embedded Cornell box.
     scene: Option<PathBuf>,
     /// Output EXR file.
     #[arg(short, long, default_value = "render.exr")]
@@ -287,6 +296,19 @@ fn render_command(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
+fn convert_command(path: &Path, output: &Path) -> Result<()> {
+    let scene = load_scene(Some(path))?;
+    lucerna::scene::file::write(&scene, output)?;
+    eprintln!(
+        "lucerna: wrote {} ({} meshes, {} materials, {} textures)",
+        output.display(),
+        scene.meshes.len(),
+        scene.materials.len(),
+        scene.textures.len()
+    );
+    Ok(())
+}
+
 fn inspect_command(path: &Path) -> Result<()> {
     let scene = load_scene(Some(path))?;
     let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();
@@ -364,6 +386,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Render(args) => render_command(*args),
         Command::Inspect { scene } => inspect_command(&scene),
+        Command::Convert { scene, output } => convert_command(&scene, &output),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -144,9 +144,10 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna", "unknown bsdf \"velvet\"")
+    # 1e39 overflows f32: the JSON reader (exact float parsing) rejects it with its position.
     yield ("infinite-transform.gltf",
            variant(lambda d: d["nodes"][0].update(translation=[1e39, 0, 0])),
-           "nodes[0]", "not finite")
+           "JSON", "number out of range at line")
 
 
 def main():

@@ -31,6 +31,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         .unwrap_or_default();
     match ext.as_str() {
         "gltf" | "glb" => gltf::load(path),
+        scene::file::EXTENSION => scene::file::read(path),
         "usd" | "usda" | "usdc" | "usdz" => Err(Error::bad_input(
             path,
             "file",
@@ -39,7 +40,7 @@ pub fn load(path: &Path) -> Result<Scene> {
         _ => Err(Error::bad_input(
             path,
             "file",
-            "unknown scene format (expected .gltf or .glb)",
+            "unknown scene format (expected .gltf, .glb or a .lucerna scene file)",
         )),
     }
 }

@@ -2,9 +2,10 @@
 //! surface point lives in `crate::material`.
 
 use glam::{Vec2, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
 
 /// A material as the scene describes it.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Material {
     pub name: String,
     pub model: BsdfModel,
@@ -57,7 +58,8 @@ impl Material {
 }
 
 /// The BSDF model a material uses.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum BsdfModel {
     /// The glTF 2.0 metallic-roughness BRDF (specification, appendix B).
     GltfPbr,
@@ -80,7 +82,8 @@ impl BsdfModel {
 }
 
 /// How a material's alpha is used.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum AlphaMode {
     Opaque,
     /// Cut-out: the surface exists where alpha >= cutoff.
@@ -92,7 +95,7 @@ pub enum AlphaMode {
 }
 
 /// A texture used by a material slot.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
 pub struct TextureRef {
     pub texture: u32,
     /// Which texture coordinate set (0 or 1).
@@ -101,7 +104,7 @@ pub struct TextureRef {
 }
 
 /// An affine UV transform (KHR_texture_transform): `uv' = m * uv + offset`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct UvTransform {
     /// Columns of the 2x2 linear part.
     pub x: Vec2,

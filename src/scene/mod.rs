@@ -2,11 +2,13 @@
 //! right-handed, Y up (like glTF). Transforms are double precision so that a scene far from
 //! the origin keeps its detail until [`crate::world`] moves it into render space.
 
+pub mod file;
 pub mod material;
 pub mod texture;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 pub use material::{AlphaMode, BsdfModel, Material, TextureRef, UvTransform};
+use serde::{Deserialize, Serialize};
 pub use texture::{Texels, Texture, Wrap};
 
 /// A scene ready for [`crate::world::World::build`].
@@ -47,7 +49,7 @@ pub struct Mesh {
 }
 
 /// A placement of a mesh in the world.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Instance {
     /// Name of the node or prim that placed it.
     pub name: String,
@@ -57,7 +59,7 @@ pub struct Instance {
 }
 
 /// An analytic sphere: exact silhouettes, and solid-angle sampling when it emits.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Sphere {
     pub name: String,
     pub centre: DVec3,
@@ -67,14 +69,15 @@ pub struct Sphere {
 
 /// A punctual light. Photometric glTF units are taken as radiometric ones (1 cd = 1 W/sr),
 /// consistent with emissive surfaces whose emission is read as radiance.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Light {
     pub name: String,
     pub kind: LightKind,
 }
 
 /// The kinds of punctual light.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum LightKind {
     /// Radiant intensity `intensity` in every direction from `position`.
     Point { position: DVec3, intensity: Vec3 },
@@ -92,7 +95,8 @@ pub enum LightKind {
 }
 
 /// Light arriving from infinitely far away.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Environment {
     /// The same radiance from every direction.
     Constant(Vec3),
@@ -107,7 +111,7 @@ pub enum Environment {
 }
 
 /// A camera: projection and placement (camera to world, looking down -Z, +Y up).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Camera {
     pub name: String,
     pub projection: Projection,
@@ -123,7 +127,8 @@ pub struct Camera {
 }
 
 /// Camera projections.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Projection {
     /// Vertical field of view in radians and, if the scene gives one, width / height.
     Perspective { yfov: f32, aspect: Option<f32> },

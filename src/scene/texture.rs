@@ -2,6 +2,7 @@
 
 use crate::color::{SRGB8_TO_LINEAR, srgb_to_linear};
 use glam::{Vec2, Vec4};
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
 /// Texel storage. 8-bit images stay 8-bit (4 bytes a texel); deeper ones are floats. sRGB
@@ -13,7 +14,8 @@ pub enum Texels {
 }
 
 /// How coordinates outside [0, 1) map into the image.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Wrap {
     Repeat,
     MirroredRepeat,

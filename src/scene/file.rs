@@ -1,0 +1,610 @@
+//! The scene file: the internal [`Scene`] on disk, so that other programs (the USD plugin,
+//! the benchmark's Mitsuba exporter) can write or read exactly what the renderer sees.
+//!
+//! Two files: a JSON manifest `NAME.lucerna` and one little-endian binary buffer beside it
+//! (the manifest's `buffer`, normally `NAME.lucerna.bin`). Small values (materials, lights,
+//! cameras, instances) are JSON; bulk arrays are *views* into the buffer: `{offset, count}`
+//! with the offset in bytes and the count in elements. Element layouts: positions and
+//! normals 3 × f32, tangents and colours 4 × f32, uvs 2 × f32, triangles 3 × u32, texels
+//! 4 × u8 (`rgba8`, sRGB-encoded or data as the material slot says) or 4 × f32 (`rgba32f`).
+//! Matrices are 16 f64 in column-major order; enums are externally tagged in snake_case.
+//!
+//! A scene file is untrusted input: [`read`] checks the format and version, every view
+//! against the buffer, every count, index and range, and that every number is finite,
+//! before anything uses the scene.
+
+use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
+use super::{Instance, Sphere, Texels, Texture, TextureRef, Wrap};
+use crate::error::{Error, Result};
+use glam::{Vec2, Vec3, Vec4};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// The manifest's `format` value.
+pub const FORMAT: &str = "lucerna-scene";
+/// The manifest version this build writes and reads.
+pub const VERSION: u32 = 1;
+/// File extension of a manifest; `ingest::load` recognises scene files by it.
+pub const EXTENSION: &str = "lucerna";
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Manifest {
+    format: String,
+    version: u32,
+    source: String,
+    /// The binary buffer's file name, relative to the manifest.
+    buffer: String,
+    buffer_bytes: u64,
+    meshes: Vec<MeshEntry>,
+    instances: Vec<Instance>,
+    spheres: Vec<Sphere>,
+    materials: Vec<Material>,
+    textures: Vec<TextureEntry>,
+    lights: Vec<Light>,
+    cameras: Vec<Camera>,
+    environment: Option<Environment>,
+    warnings: Vec<String>,
+}
+
+/// `count` elements starting `offset` bytes into the buffer.
+#[derive(Clone, Copy, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct View {
+    offset: u64,
+    count: u64,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshEntry {
+    name: String,
+    material: u32,
+    positions: View,
+    normals: Option<View>,
+    tangents: Option<View>,
+    uvs: [Option<View>; 2],
+    colors: Option<View>,
+    triangles: View,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum Encoding {
+    Rgba8,
+    Rgba32f,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TextureEntry {
+    name: String,
+    width: u32,
+    height: u32,
+    encoding: Encoding,
+    texels: View,
+    wrap_u: Wrap,
+    wrap_v: Wrap,
+    nearest: bool,
+}
+
+/// Appends arrays of plain little-endian values to the buffer.
+#[derive(Default)]
+struct BufferWriter {
+    bytes: Vec<u8>,
+}
+
+impl BufferWriter {
+    fn push<const N: usize>(&mut self, elements: impl ExactSizeIterator<Item = [u32; N]>) -> View {
+        let view = View {
+            offset: self.bytes.len() as u64,
+            count: elements.len() as u64,
+        };
+        for e in elements {
+            for word in e {
+                self.bytes.extend_from_slice(&word.to_le_bytes());
+            }
+        }
+        view
+    }
+
+    fn floats<const N: usize>(&mut self, values: &[[f32; N]]) -> View {
+        self.push(values.iter().map(|v| v.map(f32::to_bits)))
+    }
+}
+
+/// The buffer file name written beside `manifest`.
+fn buffer_name(manifest: &Path) -> String {
+    let name = manifest.file_name().map_or_else(
+        || "scene.lucerna".into(),
+        |n| n.to_string_lossy().into_owned(),
+    );
+    format!("{name}.bin")
+}
+
+/// Writes `bytes` to `path` through a temporary file and a rename, so a reader never sees
+/// a half-written file.
+fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".tmp");
+    let tmp = PathBuf::from(tmp);
+    std::fs::write(&tmp, bytes)
+        .and_then(|_| std::fs::rename(&tmp, path))
+        .map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            Error::other(path, "write", e.to_string())
+        })
+}
+
+/// Writes `scene` as the manifest `path` (conventionally `*.lucerna`) and its buffer beside
+/// it. The buffer is written first, so a complete manifest always has its buffer.
+pub fn write(scene: &Scene, path: &Path) -> Result<()> {
+    let mut buffer = BufferWriter::default();
+    let v3 = |v: &[Vec3]| v.iter().map(|x| x.to_array()).collect::<Vec<_>>();
+    let v4 = |v: &[Vec4]| v.iter().map(|x| x.to_array()).collect::<Vec<_>>();
+    let v2 = |v: &[Vec2]| v.iter().map(|x| x.to_array()).collect::<Vec<_>>();
+    let meshes = scene
+        .meshes
+        .iter()
+        .map(|m| MeshEntry {
+            name: m.name.clone(),
+            material: m.material,
+            positions: buffer.floats(&v3(&m.positions)),
+            normals: m.normals.as_deref().map(|n| buffer.floats(&v3(n))),
+            tangents: m.tangents.as_deref().map(|t| buffer.floats(&v4(t))),
+            uvs: m.uvs.clone().map(|uv| uv.map(|uv| buffer.floats(&v2(&uv)))),
+            colors: m.colors.as_deref().map(|c| buffer.floats(&v4(c))),
+            triangles: buffer.push(m.triangles.iter().copied()),
+        })
+        .collect();
+    // Texel arrays shared between textures are written once.
+    let mut written: HashMap<*const Texels, (Encoding, View)> = HashMap::new();
+    let textures = scene
+        .textures
+        .iter()
+        .map(|t| {
+            let (encoding, texels) =
+                *written
+                    .entry(Arc::as_ptr(&t.texels))
+                    .or_insert_with(|| match &*t.texels {
+                        Texels::Rgba8(p) => (
+                            Encoding::Rgba8,
+                            buffer.push(p.iter().map(|p| [u32::from_le_bytes(*p)])),
+                        ),
+                        Texels::RgbaF32(p) => (Encoding::Rgba32f, buffer.floats(p)),
+                    });
+            TextureEntry {
+                name: t.name.clone(),
+                width: t.width,
+                height: t.height,
+                encoding,
+                texels,
+                wrap_u: t.wrap_u,
+                wrap_v: t.wrap_v,
+                nearest: t.nearest,
+            }
+        })
+        .collect();
+    let manifest = Manifest {
+        format: FORMAT.into(),
+        version: VERSION,
+        source: scene.source.clone(),
+        buffer: buffer_name(path),
+        buffer_bytes: buffer.bytes.len() as u64,
+        meshes,
+        instances: scene.instances.clone(),
+        spheres: scene.spheres.clone(),
+        materials: scene.materials.clone(),
+        textures,
+        lights: scene.lights.clone(),
+        cameras: scene.cameras.clone(),
+        environment: scene.environment.clone(),
+        warnings: scene.warnings.clone(),
+    };
+    let json = serde_json::to_vec_pretty(&manifest)
+        .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
+    write_atomically(&path.with_file_name(&manifest.buffer), &buffer.bytes)?;
+    write_atomically(path, &json)
+}
+
+/// Reads a scene file written by [`write`] (or by any program following the format),
+/// rejecting anything malformed with an error naming the element.
+pub fn read(path: &Path) -> Result<Scene> {
+    let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
+    let text = std::fs::read(path).map_err(|e| bad("file", e.to_string()))?;
+    let manifest: Manifest =
+        serde_json::from_slice(&text).map_err(|e| bad("manifest", e.to_string()))?;
+    if manifest.format != FORMAT {
+        return Err(bad("format", format!("expected \"{FORMAT}\"")));
+    }
+    if manifest.version != VERSION {
+        return Err(bad(
+            "version",
+            format!(
+                "version {} is not supported (this build reads {VERSION})",
+                manifest.version
+            ),
+        ));
+    }
+    let buffer_path = path.with_file_name(&manifest.buffer);
+    if Path::new(&manifest.buffer).components().count() != 1 {
+        return Err(bad(
+            "buffer",
+            "must be a file name beside the manifest".into(),
+        ));
+    }
+    let bytes = std::fs::read(&buffer_path)
+        .map_err(|e| bad("buffer", format!("{}: {e}", buffer_path.display())))?;
+    if bytes.len() as u64 != manifest.buffer_bytes {
+        return Err(bad(
+            "buffer",
+            format!(
+                "{} bytes, the manifest says {}",
+                bytes.len(),
+                manifest.buffer_bytes
+            ),
+        ));
+    }
+    let buffer = BufferReader {
+        bytes: &bytes,
+        path,
+    };
+
+    let mut meshes = Vec::with_capacity(manifest.meshes.len());
+    for (i, m) in manifest.meshes.iter().enumerate() {
+        let element = |field: &str| format!("meshes[{i}].{field}");
+        let positions: Vec<Vec3> = buffer.floats(m.positions, &element("positions"))?;
+        let n = positions.len();
+        let triangles: Vec<[u32; 3]> = buffer.words(m.triangles, &element("triangles"))?;
+        if let Some((t, _)) = triangles
+            .iter()
+            .enumerate()
+            .find(|(_, t)| t.iter().any(|&v| v as usize >= n))
+        {
+            return Err(bad(
+                &format!("meshes[{i}].triangles[{t}]"),
+                format!("vertex index out of range (the mesh has {n} vertices)"),
+            ));
+        }
+        meshes.push(Mesh {
+            name: m.name.clone(),
+            positions,
+            normals: m
+                .normals
+                .map(|v| buffer.vertices(v, n, &element("normals")))
+                .transpose()?,
+            tangents: m
+                .tangents
+                .map(|v| buffer.vertices(v, n, &element("tangents")))
+                .transpose()?,
+            uvs: [
+                m.uvs[0]
+                    .map(|v| buffer.vertices(v, n, &element("uvs[0]")))
+                    .transpose()?,
+                m.uvs[1]
+                    .map(|v| buffer.vertices(v, n, &element("uvs[1]")))
+                    .transpose()?,
+            ],
+            colors: m
+                .colors
+                .map(|v| buffer.vertices(v, n, &element("colors")))
+                .transpose()?,
+            triangles,
+            material: m.material,
+        });
+    }
+    let mut textures = Vec::with_capacity(manifest.textures.len());
+    // Textures naming the same texels share them, as they did when written.
+    let mut shared: HashMap<(u64, u64, Encoding), Arc<Texels>> = HashMap::new();
+    for (i, t) in manifest.textures.iter().enumerate() {
+        let element = format!("textures[{i}].texels");
+        if t.width == 0 || t.height == 0 || t.texels.count != t.width as u64 * t.height as u64 {
+            return Err(bad(
+                &element,
+                format!(
+                    "{} texels for a {}x{} image",
+                    t.texels.count, t.width, t.height
+                ),
+            ));
+        }
+        let key = (t.texels.offset, t.texels.count, t.encoding);
+        if let Some(texels) = shared.get(&key) {
+            textures.push(texture(t, texels.clone()));
+            continue;
+        }
+        let texels = match t.encoding {
+            Encoding::Rgba8 => {
+                let words: Vec<[u32; 1]> = buffer.words(t.texels, &element)?;
+                Texels::Rgba8(words.iter().map(|w| w[0].to_le_bytes()).collect())
+            }
+            Encoding::Rgba32f => Texels::RgbaF32(buffer.floats(t.texels, &element)?),
+        };
+        let texels = Arc::new(texels);
+        shared.insert(key, texels.clone());
+        textures.push(texture(t, texels));
+    }
+    let scene = Scene {
+        source: manifest.source,
+        meshes,
+        instances: manifest.instances,
+        spheres: manifest.spheres,
+        materials: manifest.materials,
+        textures,
+        lights: manifest.lights,
+        cameras: manifest.cameras,
+        environment: manifest.environment,
+        warnings: manifest.warnings,
+    };
+    validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
+    Ok(scene)
+}
+
+fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {
+    Texture {
+        name: entry.name.clone(),
+        width: entry.width,
+        height: entry.height,
+        texels,
+        wrap_u: entry.wrap_u,
+        wrap_v: entry.wrap_v,
+        nearest: entry.nearest,
+    }
+}
+
+/// Reads typed views out of the buffer with bounds checks.
+struct BufferReader<'a> {
+    bytes: &'a [u8],
+    path: &'a Path,
+}
+
+impl BufferReader<'_> {
+    /// The view's elements as `N` little-endian 32-bit words each.
+    fn words<const N: usize>(&self, view: View, element: &str) -> Result<Vec<[u32; N]>> {
+        let size = 4 * N as u64;
+        let end = view
+            .count
+            .checked_mul(size)
+            .and_then(|len| view.offset.checked_add(len))
+            .filter(|&end| end <= self.bytes.len() as u64)
+            .ok_or_else(|| {
+                Error::bad_input(
+                    self.path,
+                    element,
+                    format!(
+                        "view of {} elements at byte {} runs past the buffer ({} bytes)",
+                        view.count,
+                        view.offset,
+                        self.bytes.len()
+                    ),
+                )
+            })?;
+        let data = &self.bytes[view.offset as usize..end as usize];
+        Ok(data
+            .chunks_exact(size as usize)
+            .map(|chunk| {
+                std::array::from_fn(|k| {
+                    u32::from_le_bytes(chunk[4 * k..4 * k + 4].try_into().unwrap())
+                })
+            })
+            .collect())
+    }
+
+    /// The view's elements as `N` finite floats each, converted to `T`.
+    fn floats<const N: usize, T: From<[f32; N]>>(
+        &self,
+        view: View,
+        element: &str,
+    ) -> Result<Vec<T>> {
+        let words: Vec<[u32; N]> = self.words(view, element)?;
+        let mut out = Vec::with_capacity(words.len());
+        for (k, w) in words.iter().enumerate() {
+            let v = w.map(f32::from_bits);
+            if !v.iter().all(|x| x.is_finite()) {
+                return Err(Error::bad_input(
+                    self.path,
+                    format!("{element}[{k}]"),
+                    "value is NaN or infinite",
+                ));
+            }
+            out.push(T::from(v));
+        }
+        Ok(out)
+    }
+
+    /// A per-vertex attribute: finite floats, one element per vertex.
+    fn vertices<const N: usize, T: From<[f32; N]>>(
+        &self,
+        view: View,
+        vertices: usize,
+        element: &str,
+    ) -> Result<Vec<T>> {
+        if view.count != vertices as u64 {
+            return Err(Error::bad_input(
+                self.path,
+                element,
+                format!("{} values for {vertices} vertices", view.count),
+            ));
+        }
+        self.floats(view, element)
+    }
+}
+
+/// Checks the indices, ranges and finiteness of everything that is not a buffer view.
+/// Returns the element and the reason of the first problem.
+fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
+    let fail = |element: String, reason: &str| Err((element, reason.to_string()));
+    let finite = |values: &[f32]| values.iter().all(|x| x.is_finite());
+    let materials = scene.materials.len();
+    let textures = scene.textures.len();
+    for (i, m) in scene.meshes.iter().enumerate() {
+        if m.material as usize >= materials {
+            return fail(
+                format!("meshes[{i}].material"),
+                "material index out of range",
+            );
+        }
+    }
+    for (i, inst) in scene.instances.iter().enumerate() {
+        if inst.mesh as usize >= scene.meshes.len() {
+            return fail(format!("instances[{i}].mesh"), "mesh index out of range");
+        }
+        if !inst.transform.is_finite() {
+            return fail(
+                format!("instances[{i}].transform"),
+                "transform is not finite",
+            );
+        }
+    }
+    for (i, s) in scene.spheres.iter().enumerate() {
+        if s.material as usize >= materials {
+            return fail(
+                format!("spheres[{i}].material"),
+                "material index out of range",
+            );
+        }
+        if !(s.centre.is_finite() && s.radius.is_finite() && s.radius > 0.0) {
+            return fail(
+                format!("spheres[{i}]"),
+                "centre and radius must be finite, radius > 0",
+            );
+        }
+    }
+    for (i, m) in scene.materials.iter().enumerate() {
+        let texture_refs: [(&str, Option<TextureRef>); 4] = [
+            ("base_color_texture", m.base_color_texture),
+            ("metallic_roughness_texture", m.metallic_roughness_texture),
+            ("normal_texture", m.normal_texture),
+            ("emissive_texture", m.emissive_texture),
+        ];
+        for (field, r) in texture_refs {
+            let Some(r) = r else { continue };
+            if r.texture as usize >= textures || r.tex_coord > 1 {
+                return fail(
+                    format!("materials[{i}].{field}"),
+                    "texture index or texture coordinate set out of range",
+                );
+            }
+            if let Some(t) = r.transform
+                && !finite(&[t.x.to_array(), t.y.to_array(), t.offset.to_array()].concat())
+            {
+                return fail(format!("materials[{i}].{field}.transform"), "not finite");
+            }
+        }
+        let phong_ok = match m.model {
+            super::BsdfModel::Phong { exponent, specular } => {
+                (0.0..=1e7).contains(&exponent)
+                    && specular.is_finite()
+                    && specular.min_element() >= 0.0
+            }
+            _ => true,
+        };
+        let alpha_ok = match m.alpha_mode {
+            super::AlphaMode::Mask { cutoff } => cutoff.is_finite(),
+            _ => true,
+        };
+        if !(finite(&m.base_color.to_array())
+            && m.emissive.is_finite()
+            && m.emissive.min_element() >= 0.0
+            && finite(&[m.metallic, m.roughness, m.normal_scale, m.ior])
+            && m.ior > 0.0
+            && phong_ok
+            && alpha_ok)
+        {
+            return fail(
+                format!("materials[{i}]"),
+                "a factor is not finite or out of range",
+            );
+        }
+    }
+    for (i, l) in scene.lights.iter().enumerate() {
+        let ok = match &l.kind {
+            LightKind::Point {
+                position,
+                intensity,
+            } => position.is_finite() && intensity.is_finite() && intensity.min_element() >= 0.0,
+            LightKind::Spot {
+                position,
+                direction,
+                intensity,
+                inner_cone,
+                outer_cone,
+            } => {
+                position.is_finite()
+                    && direction.is_finite()
+                    && direction.length_squared() > 0.0
+                    && intensity.is_finite()
+                    && intensity.min_element() >= 0.0
+                    && (0.0..=*outer_cone).contains(inner_cone)
+                    && *outer_cone <= std::f32::consts::FRAC_PI_2
+            }
+            LightKind::Directional {
+                direction,
+                irradiance,
+            } => {
+                direction.is_finite()
+                    && direction.length_squared() > 0.0
+                    && irradiance.is_finite()
+                    && irradiance.min_element() >= 0.0
+            }
+        };
+        if !ok {
+            return fail(
+                format!("lights[{i}]"),
+                "a value is not finite or out of range",
+            );
+        }
+    }
+    for (i, c) in scene.cameras.iter().enumerate() {
+        let projection_ok = match c.projection {
+            Projection::Perspective { yfov, aspect } => {
+                yfov > 0.0
+                    && yfov < std::f32::consts::PI
+                    && aspect.is_none_or(|a| a.is_finite() && a > 0.0)
+            }
+            Projection::Orthographic { xmag, ymag } => {
+                xmag.is_finite() && ymag.is_finite() && xmag > 0.0 && ymag > 0.0
+            }
+        };
+        if !(projection_ok
+            && c.transform.is_finite()
+            && c.aperture_radius.is_finite()
+            && c.aperture_radius >= 0.0
+            && c.focus_distance.is_finite()
+            && c.focus_distance > 0.0
+            && c.clip_near.is_finite()
+            && c.clip_near >= 0.0
+            && c.clip_far.is_none_or(|f| f > c.clip_near))
+        {
+            return fail(
+                format!("cameras[{i}]"),
+                "a value is not finite or out of range",
+            );
+        }
+    }
+    match &scene.environment {
+        Some(Environment::Constant(radiance))
+            if !(radiance.is_finite() && radiance.min_element() >= 0.0) =>
+        {
+            fail(
+                "environment".into(),
+                "radiance is not finite and non-negative",
+            )
+        }
+        Some(Environment::LatLong {
+            texture,
+            scale,
+            rotation,
+        }) => {
+            if *texture as usize >= textures {
+                fail("environment.texture".into(), "texture index out of range")
+            } else if !(scale.is_finite() && scale.min_element() >= 0.0 && rotation.is_finite()) {
+                fail("environment".into(), "scale or rotation is not finite")
+            } else {
+                Ok(())
+            }
+        }
+        _ => Ok(()),
+    }
+}

@@ -1,0 +1,284 @@
+//! The scene file (`lucerna convert`): a round trip changes nothing the renderer sees, and a
+//! malformed file is a bad-input error naming the element, never a panic.
+
+mod common;
+
+use common::gltf_builder::{Builder, png_rgba};
+use common::scenes::render;
+use lucerna::error::ErrorKind;
+use lucerna::film::aov::ALL;
+use lucerna::ingest;
+use lucerna::integrator::Settings;
+use lucerna::scene::{Scene, file};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir =
+        std::env::temp_dir().join(format!("lucerna-scene-file-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A quad with every vertex attribute, two textures sharing one image (so the texels are
+/// written once), alpha masking, a normal map, a point light and a lat-long environment.
+fn textured_scene(dir: &Path) -> PathBuf {
+    let mut b = Builder::new();
+    let png = png_rgba(
+        2,
+        2,
+        &[
+            [255, 0, 0, 255],
+            [0, 255, 0, 128],
+            [0, 0, 255, 255],
+            [255, 255, 255, 0],
+        ],
+    );
+    let colour = b.png_texture(&png, json!({"magFilter": 9728, "wrapS": 33648}));
+    let normal = b.png_texture(&png_rgba(1, 1, &[[128, 128, 255, 255]]), json!({}));
+    let m = b.add(
+        "materials",
+        json!({
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": colour, "extensions": {
+                "KHR_texture_transform": {"offset": [0.1, 0.2], "rotation": 0.3, "scale": [2, 3]}}},
+                "metallicFactor": 0.2, "roughnessFactor": 0.6},
+            "normalTexture": {"index": normal, "scale": 0.5},
+            "alphaMode": "MASK", "alphaCutoff": 0.4, "doubleSided": true,
+            "emissiveFactor": [0.1, 0.0, 0.05]
+        }),
+    );
+    let mut quad = b.quad_primitive(Some(m));
+    let normals = b.floats(
+        "VEC3",
+        &[0.0, 0.0, 1.0, 0.0, 0.1, 1.0, 0.1, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
+    let colours = b.floats(
+        "VEC4",
+        &[
+            1.0, 0.5, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 0.2, 0.2, 0.2, 1.0,
+        ],
+    );
+    quad["attributes"]["NORMAL"] = json!(normals);
+    quad["attributes"]["COLOR_0"] = json!(colours);
+    let mesh = b.mesh(json!([quad]));
+    b.root(json!({"mesh": mesh, "rotation": [0.1, 0.2, 0.0, 0.9747]}));
+    b.add("cameras", json!({"type": "perspective", "perspective": {"yfov": 0.9, "aspectRatio": 1.25, "znear": 0.05}}));
+    b.root(json!({"camera": 0, "translation": [0.2, 0.1, 3.0]}));
+    b.write_glb(dir, "textured")
+}
+
+fn shipped(scene: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(scene)
+}
+
+/// Renders both scenes with the same seed and asserts identical layers.
+fn assert_same_image(a: Scene, b: Scene, what: &str) {
+    let settings = Settings {
+        seed: 5,
+        ..Default::default()
+    };
+    let (fa, _) = render(a, (24, 18), 4, settings.clone(), 2);
+    let (fb, _) = render(b, (24, 18), 4, settings, 2);
+    for aov in ALL {
+        assert!(
+            fa.planes(aov) == fb.planes(aov),
+            "{what}: {} differs",
+            aov.name()
+        );
+    }
+}
+
+#[test]
+fn round_trip_renders_identically() {
+    let dir = temp_dir("round-trip");
+    let sources = [
+        shipped("cornell-box/cornell-box.gltf"),
+        shipped("mis-plates/mis-plates.glb"),
+        shipped("indirect-room/indirect-room.glb"),
+        textured_scene(&dir),
+    ];
+    for source in &sources {
+        let mut original = ingest::load(source).unwrap();
+        ingest::set_constant_environment(&mut original, glam::Vec3::new(0.1, 0.2, 0.3));
+        let path = dir.join(format!(
+            "{}.lucerna",
+            source.file_stem().unwrap().to_string_lossy()
+        ));
+        file::write(&original, &path).unwrap();
+        let read = ingest::load(&path).unwrap();
+        // Writing what was read gives the same files: nothing is lost or reinterpreted.
+        let again = dir.join("again").join(path.file_name().unwrap());
+        std::fs::create_dir_all(again.parent().unwrap()).unwrap();
+        file::write(&read, &again).unwrap();
+        for name in [path.clone(), path.with_extension("lucerna.bin")] {
+            let copy = again.with_file_name(name.file_name().unwrap());
+            assert!(
+                std::fs::read(&name).unwrap() == std::fs::read(&copy).unwrap(),
+                "{}",
+                name.display()
+            );
+        }
+        assert_same_image(original, read, &source.display().to_string());
+    }
+    // A third texture sharing the first one's image with another sampler (as two glTF
+    // textures of one image do) is written once and shared again when read.
+    let mut textured = ingest::load(&dir.join("textured.lucerna")).unwrap();
+    let mut variant = textured.textures[0].clone();
+    variant.nearest = !variant.nearest;
+    textured.textures.push(variant);
+    textured.materials[0].emissive_texture = Some(lucerna::scene::TextureRef {
+        texture: 2,
+        tex_coord: 0,
+        transform: None,
+    });
+    let shared = dir.join("shared.lucerna");
+    file::write(&textured, &shared).unwrap();
+    let buffer_bytes = std::fs::metadata(dir.join("shared.lucerna.bin"))
+        .unwrap()
+        .len();
+    // 4 vertices × (position 3 + normal 3 + tangent 4 + uv 2 + colour 4 floats), 2 triangles,
+    // and 2×2 + 1×1 texels of 4 bytes.
+    assert_eq!(buffer_bytes, 4 * 16 * 4 + 2 * 12 + 5 * 4);
+    let read = ingest::load(&shared).unwrap();
+    assert!(std::sync::Arc::ptr_eq(
+        &read.textures[0].texels,
+        &read.textures[2].texels
+    ));
+    assert_ne!(read.textures[0].nearest, read.textures[2].nearest);
+}
+
+/// Writes the Cornell box, lets `corrupt` change the manifest (and the buffer), and returns
+/// the error of reading it.
+fn error_after(name: &str, corrupt: impl FnOnce(&mut Value, &mut Vec<u8>)) -> lucerna::Error {
+    let dir = temp_dir(name);
+    let path = dir.join("box.lucerna");
+    file::write(&ingest::default_scene().unwrap(), &path).unwrap();
+    let mut manifest: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let bin = dir.join("box.lucerna.bin");
+    let mut buffer = std::fs::read(&bin).unwrap();
+    corrupt(&mut manifest, &mut buffer);
+    if manifest.is_object() {
+        manifest["buffer_bytes"] = json!(buffer.len());
+    }
+    std::fs::write(&path, serde_json::to_vec(&manifest).unwrap()).unwrap();
+    std::fs::write(&bin, &buffer).unwrap();
+    let error = ingest::load(&path).expect_err(name);
+    assert_eq!(error.kind, ErrorKind::BadInput, "{error}");
+    error
+}
+
+#[test]
+fn malformed_scene_files_are_rejected_with_the_element() {
+    let offset =
+        |m: &Value, field: &str| m["meshes"][0][field]["offset"].as_u64().unwrap() as usize;
+    type Corruption = Box<dyn FnOnce(&mut Value, &mut Vec<u8>)>;
+    let cases: Vec<(&str, Corruption, &str)> = vec![
+        (
+            "version",
+            Box::new(|m, _| m["version"] = json!(99)),
+            "version",
+        ),
+        (
+            "format",
+            Box::new(|m, _| m["format"] = json!("gltf")),
+            "format",
+        ),
+        (
+            "unknown-field",
+            Box::new(|m, _| m["meshes"][0]["colour"] = json!(1)),
+            "manifest",
+        ),
+        ("not-json", Box::new(|m, _| *m = json!("{")), "manifest"),
+        (
+            "view-past-end",
+            Box::new(|m, _| m["meshes"][0]["triangles"]["count"] = json!(u64::MAX / 4)),
+            "meshes[0].triangles",
+        ),
+        (
+            "vertex-index",
+            Box::new(move |m, b| {
+                let at = offset(m, "triangles");
+                b[at..at + 4].copy_from_slice(&1000u32.to_le_bytes());
+            }),
+            "meshes[0].triangles[0]",
+        ),
+        (
+            "nan-position",
+            Box::new(move |m, b| {
+                let at = offset(m, "positions") + 12;
+                b[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+            }),
+            "meshes[0].positions[1]",
+        ),
+        (
+            "material-index",
+            Box::new(|m, _| m["meshes"][2]["material"] = json!(40)),
+            "meshes[2].material",
+        ),
+        (
+            "instance-mesh",
+            Box::new(|m, _| m["instances"][1]["mesh"] = json!(8)),
+            "instances[1].mesh",
+        ),
+        (
+            "camera-fov",
+            Box::new(|m, _| m["cameras"][0]["projection"]["perspective"]["yfov"] = json!(4.0)),
+            "cameras[0]",
+        ),
+        (
+            "buffer-outside",
+            Box::new(|m, _| m["buffer"] = json!("../box.lucerna.bin")),
+            "buffer",
+        ),
+        (
+            "buffer-missing",
+            Box::new(|m, _| m["buffer"] = json!("gone.bin")),
+            "buffer",
+        ),
+        (
+            "normals-count",
+            Box::new(|m, _| m["meshes"][0]["normals"] = json!({"offset": 0, "count": 1})),
+            "meshes[0].normals",
+        ),
+        (
+            "camera-far",
+            Box::new(|m, _| m["cameras"][0]["clip_far"] = json!(0.0)),
+            "cameras[0]",
+        ),
+        (
+            "texel-count",
+            Box::new(|m, _| {
+                m["textures"] = json!([{"name": "t", "width": 3, "height": 3, "encoding": "rgba8",
+                    "texels": {"offset": 0, "count": 4}, "wrap_u": "repeat", "wrap_v": "repeat",
+                    "nearest": false}])
+            }),
+            "textures[0].texels",
+        ),
+        (
+            "emission",
+            Box::new(|m, _| m["materials"][0]["emissive"] = json!([-1.0, 0, 0])),
+            "materials[0]",
+        ),
+    ];
+    for (name, corrupt, element) in cases {
+        let error = error_after(name, corrupt);
+        assert!(error.element.starts_with(element), "{name}: {error}");
+        assert!(error.file.ends_with("box.lucerna"), "{name}: {error}");
+    }
+    // A buffer shorter than the manifest says (a truncated copy).
+    let dir = temp_dir("truncated");
+    let path = dir.join("box.lucerna");
+    file::write(&ingest::default_scene().unwrap(), &path).unwrap();
+    let bin = dir.join("box.lucerna.bin");
+    let len = std::fs::metadata(&bin).unwrap().len();
+    std::fs::write(&bin, &std::fs::read(&bin).unwrap()[..len as usize - 4]).unwrap();
+    let error = ingest::load(&path).unwrap_err();
+    assert_eq!(
+        (error.kind, error.element.as_str()),
+        (ErrorKind::BadInput, "buffer"),
+        "{error}"
+    );
+}
