@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Generate scenes/mis-plates/mis-plates.glb: the classic multiple importance sampling scene
-(Veach & Guibas 1995): four metal plates from rough to near-specular (GGX alpha 0.1, 0.05,
+(Veach & Guibas 1995): four metal plates (reflectance 1) from rough to near-specular (GGX alpha 0.1, 0.05,
 0.02, 0.005), each tilted to reflect the row of lights towards the camera, and four
 spherical lights of equal power and radii 0.9, 0.3, 0.1 and 0.03 (radiance inversely
 proportional to the area). Light sampling wins on rough plates with small lights, BSDF
@@ -37,7 +37,9 @@ def build():
         half_width, half_depth = 3.75, 0.5
         corners = [[c + sx * half_width * xa + st * half_depth * ta for c, xa, ta in zip(centre, x, t)]
                    for sx, st in [(-1, -1), (1, -1), (1, 1), (-1, 1)]]
-        m = w.material(f"plate_{i}", base=(0.4, 0.4, 0.4), metallic=1.0, roughness=alpha ** 0.5)
+        # Reflectance 1 (F0 = 1: Schlick Fresnel is then exactly 1), so that a perfect GGX
+        # conductor in another renderer (Mitsuba's roughconductor, material "none") is the same BRDF.
+        m = w.material(f"plate_{i}", base=(1.0, 1.0, 1.0), metallic=1.0, roughness=alpha ** 0.5)
         w.node(name=f"plate_{i}", mesh=w.mesh(f"plate_{i}", corners, [(0, 1, 2), (0, 2, 3)], m))
     for i, (radius, colour) in enumerate(zip(RADII, COLOURS)):
         # Equal power: radiance times area is the same for every light.
