@@ -3,7 +3,7 @@
 
 Geometry: the measured Cornell box (https://www.graphics.cornell.edu/online/box/data.html),
 converted from millimetres to metres. Reflectances and the light's radiance are the RGB
-values of Mitsuba 3's `cbox` scene, so that tools/mitsuba_cornell.py can render the same
+values of Mitsuba 3's `cbox` scene, so that tools/mitsuba_compare.py can render the same
 scene with Mitsuba 3. Every material is a Lambertian (lucerna's `extras` selector), the walls
 are double-sided and the light emits downwards only.
 

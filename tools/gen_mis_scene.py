@@ -44,7 +44,10 @@ def build():
     for i, (radius, colour) in enumerate(zip(RADII, COLOURS)):
         # Equal power: radiance times area is the same for every light.
         radiance = RADIANCE_OF_LARGEST * (RADII[0] / radius) ** 2 / luminance(colour)
-        m = w.material(f"light_{i}", base=(0, 0, 0), emissive=[c * radiance for c in colour], double_sided=False)
+        # Pure emitters: a black Lambertian surface reflects nothing (a black glTF dielectric
+        # would still reflect 4 %), so every renderer sees the same lights.
+        m = w.material(f"light_{i}", base=(0, 0, 0), emissive=[c * radiance for c in colour], double_sided=False,
+                       extras={"lucerna": {"bsdf": "lambert"}})
         centre = [LIGHT_ROW[0] + (i - 1.5) * 2.5, LIGHT_ROW[1], LIGHT_ROW[2]]
         w.sphere(f"light_{i}", centre, radius, m)
     w.camera("camera", yfov=0.6, aspect=1.5, translation=CAMERA, target=[0.0, -0.5, 0.0])

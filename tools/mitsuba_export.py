@@ -1,0 +1,165 @@
+"""Export a lucerna scene file (`lucerna convert SCENE -o x.lucerna`) to a Mitsuba 3 scene,
+so that Mitsuba renders exactly the geometry, materials, lights and camera lucerna sees.
+
+Only models on which the two renderers agree are exported; anything else is an error that
+names the element (never a silent approximation):
+
+- `lambert` materials -> `diffuse`; glTF PBR with metallic 1, base colour 1, no textures ->
+  `roughconductor` (GGX, alpha = roughness^2, Fresnel 1: `material = "none"`, visible-normal
+  sampling); `double_sided` -> `twosided`.
+- emission -> an `area` emitter (one-sided, on the front face, like lucerna);
+- meshes (with their shading normals if any) per instance, analytic spheres;
+- point and directional lights, a constant environment;
+- a pinhole perspective camera, box pixel filter.
+
+One difference remains by construction: lucerna makes the back of a one-sided surface
+invisible, Mitsuba makes it a black occluder. Scenes for comparisons show no back faces.
+"""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+
+class Unsupported(ValueError):
+    """The scene uses something the two renderers do not model alike."""
+
+
+def read_scene_file(path):
+    """(manifest dict, buffer bytes) of a lucerna scene file."""
+    path = Path(path)
+    manifest = json.loads(path.read_text())
+    if manifest.get("format") != "lucerna-scene" or manifest.get("version") != 1:
+        raise ValueError(f"{path}: not a version 1 lucerna scene file")
+    return manifest, (path.parent / manifest["buffer"]).read_bytes()
+
+
+def view(buffer, v, dtype, width):
+    """The `count` elements of a buffer view as an array of shape (count, width)."""
+    return np.frombuffer(buffer, dtype=dtype, count=v["count"] * width, offset=v["offset"]).reshape(-1, width)
+
+
+def write_ply(path, positions, triangles, normals=None):
+    props = "property float x\nproperty float y\nproperty float z\n"
+    if normals is not None:
+        props += "property float nx\nproperty float ny\nproperty float nz\n"
+    header = (f"ply\nformat binary_little_endian 1.0\nelement vertex {len(positions)}\n{props}"
+              f"element face {len(triangles)}\nproperty list uchar int vertex_indices\nend_header\n")
+    vertices = positions if normals is None else np.hstack([positions, normals])
+    faces = np.zeros(len(triangles), dtype=[("n", "u1"), ("v", "<i4", 3)])
+    faces["n"] = 3
+    faces["v"] = triangles
+    with open(path, "wb") as f:
+        f.write(header.encode())
+        f.write(np.ascontiguousarray(vertices, dtype="<f4").tobytes())
+        f.write(faces.tobytes())
+
+
+def matrix(values):
+    """A column-major list of 16 numbers as a 4x4 row-major numpy matrix."""
+    return np.array(values, dtype=np.float64).reshape(4, 4).T
+
+
+def bsdf(material, element):
+    if material["base_color_texture"] or material["metallic_roughness_texture"] or material["normal_texture"]:
+        raise Unsupported(f"{element}: textures are not exported")
+    if material["alpha_mode"] != "opaque":
+        raise Unsupported(f"{element}: alpha modes other than opaque are not exported")
+    base = material["base_color"][:3]
+    if material["model"] == "lambert":
+        b = {"type": "diffuse", "reflectance": {"type": "rgb", "value": base}}
+    elif material["model"] == "gltf_pbr" and material["metallic"] == 1.0 and base == [1.0, 1.0, 1.0]:
+        alpha = max(material["roughness"] ** 2, 1e-4)
+        b = {"type": "roughconductor", "distribution": "ggx", "alpha": alpha, "material": "none",
+             "sample_visible": True}
+    else:
+        raise Unsupported(f"{element}: only lambert and glTF metals of base colour 1 are exported "
+                          f"({material['model']}, metallic {material['metallic']}, base {base})")
+    return {"type": "twosided", "bsdf": b} if material["double_sided"] else b
+
+
+def emitter(material):
+    if material["emissive_texture"]:
+        raise Unsupported("emissive textures are not exported")
+    radiance = material["emissive"]
+    return {"type": "area", "radiance": {"type": "rgb", "value": radiance}} if max(radiance) > 0 else None
+
+
+def camera(manifest, width, height, name=None):
+    cameras = manifest["cameras"]
+    if not cameras:
+        raise Unsupported("the scene has no camera")
+    cam = next((c for c in cameras if c["name"] == name), None) if name else cameras[0]
+    if cam is None:
+        raise Unsupported(f"no camera named {name!r}")
+    projection = cam["projection"]
+    if "perspective" not in projection or cam["aperture_radius"] > 0:
+        raise Unsupported("only pinhole perspective cameras are exported")
+    m = matrix(cam["transform"])
+    origin = m[:3, 3]
+    forward = m[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    up = m[:3, :3] @ np.array([0.0, 1.0, 0.0])
+    import mitsuba as mi
+    return {
+        "type": "perspective",
+        "fov": math.degrees(projection["perspective"]["yfov"]),
+        "fov_axis": "y",
+        "near_clip": cam["clip_near"],
+        "far_clip": cam["clip_far"] or 1e7,
+        "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=(origin + forward).tolist(),
+                                                   up=up.tolist()),
+        "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"},
+                 "pixel_format": "rgb"},
+        "sampler": {"type": "independent"},
+    }
+
+
+def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=None):
+    """A Mitsuba scene dictionary (for `mi.load_dict`) of the lucerna scene file. Meshes are
+    written as PLY files into `workdir`, which must outlive the loaded scene's creation."""
+    import mitsuba as mi
+    manifest, buffer = read_scene_file(scene_file)
+    scene = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth},
+             "sensor": camera(manifest, width, height, camera_name)}
+    materials = manifest["materials"]
+    plys = {}
+    for i, inst in enumerate(manifest["instances"]):
+        mesh = manifest["meshes"][inst["mesh"]]
+        if inst["mesh"] not in plys:
+            ply = Path(workdir) / f"mesh{inst['mesh']}.ply"
+            normals = view(buffer, mesh["normals"], "<f4", 3) if mesh["normals"] else None
+            write_ply(ply, view(buffer, mesh["positions"], "<f4", 3), view(buffer, mesh["triangles"], "<u4", 3),
+                      normals)
+            plys[inst["mesh"]] = (ply, normals is not None)
+        ply, has_normals = plys[inst["mesh"]]
+        material = materials[mesh["material"]]
+        shape = {"type": "ply", "filename": str(ply), "face_normals": not has_normals,
+                 "to_world": mi.ScalarTransform4f(matrix(inst["transform"]).tolist()),
+                 "bsdf": bsdf(material, f"materials[{mesh['material']}] ({material['name']})")}
+        if e := emitter(material):
+            shape["emitter"] = e
+        scene[f"instance_{i}"] = shape
+    for i, sphere in enumerate(manifest["spheres"]):
+        material = materials[sphere["material"]]
+        shape = {"type": "sphere", "center": sphere["centre"], "radius": sphere["radius"],
+                 "bsdf": bsdf(material, f"materials[{sphere['material']}] ({material['name']})")}
+        if e := emitter(material):
+            shape["emitter"] = e
+        scene[f"sphere_{i}"] = shape
+    for i, light in enumerate(manifest["lights"]):
+        (kind, values), = light["kind"].items()
+        if kind == "point":
+            scene[f"light_{i}"] = {"type": "point", "position": values["position"],
+                                   "intensity": {"type": "rgb", "value": values["intensity"]}}
+        elif kind == "directional":
+            scene[f"light_{i}"] = {"type": "directional", "direction": values["direction"],
+                                   "irradiance": {"type": "rgb", "value": values["irradiance"]}}
+        else:
+            raise Unsupported(f"lights[{i}]: {kind} lights fall off differently in Mitsuba")
+    env = manifest["environment"]
+    if env is not None:
+        if "constant" not in env:
+            raise Unsupported("environment: only a constant environment is exported")
+        scene["environment"] = {"type": "constant", "radiance": {"type": "rgb", "value": env["constant"]}}
+    return scene
