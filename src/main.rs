@@ -94,7 +94,7 @@ struct RenderArgs {
     /// bsdf-only.
     #[arg(long)]
     mis: Option<String>,
-    /// Russian roulette: off, fixed:P, throughput[:THRESHOLD] (default throughput:0.01),
+    /// Russian roulette: off, fixed:P, throughput[:THRESHOLD] (default throughput:0.1),
     /// efficiency[:MAX_SPLIT] (learned roulette, and splitting up to MAX_SPLIT, default 1).
     #[arg(long)]
     rr: Option<String>,

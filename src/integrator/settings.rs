@@ -77,12 +77,14 @@ pub struct Settings {
 }
 
 impl Default for Settings {
-    /// Power heuristic (β = 2), throughput roulette (threshold 0.01), no depth limit, light
-    /// selection by power, area sampling, no splitting, Owen-scrambled Sobol, seed 0.
+    /// Power heuristic (β = 2), throughput roulette (threshold 0.1: the most efficient of
+    /// 0.01, 0.05, 0.1 and 0.2 at equal time on the Cornell box and the indirect room), no
+    /// depth limit, light selection by power, area sampling, no splitting, Owen-scrambled
+    /// Sobol, seed 0.
     fn default() -> Self {
         Self {
             mis: Mis::Power(2.0),
-            rr: RussianRoulette::Throughput(0.01),
+            rr: RussianRoulette::Throughput(0.1),
             max_depth: None,
             light_select: LightSelect::Power,
             light_sampling: LightSampling::Area,
@@ -135,7 +137,7 @@ impl RussianRoulette {
                 Err("fixed roulette needs a survival probability in (0, 1], e.g. fixed:0.3".into())
             }
             ("throughput", p) => {
-                let t = p.unwrap_or(0.01);
+                let t = p.unwrap_or(0.1);
                 if t.is_finite() && t > 0.0 {
                     Ok(Self::Throughput(t))
                 } else {

@@ -58,7 +58,7 @@ def test_header_metadata(default_render):
     assert spec.getattribute("lucerna/spp") == 64
     assert spec.getattribute("lucerna/nan_inf_discarded") == 0
     settings = tomllib.loads(spec.getattribute("lucerna/settings"))
-    assert settings["mis"] == "power:2" and settings["spp"] == 64 and settings["rr"] == "throughput:0.01"
+    assert settings["mis"] == "power:2" and settings["spp"] == 64 and settings["rr"] == "throughput:0.1"
     assert spec.getattribute("lucerna/render_seconds") > 0
     for matrix in ("worldToCamera", "worldToNDC"):
         m = np.array(spec.getattribute(matrix), dtype=np.float64).reshape(4, 4)
