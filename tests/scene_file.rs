@@ -234,6 +234,11 @@ fn malformed_scene_files_are_rejected_with_the_element() {
             "buffer",
         ),
         (
+            "buffer-parent",
+            Box::new(|m, _| m["buffer"] = json!("..")),
+            "buffer",
+        ),
+        (
             "buffer-missing",
             Box::new(|m, _| m["buffer"] = json!("gone.bin")),
             "buffer",

@@ -229,7 +229,10 @@ pub fn read(path: &Path) -> Result<Scene> {
         ));
     }
     let buffer_path = path.with_file_name(&manifest.buffer);
-    if Path::new(&manifest.buffer).components().count() != 1 {
+    let mut components = Path::new(&manifest.buffer).components();
+    if !(matches!(components.next(), Some(std::path::Component::Normal(_)))
+        && components.next().is_none())
+    {
         return Err(bad(
             "buffer",
             "must be a file name beside the manifest".into(),
