@@ -14,7 +14,8 @@ check passes when the first is within 2x the second.
 
     .venv/bin/python tools/mitsuba_compare.py [--scene S] [--spp 1024] [--resolution 256x256] [--json out.json]
 
-Needs numpy, mitsuba and OpenImageIO (tests/requirements.txt) and a release build of lucerna.
+Needs numpy, mitsuba and OpenImageIO (tests/requirements.txt) and a release build of lucerna
+($LUCERNA_BIN, default target/release/lucerna).
 """
 import argparse
 import json
@@ -40,27 +41,22 @@ def render_mitsuba(scene, spp, seed):
     return image[:, :, :3], time.perf_counter() - start
 
 
-def render_lucerna(binary, scene, spp, seed, width, height, workdir):
-    out = Path(workdir) / f"lucerna_{seed}.exr"
-    start = time.perf_counter()
-    subprocess.run([binary, "render", str(scene), "--spp", str(spp), "--seed", str(seed),
-                    "--resolution", f"{width}x{height}", "--filter", "box", "--aov", "beauty",
-                    "-q", "-o", str(out)], check=True)
-    seconds = time.perf_counter() - start
-    channels, _ = lt.read_exr(out)
-    return lt.rgb(channels), seconds
+def render_lucerna(scene, spp, seed, width, height, workdir):
+    image, header, _ = lt.render(scene, Path(workdir) / f"lucerna_{seed}.exr", (width, height), spp=spp, seed=seed,
+                                 filter="box", aov="beauty")
+    return image, header["lucerna/render_seconds"]
 
 
-def compare(spp, width, height, binary, scene=CORNELL):
+def compare(spp, width, height, scene=CORNELL):
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     with tempfile.TemporaryDirectory() as workdir:
         scene_file = Path(workdir) / "scene.lucerna"
-        subprocess.run([binary, "convert", str(scene), "-o", str(scene_file)], check=True, stderr=subprocess.DEVNULL)
+        subprocess.run([lt.BINARY, "convert", str(scene), "-o", str(scene_file)], check=True, stderr=subprocess.DEVNULL)
         exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
         mitsuba_a, seconds_a = render_mitsuba(exported, spp, 1)
         mitsuba_b, seconds_b = render_mitsuba(exported, spp, 2)
-        lucerna_a, lucerna_seconds = render_lucerna(binary, scene, spp, 1, width, height, workdir)
+        lucerna_a, lucerna_seconds = render_lucerna(scene, spp, 1, width, height, workdir)
     result = {
         "spp": spp,
         "resolution": [width, height],
@@ -80,11 +76,10 @@ def main():
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--scene", default=str(CORNELL))
     parser.add_argument("--resolution", default="256x256", help="WxH")
-    parser.add_argument("--lucerna", default=lt.BINARY)
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args()
     width, height = map(int, args.resolution.split("x"))
-    r = compare(args.spp, width, height, args.lucerna, args.scene)
+    r = compare(args.spp, width, height, args.scene)
     print(f"{args.scene} {width}x{height}, {args.spp} spp, box filter")
     print(f"  mean radiance   lucerna {np.round(r['mean_lucerna'], 5)}   Mitsuba {np.round(r['mean_mitsuba'], 5)}")
     print(f"  relMSE(lucerna, Mitsuba A)   = {r['relmse_lucerna_vs_mitsuba']:.6g}")

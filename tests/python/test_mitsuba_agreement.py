@@ -3,7 +3,6 @@ lucerna's scene file (tools/mitsuba_compare.py, tools/mitsuba_export.py); the di
 between the renderers must be within 2x the difference between two Mitsuba seeds, i.e. no
 visible bias. The Cornell box checks Lambertian surfaces and a one-sided area light; the MIS
 plates check GGX conductors (reflectance 1) and spherical lights."""
-import os
 import sys
 from pathlib import Path
 
@@ -11,11 +10,9 @@ ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT / "tools"))
 import mitsuba_compare  # noqa: E402
 
-BIN = os.environ.get("LUCERNA_BIN", str(ROOT / "target" / "release" / "lucerna"))
-
 
 def test_cornell_box_agrees_with_mitsuba():
-    r = mitsuba_compare.compare(spp=256, width=64, height=64, binary=BIN)
+    r = mitsuba_compare.compare(spp=256, width=64, height=64)
     assert r["ratio"] <= 2.0, r
     for lucerna, mitsuba in zip(r["mean_lucerna"], r["mean_mitsuba"]):
         assert abs(lucerna - mitsuba) <= 0.01 * mitsuba, r
@@ -25,5 +22,5 @@ def test_mis_plates_agree_with_mitsuba():
     scene = ROOT / "scenes" / "mis-plates" / "mis-plates.glb"
     # Mitsuba's image mean is heavy-tailed here (BSDF-sampled hits of the small lights), so
     # only the per-pixel comparison is checked.
-    r = mitsuba_compare.compare(spp=256, width=96, height=64, binary=BIN, scene=scene)
+    r = mitsuba_compare.compare(spp=256, width=96, height=64, scene=scene)
     assert r["ratio"] <= 2.0, r

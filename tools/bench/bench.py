@@ -147,13 +147,14 @@ def median_rows(rows):
 def ratio_table(medians, scenes, renderers):
     """Per scene and budget: lucerna's efficiency over each other renderer's."""
     base = renderers[0]
+    budgets = sorted({m["rung"] for m in medians if m["ladder"] == "time"})
     lines = []
     for other in renderers[1:]:
-        lines += [f"#### {base} / {other}", "", "| scene | " + " | ".join(f"{b:g} s" for b in budgets_of(medians)) +
-                  " | geometric mean |", "|---" * (len(budgets_of(medians)) + 2) + "|"]
+        lines += [f"#### {base} / {other}", "", "| scene | " + " | ".join(f"{b:g} s" for b in budgets) +
+                  " | geometric mean |", "|---" * (len(budgets) + 2) + "|"]
         for scene in scenes:
             ratios = []
-            for b in budgets_of(medians):
+            for b in budgets:
                 a = find(medians, scene, base, "time", b)
                 o = find(medians, scene, other, "time", b)
                 ratios.append(a["efficiency"] / o["efficiency"] if a and o else float("nan"))
@@ -162,10 +163,6 @@ def ratio_table(medians, scenes, renderers):
             lines.append(f"| {scene} | " + " | ".join(f"{r:.2f}" for r in ratios) + f" | **{gm:.2f}** |")
         lines.append("")
     return lines
-
-
-def budgets_of(medians):
-    return sorted({m["rung"] for m in medians if m["ladder"] == "time"})
 
 
 def find(medians, scene, renderer, ladder, rung):
