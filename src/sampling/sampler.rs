@@ -10,7 +10,8 @@ use glam::Vec2;
 pub enum SamplerKind {
     /// Independent uniform numbers (PCG32 per pixel sample).
     Independent,
-    /// Owen-scrambled Sobol (Burley 2020), padded in 4D sets decorrelated by seed.
+    /// Owen-scrambled Sobol (Burley 2020), padded in 4D sets decorrelated by seed, for the
+    /// camera and the first `SOBOL_DEPTH` vertices; independent numbers deeper.
     Sobol,
 }
 
@@ -65,6 +66,9 @@ pub struct Sampler {
     sample_key: u32,
     rng: Pcg32,
 }
+
+/// Vertices from this depth on take independent numbers even with the Sobol sampler.
+const SOBOL_DEPTH: u32 = 3;
 
 /// Which split samples a [`Sampler::split_point`] is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -136,8 +140,21 @@ impl Sampler {
         } else {
             0x4000_0000 ^ hash_u32(branch).wrapping_mul(0x10000)
         };
-        let a = self.set(base.wrapping_add(2 * depth));
-        let b = self.set(base.wrapping_add(2 * depth + 1));
+        let (a, b) = if self.kind == SamplerKind::Sobol && depth >= SOBOL_DEPTH {
+            // Deep vertices: hashed independent numbers, cheaper than scrambled Sobol sets.
+            let key =
+                mix_u64(((self.sample_key as u64) << 32) ^ ((branch as u64) << 16) ^ depth as u64);
+            let mut rng = Pcg32::new(key, key >> 1);
+            (
+                std::array::from_fn(|_| rng.next_f32()),
+                std::array::from_fn(|_| rng.next_f32()),
+            )
+        } else {
+            (
+                self.set(base.wrapping_add(2 * depth)),
+                self.set(base.wrapping_add(2 * depth + 1)),
+            )
+        };
         VertexSample {
             light: Vec2::new(a[0], a[1]),
             light_select: a[2],
