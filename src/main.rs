@@ -15,7 +15,7 @@ use std::process::ExitCode;
 #[command(
     name = "lucerna",
     version,
-    about = "A physically based path tracer: glTF scenes to multi-layer EXR"
+    about = "A physically based path tracer: glTF and USD scenes to multi-layer EXR"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -28,24 +28,51 @@ enum Command {
     Render(Box<RenderArgs>),
     /// Print a summary of a scene and what rendering it needs.
     Inspect {
-        /// A .gltf, .glb or .lucerna scene file.
+        /// A .gltf, .glb, .usd, .usda, .usdc, .usdz or .lucerna scene file.
         scene: PathBuf,
+        #[command(flatten)]
+        load: LoadArgs,
     },
     /// Write a scene as a lucerna scene file (a JSON manifest and a binary buffer beside it),
     /// exactly as the renderer sees it.
     Convert {
-        /// A .gltf, .glb or .lucerna scene file.
+        /// A .gltf, .glb, .usd, .usda, .usdc, .usdz or .lucerna scene file.
         scene: PathBuf,
         /// The manifest to write, e.g. shot.lucerna (its buffer goes to shot.lucerna.bin).
         #[arg(short, long)]
         output: PathBuf,
+        #[command(flatten)]
+        load: LoadArgs,
     },
+}
+
+/// How to read the scene (USD stages use these).
+#[derive(clap::Args)]
+struct LoadArgs {
+    /// Time code of an animated USD stage (default: the stage's start time code).
+    #[arg(long)]
+    frame: Option<f64>,
+    /// Convert a USD stage even if usd-core's validators report errors.
+    #[arg(long)]
+    no_validate: bool,
+}
+
+impl LoadArgs {
+    fn options(&self) -> ingest::LoadOptions {
+        ingest::LoadOptions {
+            frame: self.frame,
+            validate: !self.no_validate,
+        }
+    }
 }
 
 #[derive(clap::Args)]
 struct RenderArgs {
-    /// A .gltf, .glb or .lucerna scene file; without it, the embedded Cornell box.
+    /// A .gltf, .glb, .usd, .usda, .usdc, .usdz or .lucerna scene file; without it, the
+    /// embedded Cornell box.
     scene: Option<PathBuf>,
+    #[command(flatten)]
+    load: LoadArgs,
     /// Output EXR file.
     #[arg(short, long, default_value = "render.exr")]
     output: PathBuf,
@@ -197,9 +224,9 @@ fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
     }
 }
 
-fn load_scene(path: Option<&Path>) -> Result<Scene> {
+fn load_scene(path: Option<&Path>, load: &LoadArgs) -> Result<Scene> {
     let scene = match path {
-        Some(p) => ingest::load(p)?,
+        Some(p) => ingest::load(p, &load.options())?,
         None => ingest::default_scene()?,
     };
     for w in &scene.warnings {
@@ -220,7 +247,7 @@ fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
 fn render_command(args: RenderArgs) -> Result<()> {
     let options = args.options()?;
     let pool = thread_pool(args.threads)?;
-    let mut scene = load_scene(args.scene.as_deref())?;
+    let mut scene = load_scene(args.scene.as_deref(), &args.load)?;
     if let Some(radiance) = args.env {
         ingest::set_constant_environment(&mut scene, radiance);
     }
@@ -296,8 +323,8 @@ fn render_command(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-fn convert_command(path: &Path, output: &Path) -> Result<()> {
-    let scene = load_scene(Some(path))?;
+fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<()> {
+    let scene = load_scene(Some(path), load)?;
     lucerna::scene::file::write(&scene, output)?;
     eprintln!(
         "lucerna: wrote {} ({} meshes, {} materials, {} textures)",
@@ -309,8 +336,8 @@ fn convert_command(path: &Path, output: &Path) -> Result<()> {
     Ok(())
 }
 
-fn inspect_command(path: &Path) -> Result<()> {
-    let scene = load_scene(Some(path))?;
+fn inspect_command(path: &Path, load: &LoadArgs) -> Result<()> {
+    let scene = load_scene(Some(path), load)?;
     let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();
     let vertices: usize = scene.meshes.iter().map(|m| m.positions.len()).sum();
     println!("scene: {}", scene.source);
@@ -385,8 +412,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render_command(*args),
-        Command::Inspect { scene } => inspect_command(&scene),
-        Command::Convert { scene, output } => convert_command(&scene, &output),
+        Command::Inspect { scene, load } => inspect_command(&scene, &load),
+        Command::Convert {
+            scene,
+            output,
+            load,
+        } => convert_command(&scene, &output, &load),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

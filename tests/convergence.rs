@@ -132,12 +132,16 @@ fn every_configuration_converges_to_the_same_image() {
         ("cornell", ingest::default_scene().unwrap(), 256),
         (
             "mis-plates",
-            ingest::load(&root.join("mis-plates/mis-plates.glb")).unwrap(),
+            ingest::load(&root.join("mis-plates/mis-plates.glb"), &Default::default()).unwrap(),
             1024,
         ),
         (
             "indirect-room",
-            ingest::load(&root.join("indirect-room/indirect-room.glb")).unwrap(),
+            ingest::load(
+                &root.join("indirect-room/indirect-room.glb"),
+                &Default::default(),
+            )
+            .unwrap(),
             256,
         ),
     ];

@@ -42,7 +42,7 @@ mod tempdir {
 }
 
 fn load(path: &Path) -> Scene {
-    ingest::load(path).unwrap_or_else(|e| panic!("{e}"))
+    ingest::load(path, &Default::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn world_positions(scene: &Scene) -> Vec<DVec3> {
@@ -534,9 +534,12 @@ fn extensions_required_error_used_warning() {
         scene.warnings
     );
     b.json["extensionsRequired"] = json!(["KHR_materials_clearcoat"]);
-    let err = ingest::load(&b.write_embedded(dir.path(), "required"))
-        .err()
-        .unwrap();
+    let err = ingest::load(
+        &b.write_embedded(dir.path(), "required"),
+        &Default::default(),
+    )
+    .err()
+    .unwrap();
     assert_eq!(err.exit_code(), 2);
     assert!(
         err.to_string().contains("KHR_materials_clearcoat")

@@ -101,14 +101,14 @@ fn round_trip_renders_identically() {
         textured_scene(&dir),
     ];
     for source in &sources {
-        let mut original = ingest::load(source).unwrap();
+        let mut original = ingest::load(source, &Default::default()).unwrap();
         ingest::set_constant_environment(&mut original, glam::Vec3::new(0.1, 0.2, 0.3));
         let path = dir.join(format!(
             "{}.lucerna",
             source.file_stem().unwrap().to_string_lossy()
         ));
         file::write(&original, &path).unwrap();
-        let read = ingest::load(&path).unwrap();
+        let read = ingest::load(&path, &Default::default()).unwrap();
         // Writing what was read gives the same files: nothing is lost or reinterpreted.
         let again = dir.join("again").join(path.file_name().unwrap());
         std::fs::create_dir_all(again.parent().unwrap()).unwrap();
@@ -125,7 +125,7 @@ fn round_trip_renders_identically() {
     }
     // A third texture sharing the first one's image with another sampler (as two glTF
     // textures of one image do) is written once and shared again when read.
-    let mut textured = ingest::load(&dir.join("textured.lucerna")).unwrap();
+    let mut textured = ingest::load(&dir.join("textured.lucerna"), &Default::default()).unwrap();
     let mut variant = textured.textures[0].clone();
     variant.nearest = !variant.nearest;
     textured.textures.push(variant);
@@ -142,7 +142,7 @@ fn round_trip_renders_identically() {
     // 4 vertices × (position 3 + normal 3 + tangent 4 + uv 2 + colour 4 floats), 2 triangles,
     // and 2×2 + 1×1 texels of 4 bytes.
     assert_eq!(buffer_bytes, 4 * 16 * 4 + 2 * 12 + 5 * 4);
-    let read = ingest::load(&shared).unwrap();
+    let read = ingest::load(&shared, &Default::default()).unwrap();
     assert!(std::sync::Arc::ptr_eq(
         &read.textures[0].texels,
         &read.textures[2].texels
@@ -165,7 +165,7 @@ fn error_after(name: &str, corrupt: impl FnOnce(&mut Value, &mut Vec<u8>)) -> lu
     }
     std::fs::write(&path, serde_json::to_vec(&manifest).unwrap()).unwrap();
     std::fs::write(&bin, &buffer).unwrap();
-    let error = ingest::load(&path).expect_err(name);
+    let error = ingest::load(&path, &Default::default()).expect_err(name);
     assert_eq!(error.kind, ErrorKind::BadInput, "{error}");
     error
 }
@@ -280,7 +280,7 @@ fn malformed_scene_files_are_rejected_with_the_element() {
     let bin = dir.join("box.lucerna.bin");
     let len = std::fs::metadata(&bin).unwrap().len();
     std::fs::write(&bin, &std::fs::read(&bin).unwrap()[..len as usize - 4]).unwrap();
-    let error = ingest::load(&path).unwrap_err();
+    let error = ingest::load(&path, &Default::default()).unwrap_err();
     assert_eq!(
         (error.kind, error.element.as_str()),
         (ErrorKind::BadInput, "buffer"),

@@ -47,10 +47,12 @@ class GltfWriter:
             acc["max"] = [max(v[k] for v in values) for k in range(3)]
         return self._list("accessors", acc)
 
-    def mesh(self, name, positions, triangles, material, normals=None, extras=None):
+    def mesh(self, name, positions, triangles, material, normals=None, extras=None, uvs=None):
         attributes = {"POSITION": self.accessor(positions, "VEC3")}
         if normals is not None:
             attributes["NORMAL"] = self.accessor(normals, "VEC3")
+        if uvs is not None:
+            attributes["TEXCOORD_0"] = self.accessor(uvs, "VEC2")
         component = 5123 if len(positions) < 65536 else 5125
         indices = self.accessor([i for t in triangles for i in t], "SCALAR", component)
         mesh = {"name": name, "primitives": [{"attributes": attributes, "indices": indices, "material": material}]}
@@ -59,13 +61,15 @@ class GltfWriter:
         return self._list("meshes", mesh)
 
     def material(self, name, base=(0.8, 0.8, 0.8), metallic=0.0, roughness=1.0, emissive=None,
-                 double_sided=True, extras=None):
+                 double_sided=True, extras=None, base_texture=None):
         m = {
             "name": name,
             "pbrMetallicRoughness": {"baseColorFactor": list(base) + [1.0], "metallicFactor": metallic,
                                      "roughnessFactor": roughness},
             "doubleSided": double_sided,
         }
+        if base_texture is not None:
+            m["pbrMetallicRoughness"]["baseColorTexture"] = {"index": base_texture}
         if emissive is not None:
             peak = max(emissive)
             m["emissiveFactor"] = [c / peak for c in emissive]
@@ -77,6 +81,12 @@ class GltfWriter:
         if extras is not None:
             m["extras"] = extras
         return self._list("materials", m)
+
+    def texture(self, uri):
+        """A texture of the image file `uri` (relative to the glTF) with a repeating sampler."""
+        image = self._list("images", {"uri": uri})
+        sampler = self._list("samplers", {"wrapS": 10497, "wrapT": 10497})
+        return self._list("textures", {"source": image, "sampler": sampler})
 
     def node(self, root=True, **fields):
         index = self._list("nodes", {k: v for k, v in fields.items() if v is not None})

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs lucerna's whole test suite: the Rust tests (release build, so rendering tests are fast)
-# and the Python tests, which read the renderer's EXR output with OpenImageIO.
+# Runs lucerna's whole test suite: the Rust tests (release build, so rendering tests are fast),
+# the Python tests, which read the renderer's EXR output with OpenImageIO, and the USD
+# plugin's tests (plugins/usd/tests, usd-core).
 # Python packages go into a virtual environment (.venv, or $LUCERNA_VENV) made on first use.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -17,4 +18,5 @@ if cargo nextest --version >/dev/null 2>&1; then
 else
     cargo test --release --locked --no-fail-fast
 fi
-LUCERNA_BIN="$PWD/target/release/lucerna" "$venv/bin/python" -m pytest -q tests/python
+LUCERNA_BIN="$PWD/target/release/lucerna" LUCERNA_PYTHON="$(cd "$venv" && pwd)/bin/python" \
+    "$venv/bin/python" -m pytest -q tests/python plugins/usd/tests

@@ -137,7 +137,7 @@ fn main() {
         ),
     ] {
         let load = || match &path {
-            Some(p) => ingest::load(p).expect("scene loads"),
+            Some(p) => ingest::load(p, &Default::default()).expect("scene loads"),
             None => ingest::default_scene().unwrap(),
         };
         let rss_before = peak_memory_bytes().unwrap_or(0);

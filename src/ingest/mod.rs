@@ -5,6 +5,7 @@ pub mod gltf;
 pub mod image;
 pub mod tangents;
 pub mod uri;
+pub mod usd;
 
 use crate::error::{Error, Result};
 use crate::scene::{self, Scene, Texture, Wrap};
@@ -22,8 +23,26 @@ pub fn default_scene() -> Result<Scene> {
     gltf::import(CORNELL_BOX, DEFAULT_SCENE, None)
 }
 
+/// How to read a scene: options that only some formats use.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Time code of an animated USD stage (default: its start time code).
+    pub frame: Option<f64>,
+    /// Run usd-core's validators and stop on their errors (USD stages).
+    pub validate: bool,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        Self {
+            frame: None,
+            validate: true,
+        }
+    }
+}
+
 /// Loads a scene file, choosing the importer by extension.
-pub fn load(path: &Path) -> Result<Scene> {
+pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
@@ -32,15 +51,12 @@ pub fn load(path: &Path) -> Result<Scene> {
     match ext.as_str() {
         "gltf" | "glb" => gltf::load(path),
         scene::file::EXTENSION => scene::file::read(path),
-        "usd" | "usda" | "usdc" | "usdz" => Err(Error::bad_input(
-            path,
-            "file",
-            "USD scenes are not supported yet (the usd-core plugin is planned)",
-        )),
+        e if usd::EXTENSIONS.contains(&e) => usd::load(path, options),
         _ => Err(Error::bad_input(
             path,
             "file",
-            "unknown scene format (expected .gltf, .glb or a .lucerna scene file)",
+            "unknown scene format (expected .gltf, .glb, .usd, .usda, .usdc, .usdz or a \
+             .lucerna scene file)",
         )),
     }
 }

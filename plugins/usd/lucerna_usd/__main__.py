@@ -1,0 +1,209 @@
+"""Command line of the USD plugin, the protocol lucerna's renderer speaks:
+
+    python -m lucerna_usd convert STAGE -o OUT.lucerna [--frame F] [--no-validate]
+    python -m lucerna_usd validate STAGE
+
+`convert` opens STAGE (.usd, .usda, .usdc, .usdz), validates it with every registered
+`pxr.UsdValidation` validator, converts the composed stage at time code F (default: the
+stage's start time code if it has one, else the earliest time sample) and writes the scene
+file OUT.lucerna and its buffer OUT.lucerna.bin. Validation errors stop the conversion unless
+--no-validate; validation warnings and conversion warnings go into the scene file's
+`warnings`, which the renderer prints. Problems are printed on stderr, one per line, as
+`lucerna-usd: error: FILE: ELEMENT: REASON`.
+
+Exit status: 0 converted; 2 the stage is bad (unreadable, failed validation, nothing to
+convert); 3 a Python package is missing (the message names the install command); 1 an
+internal failure (LUCERNA_USD_DEBUG=1 shows its traceback)."""
+
+import argparse
+import contextlib
+import os
+import sys
+import tempfile
+import time as clock
+
+EXIT_BAD_INPUT = 2
+EXIT_MISSING_PACKAGE = 3
+REQUIREMENTS = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                            "requirements.txt")
+
+
+def _error(file, element, reason):
+    reason = " ".join(str(reason).split())
+    print(f"lucerna-usd: error: {file}: {element}: {reason}", file=sys.stderr)
+
+
+@contextlib.contextmanager
+def _captured_stderr(sink):
+    """Collects what usd-core prints on the C-level stderr (its Tf diagnostics) into
+    `sink` instead of the terminal; the plugin reports the same problems itself."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            sink.append(tmp.read().decode(errors="replace"))
+
+
+def _open(path):
+    from pxr import Tf, Usd
+
+    if not os.path.isfile(path):
+        raise FileNotFoundError(path)
+    captured = []
+    try:
+        with _captured_stderr(captured):
+            stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+    except Tf.ErrorException as e:
+        return None, _tf_reason(e)
+    if stage is None:
+        return None, "usd-core cannot open the file"
+    return stage, None
+
+
+def _time(stage, frame):
+    from pxr import Usd
+
+    if frame is not None:
+        return Usd.TimeCode(frame)
+    if stage.HasAuthoredTimeCodeRange():
+        return Usd.TimeCode(stage.GetStartTimeCode())
+    return Usd.TimeCode.EarliestTime()
+
+
+def _validate(stage, path, no_validate, warnings):
+    """Runs the validators; returns False (after printing the errors) if conversion must
+    stop."""
+    from .validate import validate
+
+    captured = []
+    with _captured_stderr(captured):
+        findings = validate(stage)
+    errors = [f for f in findings if f.severity == "error"]
+    for f in findings:
+        if f.severity != "error" or no_validate:
+            warnings.append(f"validation {f.severity}: {f}")
+    if errors and not no_validate:
+        for f in errors:
+            _error(path, ", ".join(f.sites) or "stage", f"{f.message} [{f.validator}]")
+        print(f"lucerna-usd: {len(errors)} validation error(s); --no-validate renders the "
+              "stage anyway", file=sys.stderr)
+        return False
+    return True
+
+
+def convert(path, output, frame=None, no_validate=False, quiet=False):
+    """Converts `path` to the scene file `output`; returns the exit status."""
+    from pxr import Tf
+
+    try:
+        return _convert(path, output, frame, no_validate, quiet)
+    except Tf.ErrorException as e:
+        # usd-core raises on layers it cannot parse when composition reaches them.
+        _error(path, "stage", _tf_reason(e))
+        return EXIT_BAD_INPUT
+
+
+def _tf_reason(error):
+    messages = [line.strip() for line in str(error).splitlines() if line.strip()]
+    detail = next((m.split(" : ", 1)[1] for m in messages if " : " in m), "; ".join(messages))
+    return detail.strip("'")
+
+
+def _convert(path, output, frame, no_validate, quiet):
+    from . import StageError
+    from .convert import Converter
+
+    started = clock.monotonic()
+    try:
+        stage, reason = _open(path)
+    except FileNotFoundError:
+        _error(path, "file", "no such file")
+        return EXIT_BAD_INPUT
+    if stage is None:
+        _error(path, "stage", reason)
+        return EXIT_BAD_INPUT
+    warnings = []
+    if not _validate(stage, path, no_validate, warnings):
+        return EXIT_BAD_INPUT
+    if no_validate:
+        for e in stage.GetCompositionErrors():
+            text = e.GetErrorAsString() if hasattr(e, "GetErrorAsString") else str(e)
+            warnings.append(f"composition: {' '.join(text.split())}")
+    captured = []
+    try:
+        with _captured_stderr(captured):
+            converter = Converter(stage, path, _time(stage, frame))
+            writer = converter.run()
+    except StageError as e:
+        _error(path, e.element, e.reason)
+        return EXIT_BAD_INPUT
+    writer.warnings[:0] = warnings
+    for text in captured:
+        for line in text.splitlines():
+            if line.strip():
+                writer.warnings.append(f"usd-core: {line.strip()}")
+    if not writer.instances and not writer.spheres and not writer.lights and writer.environment is None:
+        _error(path, "stage", "nothing to render (no meshes, spheres or lights)")
+        return EXIT_BAD_INPUT
+    writer.write(output)
+    if not quiet:
+        print(f"lucerna-usd: {path} -> {output}: {len(writer.meshes)} meshes, "
+              f"{len(writer.instances)} instances, {len(writer.materials)} materials, "
+              f"{len(writer.lights) + len(writer.spheres)} lights and spheres, "
+              f"{len(writer.cameras)} cameras, {len(writer.warnings)} warnings, "
+              f"{clock.monotonic() - started:.2f} s", file=sys.stderr)
+    return 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="python -m lucerna_usd", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    commands = parser.add_subparsers(dest="command", required=True)
+    c = commands.add_parser("convert", help="convert a stage to a lucerna scene file")
+    c.add_argument("stage")
+    c.add_argument("-o", "--output", required=True)
+    c.add_argument("--frame", type=float)
+    c.add_argument("--no-validate", action="store_true")
+    c.add_argument("--quiet", action="store_true")
+    v = commands.add_parser("validate", help="print the validators' findings")
+    v.add_argument("stage")
+    args = parser.parse_args(argv)
+    try:
+        import numpy  # noqa: F401
+        import OpenImageIO  # noqa: F401
+        from pxr import Usd  # noqa: F401
+    except ImportError as e:
+        print(f"lucerna-usd: error: missing Python package ({e}); install the plugin's "
+              f"requirements with: {sys.executable} -m pip install -r {REQUIREMENTS}",
+              file=sys.stderr)
+        return EXIT_MISSING_PACKAGE
+    if args.command == "validate":
+        stage, reason = _open(args.stage) if os.path.isfile(args.stage) else (None, "no such file")
+        if stage is None:
+            _error(args.stage, "stage", reason)
+            return EXIT_BAD_INPUT
+        from .validate import validate
+
+        findings = validate(stage)
+        for f in findings:
+            print(f"{f.severity}: {f}")
+        return EXIT_BAD_INPUT if any(f.severity == "error" for f in findings) else 0
+    try:
+        return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet)
+    except Exception as e:  # a bug of the plugin: one line, the traceback on request
+        if os.environ.get("LUCERNA_USD_DEBUG"):
+            raise
+        _error(args.stage, "usd plugin", f"internal error: {type(e).__name__}: {e} "
+               "(LUCERNA_USD_DEBUG=1 shows the traceback)")
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,307 @@
+"""The composed stage to lucerna's scene.
+
+Traversal: active, loaded, defined prims (usd-core's default predicate); `visibility`
+invisible prunes a subtree, `purpose` proxy and guide are skipped (default and render are
+rendered). Every prim yields *groups*: what it contains (meshes, spheres, lights, cameras)
+with one transform per placement, relative to the prim. A parent applies its children's
+local transforms (time-sampled, at the frame) to their groups, so a prototype (a
+scene-graph instance's, or a PointInstancer's) is converted once and placed many times:
+its meshes are stored once and instanced.
+
+Stage space to lucerna's: Z-up stages are turned to Y up, and metersPerUnit scales to
+metres (lucerna's world unit, as glTF's). Texture coordinates flip v (USD's t grows
+upwards, glTF's v downwards).
+"""
+
+import math
+
+import numpy as np
+from pxr import Usd, UsdGeom, UsdLux, UsdShade
+
+from . import lights
+from .materials import MaterialConverter
+from .mesh import MeshData
+from .scene_file import SceneWriter, matrix
+
+# Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
+_SKIPPED_GPRIMS = (UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane,
+                   UsdGeom.Points, UsdGeom.BasisCurves, UsdGeom.NurbsCurves, UsdGeom.NurbsPatch,
+                   UsdGeom.HermiteCurves, UsdGeom.TetMesh)
+
+
+class Group:
+    """Something a prim contributes, placed by row-vector matrices `mats` (K, 4, 4)
+    relative to the prim (or to the world when `absolute`, after a resetXformStack)."""
+
+    __slots__ = ("kind", "payload", "mats", "absolute")
+
+    def __init__(self, kind, payload, mats=None, absolute=False):
+        self.kind = kind
+        self.payload = payload
+        self.mats = np.identity(4)[None] if mats is None else mats
+        self.absolute = absolute
+
+    def placed(self, local, resets):
+        """This group seen from the parent whose child has `local` transform."""
+        if self.absolute:
+            return self
+        return Group(self.kind, self.payload, self.mats @ local, resets)
+
+
+def _np(m):
+    return np.array(m, dtype=np.float64).reshape(4, 4)
+
+
+def stage_to_lucerna(stage):
+    """Row-vector matrix from stage space to lucerna's world (Y up, metres)."""
+    m = np.identity(4)
+    if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z:
+        m[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]
+    m[:3, :3] *= UsdGeom.GetStageMetersPerUnit(stage)
+    return m
+
+
+class Converter:
+    """Converts one stage at one time code; `warnings` collects what was repaired,
+    approximated or skipped, each naming its prim."""
+
+    def __init__(self, stage, source, time):
+        self.stage = stage
+        self.time = time
+        self.writer = SceneWriter(source)
+        self.materials = MaterialConverter(self.writer, time, self.warn)
+        self.to_lucerna = stage_to_lucerna(stage)
+        self.meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
+        self._flat = {}
+        self._warned = set()
+
+    def warn(self, element, message):
+        text = f"{element}: {message}"
+        if text not in self._warned:
+            self._warned.add(text)
+            self.writer.warnings.append(text)
+
+    # ---- traversal -----------------------------------------------------------------
+    def run(self):
+        groups = self._children(self.stage.GetPseudoRoot(), self.stage.GetPseudoRoot().GetFilteredChildren(Usd.PrimDefaultPredicate), None)
+        for g in groups:
+            world_usd = g.mats
+            world = g.mats @ self.to_lucerna
+            if g.kind == "mesh":
+                mesh, name = g.payload
+                self.writer.add_instances(name, mesh, world)
+            elif g.kind == "sphere":
+                radius, material, name = g.payload
+                for k, m in enumerate(world):
+                    scales = np.linalg.norm(m[:3, :3], axis=1)
+                    if scales.max() > scales.min() * (1 + 1e-4):
+                        self.warn(name, "non-uniform scale on a Sphere: the mean scale is used")
+                    self.writer.spheres.append({
+                        "name": name if len(world) == 1 else f"{name}[{k}]",
+                        "centre": [float(x) for x in m[3, :3]],
+                        "radius": float(radius * scales.mean()), "material": material})
+            elif g.kind == "camera":
+                for m in world:
+                    self._camera(g.payload, m)
+            elif g.kind == "light":
+                lights.convert(self.writer, g.payload, list(world_usd), self.to_lucerna,
+                               self.time, self.warn)
+        if not self.writer.instances and not self.writer.spheres:
+            self.warn("stage", "no renderable geometry")
+        return self.writer
+
+    def _children(self, parent, children, inherited):
+        groups = []
+        for child in children:
+            local, resets = np.identity(4), False
+            if child.IsA(UsdGeom.Xformable):
+                xformable = UsdGeom.Xformable(child)
+                local = _np(xformable.GetLocalTransformation(self.time))
+                resets = xformable.GetResetXformStack()
+            groups.extend(g.placed(local, resets) for g in self._flatten(child, inherited))
+        return groups
+
+    def _flatten(self, prim, inherited):
+        key = (str(prim.GetPath()), inherited)
+        if key not in self._flat:
+            self._flat[key] = self._convert_prim(prim, inherited)
+        return self._flat[key]
+
+    def _convert_prim(self, prim, inherited):
+        path = str(prim.GetPath())
+        if prim.IsA(UsdGeom.Imageable):
+            imageable = UsdGeom.Imageable(prim)
+            if imageable.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible:
+                return []
+            if imageable.GetPurposeAttr().Get() in (UsdGeom.Tokens.proxy, UsdGeom.Tokens.guide):
+                return []
+        groups = []
+        if prim.IsA(UsdGeom.Mesh):
+            if prim.HasAPI(UsdLux.MeshLightAPI):
+                self.warn(path, "MeshLightAPI is not supported: use an emissive material")
+            groups += self._mesh(prim, inherited)
+        elif prim.IsA(UsdGeom.Sphere) or prim.IsA(UsdGeom.Cube):
+            groups += self._implicit(prim, inherited)
+        elif prim.IsA(UsdGeom.PointInstancer):
+            return self._point_instancer(prim, inherited)
+        elif prim.IsA(UsdGeom.Camera):
+            groups.append(Group("camera", prim))
+        elif prim.HasAPI(UsdLux.LightAPI):
+            groups.append(Group("light", prim))
+        elif any(prim.IsA(t) for t in _SKIPPED_GPRIMS):
+            self.warn(path, f"{prim.GetTypeName()} is not supported: skipped")
+        if prim.IsInstance():
+            proto = prim.GetPrototype()
+            bound = self._bound_material(prim) or inherited
+            return groups + self._children(proto, proto.GetFilteredChildren(Usd.PrimDefaultPredicate), bound)
+        return groups + self._children(prim, prim.GetFilteredChildren(Usd.PrimDefaultPredicate), inherited)
+
+    def _bound_material(self, prim):
+        material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]
+        return str(material.GetPath()) if material else None
+
+    def _material(self, prim, inherited, double_sided):
+        """(index, st primvar, colour primvar) of the material bound to `prim` (a mesh or
+        subset), else of the instance's material, else None for the caller's fallback."""
+        path = self._bound_material(prim) or inherited
+        if path is None:
+            return None
+        return self.materials.material(UsdShade.Material(self.stage.GetPrimAtPath(path)), double_sided)
+
+    # ---- point instancers ------------------------------------------------------------
+    def _point_instancer(self, prim, inherited):
+        path = str(prim.GetPath())
+        pi = UsdGeom.PointInstancer(prim)
+        prototypes = pi.GetPrototypesRel().GetForwardedTargets()
+        indices = np.asarray(pi.GetProtoIndicesAttr().Get(self.time) or [], dtype=np.int64)
+        bad = (indices < 0) | (indices >= len(prototypes))
+        if bad.any():
+            self.warn(path, f"{int(bad.sum())} protoIndices out of range (there are "
+                      f"{len(prototypes)} prototypes): the PointInstancer is skipped")
+            return []
+        # The transforms come without the masked instances (invisibleIds, inactiveIds).
+        mask = pi.ComputeMaskAtTime(self.time)
+        if mask:
+            indices = indices[np.asarray(mask, dtype=bool)]
+        xforms = pi.ComputeInstanceTransformsAtTime(self.time, self.time)
+        if xforms is None or len(xforms) != len(indices):
+            self.warn(path, "instance transforms cannot be computed (positions, orientations "
+                      "or scales disagree with protoIndices): the PointInstancer is skipped")
+            return []
+        mats = np.array(xforms, dtype=np.float64).reshape(-1, 4, 4)
+        groups = []
+        for p, target in enumerate(prototypes):
+            proto = self.stage.GetPrimAtPath(target)
+            if not proto:
+                self.warn(path, f"prototype {target} does not exist")
+                continue
+            placements = mats[indices == p]
+            if not len(placements):
+                continue
+            for g in self._flatten(proto, inherited):
+                if g.absolute:
+                    groups.append(g)
+                    continue
+                combined = (g.mats[None, :, :, :] @ placements[:, None, :, :]).reshape(-1, 4, 4)
+                groups.append(Group(g.kind, g.payload, combined))
+        return groups
+
+    # ---- implicit gprims -------------------------------------------------------------
+    def _implicit(self, prim, inherited):
+        path = str(prim.GetPath())
+        gprim = UsdGeom.Gprim(prim)
+        double_sided = bool(gprim.GetDoubleSidedAttr().Get(self.time))
+        material = self._material(prim, inherited, double_sided)
+        if material is None:
+            material = self.materials.display_color(self._constant_display_color(gprim), double_sided)
+        if prim.IsA(UsdGeom.Sphere):
+            radius = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time))
+            return [Group("sphere", (radius, material[0], path))]
+        size = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time)) / 2
+        corners = np.array([[x, y, z] for x in (-size, size) for y in (-size, size) for z in (-size, size)])
+        faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        triangles = np.array([[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces])
+        mesh = self.writer.add_mesh(path, material[0], corners, triangles)
+        return [Group("mesh", (mesh, path))]
+
+    def _constant_display_color(self, gprim):
+        pv = gprim.GetDisplayColorPrimvar()
+        if pv and pv.HasAuthoredValue() and pv.GetInterpolation() == UsdGeom.Tokens.constant:
+            values = pv.ComputeFlattened(self.time)
+            if values:
+                return values[0]
+        return None
+
+    # ---- cameras ---------------------------------------------------------------------
+    def _camera(self, prim, world):
+        path = str(prim.GetPath())
+        cam = UsdGeom.Camera(prim).GetCamera(self.time)
+        h_ap, v_ap = cam.horizontalAperture, cam.verticalAperture
+        if h_ap <= 0 or v_ap <= 0 or cam.focalLength <= 0:
+            self.warn(path, "camera with a zero aperture or focal length: skipped")
+            return
+        if cam.horizontalApertureOffset or cam.verticalApertureOffset:
+            self.warn(path, "aperture offsets (lens shift) are not supported and are ignored")
+        mpu = self.meters_per_unit
+        if cam.projection == cam.Orthographic:
+            # Orthographic apertures are in tenths of a scene unit.
+            projection = {"orthographic": {"xmag": h_ap * 0.1 * mpu / 2, "ymag": v_ap * 0.1 * mpu / 2}}
+        else:
+            projection = {"perspective": {"yfov": 2 * math.atan(v_ap / (2 * cam.focalLength)),
+                                          "aspect": h_ap / v_ap}}
+        transform = np.array(world, dtype=np.float64)
+        transform[:3, :3] /= np.linalg.norm(transform[:3, :3], axis=1, keepdims=True)
+        near, far = cam.clippingRange.min, cam.clippingRange.max
+        aperture = cam.focalLength * 0.1 / (2 * cam.fStop) * mpu if cam.fStop > 0 else 0.0
+        self.writer.cameras.append({
+            "name": path,
+            "projection": projection,
+            "transform": matrix(transform),
+            "aperture_radius": aperture,
+            "focus_distance": cam.focusDistance * mpu if cam.focusDistance > 0 else 1.0,
+            "clip_near": max(near, 0.0) * mpu,
+            "clip_far": far * mpu if math.isfinite(far) and far > near else None,
+        })
+
+    # ---- meshes ----------------------------------------------------------------------
+    def _mesh(self, prim, inherited):
+        path = str(prim.GetPath())
+        mesh = UsdGeom.Mesh(prim)
+        double_sided = bool(mesh.GetDoubleSidedAttr().Get(self.time))
+        data = MeshData.read(mesh, self.time, self.warn)
+        if data is None:
+            return []
+        # Faces by material: GeomSubsets of the materialBind family, then the rest.
+        parts = []
+        taken = np.zeros(data.face_count, bool)
+        for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
+            faces = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], dtype=np.int64)
+            faces = faces[(faces >= 0) & (faces < data.face_count)]
+            mat = self._material(subset.GetPrim(), None, double_sided)
+            if mat is None:
+                continue
+            select = np.zeros(data.face_count, bool)
+            select[faces] = True
+            select &= ~taken
+            taken |= select
+            parts.append((f"{path}:{subset.GetPrim().GetName()}", select, mat))
+        rest = ~taken
+        if rest.any():
+            mat = self._material(prim, inherited, double_sided)
+            parts.append((path, rest, mat))
+        groups = []
+        for name, faces, mat in parts:
+            if mat is None:
+                color = self._constant_display_color(mesh)
+                mat = self.materials.display_color(color, double_sided)
+                color_primvar = None if color is not None else "displayColor"
+                mat = (mat[0], None, color_primvar)
+            index, st_name, color_primvar = mat
+            built = data.build(faces, st_name, color_primvar, name)
+            if built is None:
+                continue
+            positions, triangles, normals, uvs, colors = built
+            mesh_index = self.writer.add_mesh(name, index, positions, triangles, normals, uvs, colors)
+            groups.append(Group("mesh", (mesh_index, name)))
+        return groups
+

@@ -1,0 +1,97 @@
+"""Texture images for the plugin, read with OpenImageIO (PNG, JPEG, OpenEXR, Radiance HDR,
+TIFF, ...). Paths are resolved by USD's asset resolver, so images inside a .usdz package
+are read too."""
+
+import os
+import tempfile
+
+import numpy as np
+import OpenImageIO as oiio
+from pxr import Ar
+
+
+class Image:
+    """A decoded image: `pixels` (H, W, 4) float32, with RGB replicated from a grey image
+    and alpha 1 where the file has none; `eight_bit` tells whether the file stored 8-bit
+    values (USD's `auto` colour space reads those as sRGB); `raw8` keeps the 8-bit values
+    as stored, for textures passed through unchanged."""
+
+    def __init__(self, path, pixels, eight_bit, raw8):
+        self.path = path
+        self.pixels = pixels
+        self.eight_bit = eight_bit
+        self.raw8 = raw8
+
+    @property
+    def shape(self):
+        return self.pixels.shape[:2]
+
+
+def _rgba(pixels):
+    h, w, c = pixels.shape
+    if c == 1:
+        return np.concatenate([pixels] * 3 + [np.ones((h, w, 1), pixels.dtype) * _one(pixels)], 2)
+    if c == 2:
+        return np.concatenate([pixels[..., :1]] * 3 + [pixels[..., 1:2]], 2)
+    if c == 3:
+        return np.concatenate([pixels, np.ones((h, w, 1), pixels.dtype) * _one(pixels)], 2)
+    return pixels[..., :4]
+
+
+def _one(pixels):
+    return 255 if pixels.dtype == np.uint8 else 1.0
+
+
+def _read_file(path):
+    buf = oiio.ImageBuf(path)
+    if buf.has_error:
+        raise OSError(buf.geterror().strip() or "cannot read the image")
+    spec = buf.spec()
+    eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
+    pixels = buf.get_pixels(oiio.FLOAT)
+    if pixels is None or buf.has_error:
+        raise OSError(buf.geterror().strip() or "cannot decode the image")
+    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
+    if not np.isfinite(pixels).all():
+        bad = int((~np.isfinite(pixels)).sum())
+        raise OSError(f"{bad} texel values are NaN or infinite")
+    raw8 = _rgba(np.asarray(buf.get_pixels(oiio.UINT8)).reshape(pixels.shape)) if eight_bit else None
+    return _rgba(pixels), eight_bit, raw8
+
+
+def read(asset_path):
+    """Reads the image an `Sdf.AssetPath` names. Raises OSError with the reason."""
+    resolved = asset_path.resolvedPath
+    if not resolved:
+        raise OSError(f"cannot resolve {asset_path.path!r}")
+    if "[" in resolved and resolved.endswith("]"):
+        # Inside a package (.usdz): copy the bytes out for OpenImageIO.
+        asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
+        if asset is None:
+            raise OSError(f"cannot open {resolved}")
+        data = bytes(asset.GetBuffer())
+        suffix = os.path.splitext(resolved[:-1])[1]
+        with tempfile.NamedTemporaryFile(suffix=suffix) as f:
+            f.write(data)
+            f.flush()
+            pixels, eight_bit, raw8 = _read_file(f.name)
+    else:
+        pixels, eight_bit, raw8 = _read_file(resolved)
+    return Image(resolved, pixels, eight_bit, raw8)
+
+
+def srgb_to_linear(x):
+    """The sRGB transfer function's inverse (IEC 61966-2-1)."""
+    x = np.asarray(x, dtype=np.float32)
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
+def resample(pixels, shape):
+    """Nearest-texel resampling of (H, W, C) to `shape` (H', W'), for combining channels
+    of images of different sizes into one texture."""
+    h, w = pixels.shape[:2]
+    if (h, w) == tuple(shape):
+        return pixels
+    ys = np.minimum(((np.arange(shape[0]) + 0.5) * h / shape[0]).astype(int), h - 1)
+    xs = np.minimum(((np.arange(shape[1]) + 0.5) * w / shape[1]).astype(int), w - 1)
+    return pixels[ys][:, xs]

@@ -1,0 +1,215 @@
+"""UsdLux lights to lucerna's scene.
+
+Emission follows UsdLux's definition: L = intensity * 2^exposure * color, times the
+blackbody colour of colorTemperature when enableColorTemperature is on (usd-core's
+`UsdLux.BlackbodyTemperatureAsRgb`, divided by its value at 6500 K so that the fallback
+temperature gives white, as the schema says); with normalize, area lights divide by their
+surface area in stage units, and a distant light's intensity becomes the irradiance on a
+surface facing it. Lights are visible to the camera, as in Karma and RenderMan.
+
+- RectLight, DiskLight, CylinderLight: emissive surfaces (black, one-sided, emitting along
+  -Z, resp. outwards; no end caps). The disk and the cylinder are polygons of SEGMENTS
+  sides whose radius keeps the true surface area, so their power is exact.
+- SphereLight: an analytic emissive sphere (sampled by solid angle); with treatAsPoint a
+  point light of the same radiant intensity L * pi * r^2.
+- DistantLight: a directional light with the cone's irradiance.
+- DomeLight, DomeLight_1: the environment, constant or a lat-long map (OpenEXR's
+  convention: +Y pole, longitude 0 along +Z).
+"""
+
+import math
+
+import numpy as np
+from pxr import UsdGeom, UsdLux
+
+from . import images
+from .scene_file import default_material, matrix
+
+SEGMENTS = 64
+
+
+def emission(prim, time):
+    """The light's scalar-times-colour emission before normalisation (RGB)."""
+    light = UsdLux.LightAPI(prim)
+    intensity = light.GetIntensityAttr().Get(time)
+    exposure = light.GetExposureAttr().Get(time)
+    color = np.asarray(light.GetColorAttr().Get(time), dtype=float)
+    value = float(intensity) * 2.0 ** float(exposure) * color
+    if light.GetEnableColorTemperatureAttr().Get(time):
+        kelvin = float(light.GetColorTemperatureAttr().Get(time))
+        rgb = np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), dtype=float)
+        value = value * rgb / np.asarray(UsdLux.BlackbodyTemperatureAsRgb(6500.0), dtype=float)
+    return value
+
+
+def _normalize(prim, time):
+    return bool(UsdLux.LightAPI(prim).GetNormalizeAttr().Get(time))
+
+
+def _emitter(writer, name, radiance):
+    return writer.add_material(default_material(
+        name, model="lambert", base_color=[0.0, 0.0, 0.0, 1.0], metallic=0.0,
+        emissive=[float(c) for c in radiance], double_sided=False))
+
+
+def _face_outwards(positions, triangles, outward):
+    """Orders each triangle counter-clockwise seen from `outward(centroid)`."""
+    p = positions[triangles]
+    n = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    flip = np.einsum("ij,ij->i", n, outward(p.mean(axis=1))) < 0
+    triangles[flip] = triangles[flip][:, [0, 2, 1]]
+    return triangles
+
+
+def _world_area(linear, positions, triangles):
+    p = positions[triangles] @ linear
+    return float(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+
+
+def _polygon_radius(radius, segments):
+    """Radius of a regular polygon with the area of the circle of `radius`."""
+    return radius * math.sqrt(2 * math.pi / (segments * math.sin(2 * math.pi / segments)))
+
+
+def _rect(width, height):
+    w, h = width / 2, height / 2
+    positions = np.array([[-w, -h, 0], [w, -h, 0], [w, h, 0], [-w, h, 0]], float)
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    return positions, triangles, lambda c: np.tile([0.0, 0.0, -1.0], (len(c), 1))
+
+
+def _disk(radius):
+    r = _polygon_radius(radius, SEGMENTS)
+    angles = 2 * math.pi * np.arange(SEGMENTS) / SEGMENTS
+    ring = np.stack([r * np.cos(angles), r * np.sin(angles), np.zeros(SEGMENTS)], 1)
+    positions = np.vstack([[0.0, 0.0, 0.0], ring])
+    k = np.arange(SEGMENTS)
+    triangles = np.stack([np.zeros(SEGMENTS, int), 1 + k, 1 + (k + 1) % SEGMENTS], 1)
+    return positions, triangles, lambda c: np.tile([0.0, 0.0, -1.0], (len(c), 1))
+
+
+def _cylinder(radius, length):
+    # Same lateral area: the polygon's perimeter equals the circle's.
+    r = radius * math.pi / (SEGMENTS * math.sin(math.pi / SEGMENTS))
+    angles = 2 * math.pi * np.arange(SEGMENTS) / SEGMENTS
+    ring = np.stack([np.zeros(SEGMENTS), r * np.cos(angles), r * np.sin(angles)], 1)
+    positions = np.vstack([ring + [-length / 2, 0, 0], ring + [length / 2, 0, 0]])
+    k = np.arange(SEGMENTS)
+    k1 = (k + 1) % SEGMENTS
+    triangles = np.vstack([np.stack([k, k1, SEGMENTS + k1], 1), np.stack([k, SEGMENTS + k1, SEGMENTS + k], 1)])
+    return positions, triangles, lambda c: c * [0.0, 1.0, 1.0]
+
+
+def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
+    """Adds the light `prim` placed by each row-vector matrix of `usd_worlds` (stage
+    space); `to_lucerna` maps stage space to lucerna's (Y up, metres)."""
+    path = str(prim.GetPath())
+    radiance = emission(prim, time)
+    normalize = _normalize(prim, time)
+    if prim.HasAPI(UsdLux.ShapingAPI):
+        warn(path, "ShapingAPI (cone, focus, IES) is not supported and is ignored")
+    for k, usd_world in enumerate(usd_worlds):
+        name = path if len(usd_worlds) == 1 else f"{path}[{k}]"
+        world = usd_world @ to_lucerna
+        if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight) or prim.IsA(UsdLux.CylinderLight):
+            if prim.IsA(UsdLux.RectLight):
+                light = UsdLux.RectLight(prim)
+                shape = _rect(light.GetWidthAttr().Get(time), light.GetHeightAttr().Get(time))
+                if light.GetTextureFileAttr().Get(time):
+                    warn(path, "texture:file on a RectLight is not supported: uniform emission")
+            elif prim.IsA(UsdLux.DiskLight):
+                shape = _disk(UsdLux.DiskLight(prim).GetRadiusAttr().Get(time))
+            else:
+                light = UsdLux.CylinderLight(prim)
+                if light.GetTreatAsLineAttr().Get(time):
+                    warn(path, "treatAsLine is ignored: the cylinder is rendered")
+                shape = _cylinder(light.GetRadiusAttr().Get(time), light.GetLengthAttr().Get(time))
+            positions, triangles, outward = shape
+            triangles = _face_outwards(positions, triangles.copy(), outward)
+            area = _world_area(np.asarray(usd_world)[:3, :3], positions, triangles)
+            if area <= 0.0:
+                warn(path, "light has no area: skipped")
+                continue
+            L = radiance / area if normalize else radiance
+            material = _emitter(writer, name, L)
+            mesh = writer.add_mesh(name, material, positions, triangles)
+            writer.add_instances(name, mesh, world[None])
+        elif prim.IsA(UsdLux.SphereLight):
+            light = UsdLux.SphereLight(prim)
+            radius = float(light.GetRadiusAttr().Get(time))
+            linear = world[:3, :3]
+            scales = np.linalg.norm(linear, axis=1)
+            if scales.max() > scales.min() * (1 + 1e-4):
+                warn(name, "non-uniform scale on a SphereLight: the mean scale is used")
+            usd_scale = float(np.linalg.norm(np.asarray(usd_world)[:3, :3], axis=1).mean())
+            r_world = radius * float(scales.mean())
+            centre = [float(x) for x in world[3, :3]]
+            if normalize and radius > 0:
+                radiance = radiance / (4 * math.pi * (radius * usd_scale) ** 2)
+            if light.GetTreatAsPointAttr().Get(time) or radius <= 0.0:
+                intensity = radiance * math.pi * r_world ** 2 if radius > 0 else radiance
+                writer.lights.append({"name": name, "kind": {"point": {
+                    "position": centre, "intensity": [float(c) for c in intensity]}}})
+            else:
+                writer.spheres.append({"name": name, "centre": centre, "radius": r_world,
+                                       "material": _emitter(writer, name, radiance)})
+        elif prim.IsA(UsdLux.DistantLight):
+            angle = math.radians(min(max(float(UsdLux.DistantLight(prim).GetAngleAttr().Get(time)), 0.0), 180.0))
+            if normalize or angle == 0.0:
+                irradiance = radiance
+            else:
+                irradiance = radiance * math.pi * math.sin(angle / 2) ** 2
+            if angle > 0.0:
+                warn(name, f"angle {math.degrees(angle):.3g} degrees is rendered as a parallel "
+                     "light with the same irradiance (sharp shadows)")
+            direction = np.array([0.0, 0.0, -1.0]) @ world[:3, :3]
+            direction /= np.linalg.norm(direction)
+            writer.lights.append({"name": name, "kind": {"directional": {
+                "direction": [float(x) for x in direction],
+                "irradiance": [float(c) for c in irradiance]}}})
+        elif prim.IsA(UsdLux.DomeLight) or prim.IsA(UsdLux.DomeLight_1):
+            _dome(writer, prim, world, radiance, time, warn, name)
+        else:
+            warn(path, f"light type {prim.GetTypeName()!r} is not supported: skipped")
+
+
+def _dome(writer, prim, world, radiance, time, warn, name):
+    if writer.environment is not None:
+        warn(name, "a second dome light is ignored (one environment per scene)")
+        return
+    dome = UsdLux.DomeLight_1(prim) if prim.IsA(UsdLux.DomeLight_1) else UsdLux.DomeLight(prim)
+    fmt = dome.GetTextureFormatAttr().Get(time)
+    asset = dome.GetTextureFileAttr().Get(time)
+    scale = [float(c) for c in radiance]
+    if not asset or not asset.path:
+        writer.environment = {"constant": scale}
+        return
+    if fmt not in ("automatic", "latlong"):
+        warn(name, f"texture:format {fmt!r} is not supported (latlong is): constant dome")
+        writer.environment = {"constant": scale}
+        return
+    try:
+        image = images.read(asset)
+    except OSError as e:
+        warn(name, f"dome texture {asset.path!r} unreadable ({e}): constant dome")
+        writer.environment = {"constant": scale}
+        return
+    pixels = image.pixels.copy()
+    if image.eight_bit:
+        pixels[..., :3] = images.srgb_to_linear(pixels[..., :3])
+    texture = writer.add_texture(name, pixels, ("repeat", "clamp_to_edge"))
+    rotation = np.asarray(world, dtype=float)[:3, :3].copy()
+    rotation /= np.linalg.norm(rotation, axis=1, keepdims=True)
+    pole_z = prim.IsA(UsdLux.DomeLight_1) and (
+        dome.GetPoleAxisAttr().Get(time) == "Z"
+        or (dome.GetPoleAxisAttr().Get(time) == "scene"
+            and UsdGeom.GetStageUpAxis(prim.GetStage()) == UsdGeom.Tokens.z))
+    if pole_z:
+        # The map's +Y pole onto the dome's +Z (row vectors: y -> z, z -> -y).
+        rotation = np.array([[1.0, 0, 0], [0, 0, 1.0], [0, -1.0, 0]]) @ rotation
+    # lucerna's lat-long map looks along -Z at its centre, OpenEXR's along +Z: a half turn
+    # about the pole.
+    rotation = np.diag([-1.0, 1.0, -1.0]) @ rotation
+    m = np.identity(4)
+    m[:3, :3] = rotation
+    writer.environment = {"lat_long": {"texture": texture, "scale": scale, "rotation": matrix(m)}}

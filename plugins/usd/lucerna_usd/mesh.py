@@ -1,0 +1,165 @@
+"""UsdGeom.Mesh to triangle meshes: fan triangulation of polygons (as Hydra does), holes,
+orientation, and primvars of every interpolation (constant, uniform, vertex, varying,
+faceVarying; indexed or not). Corners are welded where all their attributes agree, so a
+mesh with only vertex primvars keeps one vertex per point."""
+
+import numpy as np
+from pxr import UsdGeom
+
+_ORDER = {UsdGeom.Tokens.constant: "constant", UsdGeom.Tokens.uniform: "uniform",
+          UsdGeom.Tokens.vertex: "vertex", UsdGeom.Tokens.varying: "vertex",
+          UsdGeom.Tokens.faceVarying: "faceVarying"}
+
+
+class MeshData:
+    """A mesh's topology, triangulated, with its primvars read on demand."""
+
+    def __init__(self, mesh, time, warn, points, counts, indices, face_keep):
+        self.mesh = mesh
+        self.time = time
+        self.warn = warn
+        self.path = str(mesh.GetPath())
+        self.points = points
+        self.indices = indices
+        self.face_count = len(counts)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+        self.face_of_corner = np.repeat(np.arange(len(counts)), counts)
+        # Fan triangulation in corner space: (s, s + k + 1, s + k + 2), k = 0 .. n - 3.
+        ntri = np.where(face_keep, np.maximum(counts - 2, 0), 0)
+        self.face_of_triangle = np.repeat(np.arange(len(counts)), ntri)
+        first = np.repeat(starts, ntri)
+        k = np.arange(int(ntri.sum())) - np.repeat(np.cumsum(ntri) - ntri, ntri)
+        self.corner_triangles = np.stack([first, first + k + 1, first + k + 2], 1)
+        if mesh.GetOrientationAttr().Get(time) == UsdGeom.Tokens.leftHanded:
+            self.corner_triangles = self.corner_triangles[:, [0, 2, 1]]
+
+    @classmethod
+    def read(cls, mesh, time, warn):
+        """The mesh's topology, or None (with a warning) if it cannot be used."""
+        path = str(mesh.GetPath())
+        points = np.asarray(mesh.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+        counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], dtype=np.int64)
+        indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], dtype=np.int64)
+        if not len(points) or not len(counts):
+            warn(path, "mesh has no points or no faces: skipped")
+            return None
+        if (counts < 0).any() or counts.sum() != len(indices):
+            warn(path, f"faceVertexCounts sum to {int(counts[counts > 0].sum())} but there are "
+                 f"{len(indices)} faceVertexIndices: mesh skipped")
+            return None
+        if ((indices < 0) | (indices >= len(points))).any():
+            bad = int(((indices < 0) | (indices >= len(points))).sum())
+            warn(path, f"{bad} faceVertexIndices out of range (the mesh has {len(points)} "
+                 "points): mesh skipped")
+            return None
+        keep = counts >= 3
+        if not keep.all():
+            warn(path, f"{int((~keep).sum())} faces with fewer than 3 vertices skipped")
+        holes = np.asarray(mesh.GetHoleIndicesAttr().Get(time) or [], dtype=np.int64)
+        holes = holes[(holes >= 0) & (holes < len(counts))]
+        keep[holes] = False
+        face_of_corner = np.repeat(np.arange(len(counts)), counts)
+        finite = np.isfinite(points).all(axis=1)
+        if not finite.all():
+            broken = np.zeros(len(counts), bool)
+            broken[face_of_corner[~finite[indices]]] = True
+            warn(path, f"{int((~finite).sum())} points are NaN or infinite: "
+                 f"{int((broken & keep).sum())} faces touching them skipped")
+            keep &= ~broken
+        _check_manifold(path, counts, indices, warn)
+        if not keep.any():
+            warn(path, "mesh has no usable faces: skipped")
+            return None
+        return cls(mesh, time, warn, points, counts, indices, keep)
+
+    def _primvar(self, name, width):
+        """A primvar's values per corner, (corners, width) float64, or None."""
+        api = UsdGeom.PrimvarsAPI(self.mesh)
+        pv = api.GetPrimvar(name)
+        if pv and pv.HasAuthoredValue():
+            values = pv.ComputeFlattened(self.time)
+            interpolation = pv.GetInterpolation()
+        elif name == "normals" and self.mesh.GetNormalsAttr().HasAuthoredValue():
+            values = self.mesh.GetNormalsAttr().Get(self.time)
+            interpolation = self.mesh.GetNormalsInterpolation()
+        else:
+            return None
+        if values is None or not len(values):
+            return None
+        values = np.asarray(values, dtype=np.float64).reshape(len(values), -1)[:, :width]
+        n = len(values)
+        mode = _ORDER.get(interpolation, "vertex")
+        corners = len(self.indices)
+        if mode == "constant":
+            per_corner = np.broadcast_to(values[0], (corners, values.shape[1]))
+        elif mode == "uniform" and n >= self.face_count:
+            per_corner = values[self.face_of_corner]
+        elif mode == "vertex" and n >= len(self.points):
+            per_corner = values[self.indices]
+        elif mode == "faceVarying" and n >= corners:
+            per_corner = values[:corners]
+        else:
+            self.warn(self.path, f"primvar {name!r} has {n} values, too few for "
+                      f"{interpolation} interpolation: ignored")
+            return None
+        if not np.isfinite(per_corner).all():
+            self.warn(self.path, f"primvar {name!r} has NaN or infinite values: ignored")
+            return None
+        return per_corner
+
+    def build(self, face_mask, st_name, color_primvar, name):
+        """(positions, triangles, normals, uvs, colors) of the faces in `face_mask`, welded,
+        or None when no triangle is left."""
+        tri = self.corner_triangles[face_mask[self.face_of_triangle]]
+        if not len(tri):
+            return None
+        normals = self._primvar("normals", 3)
+        uvs = self._primvar(st_name, 2) if st_name else None
+        if st_name and uvs is None:
+            self.warn(name, f"the material reads primvar {st_name!r}, which the mesh lacks: "
+                      "textures are sampled at (0, 0)")
+        colors = self._primvar(color_primvar, 3) if color_primvar else None
+        columns = [self.indices[:, None].astype(np.float64)]
+        columns += [a for a in (normals, uvs, colors) if a is not None]
+        key = np.ascontiguousarray(np.concatenate(columns, 1))
+        used = np.unique(tri)
+        rows = key[used]
+        unique, first, inverse = np.unique(
+            rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel(),
+            return_index=True, return_inverse=True)
+        remap = np.empty(len(key), np.int64)
+        remap[used] = inverse.ravel()
+        corners = used[first]
+        triangles = remap[tri].astype(np.uint32)
+        positions = self.points[self.indices[corners]]
+        out_normals = None
+        if normals is not None:
+            n = normals[corners]
+            length = np.linalg.norm(n, axis=1, keepdims=True)
+            bad = (length[:, 0] == 0)
+            if bad.any():
+                self.warn(name, f"{int(bad.sum())} zero-length normals: flat shading there")
+            out_normals = np.where(length > 0, n / np.where(length > 0, length, 1), 0.0)
+            if bad.any():
+                out_normals = None
+        out_uvs = None
+        if uvs is not None:
+            out_uvs = np.stack([uvs[corners, 0], 1.0 - uvs[corners, 1]], 1)
+        out_colors = None
+        if colors is not None:
+            out_colors = np.concatenate([colors[corners], np.ones((len(corners), 1))], 1)
+        return positions, triangles, out_normals, out_uvs, out_colors
+
+
+def _check_manifold(path, counts, indices, warn):
+    """Warns about edges shared by more than two faces (the renderer does not need a
+    manifold, but such meshes are usually broken exports)."""
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    nxt = np.arange(len(indices)) + 1
+    ends = np.repeat(starts + counts, counts)
+    nxt = np.where(nxt == ends, np.repeat(starts, counts), nxt)
+    edges = np.sort(np.stack([indices, indices[nxt]], 1), axis=1)
+    _, multiplicity = np.unique(edges, axis=0, return_counts=True)
+    over = int((multiplicity > 2).sum())
+    if over:
+        warn(path, f"non-manifold: {over} edges are shared by more than two faces")

@@ -1,0 +1,156 @@
+"""Writer of lucerna's scene file (format "lucerna-scene", version 1; `src/scene/file.rs`
+documents it): a JSON manifest and one little-endian binary buffer beside it. Bulk arrays
+go to the buffer as views {offset in bytes, count in elements}; everything else is JSON
+with the renderer's field names. Both files are written through a temporary file and a
+rename, the buffer first, so a reader never sees a manifest without its buffer."""
+
+import json
+import os
+
+import numpy as np
+
+FORMAT = "lucerna-scene"
+VERSION = 1
+
+IDENTITY = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]
+
+
+def matrix(m):
+    """A 4x4 row-vector matrix (Gf.Matrix4d or an array, translation in the last row) as the
+    scene file's 16 column-major numbers of the column-vector matrix: the same 16 numbers
+    read row by row."""
+    return [float(x) for x in np.asarray(m, dtype=np.float64).reshape(16)]
+
+
+def default_material(name, **fields):
+    """A material with the renderer's defaults (glTF metallic-roughness, opaque, one-sided)
+    and `fields` overriding them."""
+    material = {
+        "name": name,
+        "model": "gltf_pbr",
+        "base_color": [1.0, 1.0, 1.0, 1.0],
+        "base_color_texture": None,
+        "metallic": 1.0,
+        "roughness": 1.0,
+        "metallic_roughness_texture": None,
+        "normal_texture": None,
+        "normal_scale": 1.0,
+        "emissive": [0.0, 0.0, 0.0],
+        "emissive_texture": None,
+        "ior": 1.5,
+        "alpha_mode": "opaque",
+        "double_sided": False,
+    }
+    material.update(fields)
+    return material
+
+
+class SceneWriter:
+    """Collects a scene and writes it as a scene file."""
+
+    def __init__(self, source):
+        self.source = source
+        self._chunks = []
+        self._size = 0
+        self.meshes = []
+        self.instances = []
+        self.spheres = []
+        self.materials = []
+        self.textures = []
+        self.lights = []
+        self.cameras = []
+        self.environment = None
+        self.warnings = []
+
+    def _view(self, array, dtype, width):
+        data = np.ascontiguousarray(np.asarray(array, dtype=dtype).reshape(-1, width))
+        view = {"offset": self._size, "count": int(data.shape[0])}
+        raw = data.astype(data.dtype.newbyteorder("<"), copy=False).tobytes()
+        self._chunks.append(raw)
+        self._size += len(raw)
+        return view
+
+    def add_mesh(self, name, material, positions, triangles, normals=None, uvs=None, colors=None):
+        """Adds a triangle mesh (object space, counter-clockwise front faces); returns its
+        index. `uvs` are glTF-style (v down), `colors` linear RGBA."""
+        self.meshes.append({
+            "name": name,
+            "material": int(material),
+            "positions": self._view(positions, "<f4", 3),
+            "normals": None if normals is None else self._view(normals, "<f4", 3),
+            "tangents": None,
+            "uvs": [None if uvs is None else self._view(uvs, "<f4", 2), None],
+            "colors": None if colors is None else self._view(colors, "<f4", 4),
+            "triangles": self._view(triangles, "<u4", 3),
+        })
+        return len(self.meshes) - 1
+
+    def add_instances(self, name, mesh, matrices):
+        """Places `mesh` once per row-vector matrix in `matrices` (shape (K, 4, 4))."""
+        for k, m in enumerate(np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)):
+            self.instances.append({
+                "name": name if len(matrices) == 1 else f"{name}[{k}]",
+                "mesh": int(mesh),
+                "transform": matrix(m),
+            })
+
+    def add_material(self, material):
+        self.materials.append(material)
+        return len(self.materials) - 1
+
+    def add_texture(self, name, texels, wrap=("repeat", "repeat")):
+        """Adds an image (H, W, 4): uint8 (sRGB-encoded or data as the material slot
+        reads it) or float32 (linear); returns its index."""
+        texels = np.asarray(texels)
+        height, width = texels.shape[:2]
+        if texels.dtype == np.uint8:
+            encoding, view = "rgba8", self._view(texels.reshape(-1, 4).view("<u4"), "<u4", 1)
+        else:
+            encoding, view = "rgba32f", self._view(texels, "<f4", 4)
+        self.textures.append({
+            "name": name,
+            "width": int(width),
+            "height": int(height),
+            "encoding": encoding,
+            "texels": view,
+            "wrap_u": wrap[0],
+            "wrap_v": wrap[1],
+            "nearest": False,
+        })
+        return len(self.textures) - 1
+
+    def write(self, path):
+        """Writes the manifest `path` and its buffer `path + '.bin'`."""
+        buffer_name = os.path.basename(path) + ".bin"
+        manifest = {
+            "format": FORMAT,
+            "version": VERSION,
+            "source": self.source,
+            "buffer": buffer_name,
+            "buffer_bytes": self._size,
+            "meshes": self.meshes,
+            "instances": self.instances,
+            "spheres": self.spheres,
+            "materials": self.materials,
+            "textures": self.textures,
+            "lights": self.lights,
+            "cameras": self.cameras,
+            "environment": self.environment,
+            "warnings": self.warnings,
+        }
+        text = json.dumps(manifest, indent=1, allow_nan=False)
+        _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._chunks)
+        _write_atomically(path, [text.encode()])
+
+
+def _write_atomically(path, chunks):
+    tmp = path + ".tmp"
+    try:
+        with open(tmp, "wb") as f:
+            for chunk in chunks:
+                f.write(chunk)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.remove(tmp)
+        raise

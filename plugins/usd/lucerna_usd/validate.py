@@ -1,0 +1,59 @@
+"""Stage validation with usd-core's `pxr.UsdValidation` framework (the successor of
+usdchecker's ComplianceChecker): every registered validator runs through one
+`ValidationContext`, and each finding is reported with the prim or property paths it is
+about."""
+
+from dataclasses import dataclass
+
+from pxr import Usd, UsdValidation
+
+
+@dataclass
+class Finding:
+    """One validation finding: `severity` is "error", "warning" or "info"."""
+
+    severity: str
+    validator: str
+    sites: list
+    message: str
+
+    def __str__(self):
+        where = ", ".join(self.sites) or "stage"
+        return f"{where}: {self.message} [{self.validator}]"
+
+
+_SEVERITY = {
+    UsdValidation.ValidationErrorType.Error: "error",
+    UsdValidation.ValidationErrorType.Warn: "warning",
+    UsdValidation.ValidationErrorType.Info: "info",
+}
+
+
+def _site(site):
+    if site.IsPrim():
+        return str(site.GetPrim().GetPath())
+    if site.IsProperty():
+        return str(site.GetProperty().GetPath())
+    layer = site.GetLayer()
+    return layer.identifier if layer else ""
+
+
+def validate(stage: Usd.Stage) -> list:
+    """Runs every registered validator on `stage`; returns the findings, errors first."""
+    registry = UsdValidation.ValidationRegistry()
+    validators = registry.GetOrLoadAllValidators()
+    context = UsdValidation.ValidationContext(validators)
+    findings = []
+    for error in context.Validate(stage):
+        if error.HasNoError():
+            continue
+        validator = error.GetValidator()
+        findings.append(Finding(
+            severity=_SEVERITY.get(error.GetType(), "warning"),
+            validator=validator.GetMetadata().name if validator else error.GetName(),
+            sites=[s for s in (_site(s) for s in error.GetSites()) if s],
+            message=error.GetMessage(),
+        ))
+    order = {"error": 0, "warning": 1, "info": 2}
+    findings.sort(key=lambda f: order[f.severity])
+    return findings

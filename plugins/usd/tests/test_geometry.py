@@ -1,0 +1,343 @@
+"""Meshes, primvars, subsets, transforms, instancing, composition, cameras, units."""
+
+import json
+import math
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+from conftest import convert
+
+QUAD = '''
+    def Mesh "Quad" {{
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+        {extra}
+    }}
+'''
+
+
+def world(body):
+    return 'def Xform "World" {\n' + body + "\n}\n"
+
+
+def normal_of(p, t):
+    a, b, c = p[t[0]], p[t[1]], p[t[2]]
+    n = np.cross(b - a, c - a)
+    return n / np.linalg.norm(n)
+
+
+def test_polygons_are_fan_triangulated_with_holes_and_degenerate_faces(stage_file, converted):
+    s = converted(stage_file(world('''
+    def Mesh "M" {
+        int[] faceVertexCounts = [5, 4, 2, 3]
+        int[] faceVertexIndices = [0, 1, 2, 3, 4,  0, 4, 5, 6,  1, 2,  0, 5, 6]
+        int[] holeIndices = [3]
+        point3f[] points = [(0,0,0), (2,0,0), (3,1,0), (1,2,0), (-1,1,0), (-1,-1,0), (0,-2,0)]
+    }''')))
+    m = s.mesh("/World/M")
+    assert len(s.triangles(m)) == 3 + 2  # pentagon 3, quad 2; the 2-gon and the hole dropped
+    assert s.warnings_about("1 faces with fewer than 3 vertices skipped")
+    p = s.positions(m)
+    for t in s.triangles(m):
+        assert normal_of(p, t)[2] > 0.99  # counter-clockwise, facing +Z
+
+
+def test_left_handed_orientation_flips_the_winding(stage_file, converted):
+    s = converted(stage_file(world(QUAD.format(extra='uniform token orientation = "leftHanded"'))))
+    m = s.mesh("/World/Quad")
+    p = s.positions(m)
+    assert all(normal_of(p, t)[2] < -0.99 for t in s.triangles(m))
+
+
+def write_png(path, rgb):
+    """A small 8-bit RGB image (H, W, 3) of values in 0..255."""
+    rgb = np.asarray(rgb, dtype=np.uint8)
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, oiio.UINT8))
+    out.write_image(rgb)
+    out.close()
+
+
+def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
+    write_png(tmp_path / "checker.png", [[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]])
+    s = converted(stage_file(world('''
+    def Mesh "M" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+        int[] faceVertexCounts = [4, 4]
+        int[] faceVertexIndices = [0, 1, 2, 3, 1, 4, 5, 2]
+        point3f[] points = [(0,0,0), (1,0,0), (1,1,0), (0,1,0), (2,0,0), (2,1,0)]
+        normal3f[] primvars:normals = [(0,0,1), (0,1,0)] (interpolation = "uniform")
+        texCoord2f[] primvars:st = [(0,0), (1,0), (1,1), (0,1)] (interpolation = "faceVarying")
+        int[] primvars:st:indices = [0, 1, 2, 3, 0, 1, 2, 3]
+        rel material:binding = </World/Tex>
+    }
+    def Material "Tex" {
+        token outputs:surface.connect = </World/Tex/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </World/Tex/T.outputs:rgb>
+            token outputs:surface
+        }
+        def Shader "T" {
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @checker.png@
+            float2 inputs:st.connect = </World/Tex/R.outputs:result>
+            float3 outputs:rgb
+        }
+        def Shader "R" {
+            uniform token info:id = "UsdPrimvarReader_float2"
+            string inputs:varname = "st"
+            float2 outputs:result
+        }
+    }''')))
+    m = s.mesh("/World/M")
+    # Uniform normals split the shared edge: 4 + 4 vertices, not 6.
+    assert m["positions"]["count"] == 8
+    normals = s.array(m["normals"], "<f4", 3)
+    assert {tuple(n) for n in normals} == {(0, 0, 1), (0, 1, 0)}
+    uvs = s.array(m["uvs"][0], "<f4", 2)
+    positions = s.positions(m)
+    # Indexed faceVarying st, with v flipped: the corner at (1, 1, 0) of face 0 has st (1, 1).
+    k = next(i for i, (p, n) in enumerate(zip(positions, normals)) if tuple(p) == (1, 1, 0) and n[2] == 1)
+    assert tuple(uvs[k]) == (1.0, 0.0)
+    texture = s["textures"][s["materials"][m["material"]]["base_color_texture"]["texture"]]
+    assert (texture["width"], texture["height"], texture["encoding"]) == (2, 2, "rgba8")
+
+
+def test_missing_texture_is_a_validation_error_and_a_warning_without_validation(stage_file, converted, tmp_path):
+    text = world(QUAD.format(extra='rel material:binding = </World/Tex>') + '''
+    def Material "Tex" {
+        token outputs:surface.connect = </World/Tex/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </World/Tex/T.outputs:rgb>
+            token outputs:surface
+        }
+        def Shader "T" {
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @missing.png@
+            float4 inputs:fallback = (0.5, 0.25, 0.125, 1)
+            float3 outputs:rgb
+        }
+    }''')
+    path = stage_file(text)
+    assert convert(str(path), str(tmp_path / "x.lucerna"), quiet=True) == 2
+    s = converted(path, no_validate=True)
+    assert s.warnings_about("unresolvable external dependency 'missing.png'")
+    assert s.warnings_about("texture 'missing.png' unreadable")
+    material = s["materials"][s.mesh("/World/Quad")["material"]]
+    assert material["base_color"] == [0.5, 0.25, 0.125, 1.0] and material["base_color_texture"] is None
+
+
+def test_vertex_primvars_keep_one_vertex_per_point(stage_file, converted):
+    s = converted(stage_file(world(QUAD.format(extra='''
+        normal3f[] normals = [(0,0,1), (0,0,1), (0,0,1), (0,0,1)] (interpolation = "vertex")
+        color3f[] primvars:displayColor = [(1,0,0), (0,1,0), (0,0,1), (1,1,1)] (interpolation = "vertex")'''))))
+    m = s.mesh("/World/Quad")
+    assert m["positions"]["count"] == 4
+    colors = s.array(m["colors"], "<f4", 4)
+    assert colors[:, 3].tolist() == [1, 1, 1, 1]
+    material = s["materials"][m["material"]]
+    assert material["base_color"] == [1, 1, 1, 1]  # per-vertex displayColor: in the colours
+
+
+def test_constant_display_color_and_double_sided(stage_file, converted):
+    s = converted(stage_file(world(QUAD.format(extra='''
+        color3f[] primvars:displayColor = [(0.25, 0.5, 0.75)]
+        uniform bool doubleSided = 1'''))))
+    material = s["materials"][s.mesh("/World/Quad")["material"]]
+    assert material["base_color"] == [0.25, 0.5, 0.75, 1.0]
+    assert material["double_sided"] is True
+    assert material["metallic"] == 0.0 and material["roughness"] == 0.5
+
+
+MATERIALS = '''
+    def Material "Red" {
+        token outputs:surface.connect = </World/Red/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor = (1, 0, 0)
+            token outputs:surface
+        }
+    }
+    def Material "Blue" {
+        token outputs:surface.connect = </World/Blue/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor = (0, 0, 1)
+            token outputs:surface
+        }
+    }
+'''
+
+
+def test_geom_subsets_bind_materials_per_face(stage_file, converted):
+    s = converted(stage_file(world(MATERIALS + '''
+    def Mesh "M" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+        int[] faceVertexCounts = [3, 3, 3]
+        int[] faceVertexIndices = [0, 1, 2, 0, 2, 3, 0, 3, 1]
+        point3f[] points = [(0,0,0), (1,0,0), (0,1,0), (0,0,1)]
+        rel material:binding = </World/Red>
+        uniform token subsetFamily:materialBind:familyType = "nonOverlapping"
+        def GeomSubset "blue" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+            uniform token elementType = "face"
+            uniform token familyName = "materialBind"
+            int[] indices = [1, 2]
+            rel material:binding = </World/Blue>
+        }
+    }''')))
+    red = s.mesh("/World/M")
+    blue = s.mesh("/World/M:blue")
+    assert len(s.triangles(red)) == 1 and len(s.triangles(blue)) == 2
+    assert s["materials"][red["material"]]["base_color"][:3] == [1, 0, 0]
+    assert s["materials"][blue["material"]]["base_color"][:3] == [0, 0, 1]
+
+
+def test_time_sampled_transforms_follow_the_frame(stage_file, converted):
+    path = stage_file('#usda 1.0\n(\n defaultPrim = "World"\n metersPerUnit = 1\n upAxis = "Y"\n'
+                      ' startTimeCode = 1\n endTimeCode = 10\n)\n' + world('''
+    def Xform "Moving" {
+        double3 xformOp:translate.timeSamples = { 1: (0, 0, 0), 10: (9, 0, 0) }
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    ''' + QUAD.format(extra="") + "}"))
+    def x_of(scene):
+        return scene["instances"][0]["transform"][12]
+    assert x_of(converted(path)) == 0.0  # the stage's start time code
+    assert x_of(converted(path, frame=4.0)) == pytest.approx(3.0)
+    assert x_of(converted(path, frame=10.0)) == pytest.approx(9.0)
+
+
+def test_scene_graph_instances_share_one_mesh(stage_file, converted):
+    s = converted(stage_file(world('''
+    def Xform "A" (
+        instanceable = true
+        references = </Proto>
+    ) {
+        double3 xformOp:translate = (1, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def Xform "B" (
+        instanceable = true
+        references = </Proto>
+    ) {
+        double3 xformOp:translate = (2, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def Xform "C" (
+        instanceable = true
+        references = </Proto>
+    ) {
+        double3 xformOp:translate = (3, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+''') + 'class Xform "Proto" {' + QUAD.format(extra="") + "}\n"))
+    assert len(s["meshes"]) == 1
+    assert sorted(i["transform"][12] for i in s["instances"]) == [1, 2, 3]
+
+
+def point_instancer(n):
+    side = int(math.ceil(math.sqrt(n)))
+    positions = ", ".join(f"({i % side}, 0, {i // side})" for i in range(n))
+    return world(f'''
+    def PointInstancer "Field" {{
+        point3f[] positions = [{positions}]
+        int[] protoIndices = [{", ".join("0" for _ in range(n))}]
+        rel prototypes = </World/Field/Prototypes/Ball>
+        def Scope "Prototypes" {{
+            def Xform "Ball" {{
+                def Mesh "Tri" {{
+                    int[] faceVertexCounts = [3, 3, 3, 3]
+                    int[] faceVertexIndices = [0, 1, 2, 0, 3, 1, 0, 2, 3, 1, 3, 2]
+                    point3f[] points = [(0, 0, 0), (0.4, 0, 0), (0, 0.4, 0), (0, 0, 0.4)]
+                }}
+            }}
+        }}
+    }}''')
+
+
+def test_point_instancer_of_ten_thousand_stores_the_prototype_once(stage_file, converted, tmp_path):
+    one = converted(stage_file(point_instancer(1), "one.usda"))
+    many = converted(stage_file(point_instancer(10_000), "many.usda"))
+    assert len(many["meshes"]) == 1 and len(many["instances"]) == 10_000
+    assert len(many.buffer) == len(one.buffer)  # geometry bytes do not grow with the count
+    xs = sorted({i["transform"][12] for i in many["instances"]})
+    assert xs == list(range(100))
+    # Prototypes under the instancer are not rendered on their own.
+    assert all(i["mesh"] == 0 for i in many["instances"])
+
+
+def test_point_instancer_mask(stage_file, converted):
+    text = point_instancer(4).replace("int[] protoIndices", "int64[] invisibleIds = [1, 2]\n int[] protoIndices")
+    s = converted(stage_file(text))
+    assert sorted((i["transform"][12], i["transform"][14]) for i in s["instances"]) == [(0, 0), (1, 1)]
+
+
+def test_point_instancer_with_bad_indices_is_skipped_with_a_warning(stage_file, converted):
+    text = point_instancer(4).replace("int[] protoIndices = [0, 0, 0, 0]", "int[] protoIndices = [0, 0, 7, 0]")
+    text += 'def Sphere "Keep" {}\n'
+    s = converted(stage_file(text))
+    assert not s["instances"]
+    assert s.warnings_about("1 protoIndices out of range")
+
+
+def test_reference_and_variant_set(stage_file, converted, tmp_path):
+    (tmp_path / "asset.usda").write_text('#usda 1.0\n(\n defaultPrim = "Asset"\n metersPerUnit = 1\n upAxis = "Y"\n)\n'
+                                         'def Xform "Asset" (\n variantSets = ["size"]\n variants = { string size = "small" }\n) {\n'
+                                         ' variantSet "size" = {\n'
+                                         '  "small" { double3 xformOp:scale = (1, 1, 1)\n uniform token[] xformOpOrder = ["xformOp:scale"]\n }\n'
+                                         '  "large" { double3 xformOp:scale = (5, 5, 5)\n uniform token[] xformOpOrder = ["xformOp:scale"]\n }\n'
+                                         ' }\n' + QUAD.format(extra="") + "}\n")
+    s = converted(stage_file(world('''
+    def "Small" (references = @./asset.usda@) {}
+    def "Large" (
+        references = @./asset.usda@
+        variants = { string size = "large" }
+    ) {}''')))
+    scales = sorted(i["transform"][0] for i in s["instances"])
+    assert scales == [1.0, 5.0]
+    assert {i["name"] for i in s["instances"]} == {"/World/Small/Quad", "/World/Large/Quad"}
+
+
+def test_purpose_and_visibility(stage_file, converted):
+    s = converted(stage_file(world('''
+    def Xform "Guide" { uniform token purpose = "guide"''' + QUAD.format(extra="") + '''}
+    def Xform "Proxy" { uniform token purpose = "proxy"''' + QUAD.format(extra="") + '''}
+    def Xform "Render" { uniform token purpose = "render"''' + QUAD.format(extra="") + '''}
+    def Xform "Hidden" { token visibility = "invisible"''' + QUAD.format(extra="") + '''}
+    def Xform "Shown" {''' + QUAD.format(extra="") + "}")))
+    assert sorted(i["name"] for i in s["instances"]) == ["/World/Render/Quad", "/World/Shown/Quad"]
+
+
+def test_up_axis_and_meters_per_unit(stage_file, converted):
+    s = converted(stage_file('#usda 1.0\n(\n defaultPrim = "World"\n metersPerUnit = 0.01\n upAxis = "Z"\n)\n'
+                             + world(QUAD.format(extra=""))))
+    t = np.array(s["instances"][0]["transform"]).reshape(4, 4)  # row-vector form, as stored
+    p = np.array([0.0, 1.0, 0.0, 1.0]) @ t  # stage +Y (1 cm) ...
+    assert np.allclose(p[:3], [0, 0, -0.01])  # ... is lucerna's -Z, in metres
+    up = np.array([0.0, 0.0, 100.0, 1.0]) @ t  # stage +Z is up
+    assert np.allclose(up[:3], [0, 1, 0])
+
+
+def test_camera(stage_file, converted):
+    s = converted(stage_file('#usda 1.0\n(\n defaultPrim = "World"\n metersPerUnit = 0.01\n upAxis = "Y"\n)\n' + world('''
+    def Camera "Cam" {
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 24
+        float2 clippingRange = (10, 5000)
+        float fStop = 2.8
+        float focusDistance = 250
+        double3 xformOp:translate = (0, 100, 500)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }''' + QUAD.format(extra=""))))
+    cam = s["cameras"][0]
+    assert cam["name"] == "/World/Cam"
+    assert cam["projection"]["perspective"]["yfov"] == pytest.approx(2 * math.atan(12 / 35))
+    assert cam["projection"]["perspective"]["aspect"] == pytest.approx(1.5)
+    assert cam["clip_near"] == pytest.approx(0.1) and cam["clip_far"] == pytest.approx(50)
+    # Aperture diameter focal length / f-stop, lens units tenths of a scene unit (cm here).
+    assert cam["aperture_radius"] == pytest.approx(35 * 0.1 / 2.8 / 2 * 0.01)
+    assert cam["focus_distance"] == pytest.approx(2.5)
+    assert cam["transform"][12:15] == pytest.approx([0, 1, 5])
+    assert cam["transform"][0] == pytest.approx(1)  # scale removed: an orthonormal frame

@@ -1,0 +1,178 @@
+"""UsdLux lights: shapes, units (intensity, exposure, colour, temperature, normalize), the
+dome's orientation (rendered)."""
+
+import math
+import subprocess
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from conftest import lucerna_bin
+
+
+def world(body):
+    return 'def Xform "World" {\n' + body + "\n}\n"
+
+
+def emitter(s, material_index):
+    m = s["materials"][material_index]
+    assert m["model"] == "lambert" and m["base_color"][:3] == [0, 0, 0] and not m["double_sided"]
+    return m["emissive"]
+
+
+def mesh_area_and_normals(s, mesh):
+    p = s.positions(mesh).astype(float)
+    t = s.triangles(mesh)
+    n = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    return 0.5 * np.linalg.norm(n, axis=1).sum(), n / np.linalg.norm(n, axis=1, keepdims=True), p[t].mean(axis=1)
+
+
+def test_rect_light_units_and_orientation(stage_file, converted):
+    s = converted(stage_file(world('''
+    def RectLight "Plain" {
+        float inputs:width = 2
+        float inputs:height = 1
+        float inputs:intensity = 3
+        float inputs:exposure = 1
+        color3f inputs:color = (1, 0.5, 0.25)
+    }
+    def RectLight "Normalized" {
+        float inputs:width = 2
+        float inputs:height = 1
+        float inputs:intensity = 3
+        bool inputs:normalize = 1
+        double3 xformOp:scale = (2, 2, 2)
+        uniform token[] xformOpOrder = ["xformOp:scale"]
+    }''')))
+    plain = s.mesh("/World/Plain")
+    assert emitter(s, plain["material"]) == pytest.approx([6, 3, 1.5])
+    area, normals, _ = mesh_area_and_normals(s, plain)
+    assert area == pytest.approx(2.0) and np.allclose(normals, [0, 0, -1])  # emits along -Z
+    # normalize divides by the world area: 2 x 1 scaled by 2 is 8.
+    assert emitter(s, s.mesh("/World/Normalized")["material"]) == pytest.approx([3 / 8] * 3)
+
+
+def test_disk_and_cylinder_keep_their_true_area(stage_file, converted):
+    s = converted(stage_file(world('''
+    def DiskLight "Disk" {
+        float inputs:radius = 0.5
+    }
+    def CylinderLight "Tube" {
+        float inputs:radius = 0.25
+        float inputs:length = 2
+        bool inputs:normalize = 1
+        float inputs:intensity = 10
+    }''')))
+    area, normals, _ = mesh_area_and_normals(s, s.mesh("/World/Disk"))
+    assert area == pytest.approx(math.pi * 0.25, rel=1e-6) and np.allclose(normals, [0, 0, -1])
+    tube = s.mesh("/World/Tube")
+    area, normals, centres = mesh_area_and_normals(s, tube)
+    assert area == pytest.approx(2 * math.pi * 0.25 * 2, rel=1e-3)
+    radial = centres * [0, 1, 1]
+    assert (np.einsum("ij,ij->i", normals, radial) > 0).all()  # outwards, along the X axis
+    assert np.abs(normals[:, 0]).max() < 1e-6  # no end caps
+    assert emitter(s, tube["material"]) == pytest.approx([10 / (2 * math.pi * 0.25 * 2)] * 3)
+
+
+def test_sphere_light_and_treat_as_point(stage_file, converted):
+    s = converted(stage_file(world('''
+    def SphereLight "Ball" {
+        float inputs:radius = 0.5
+        float inputs:intensity = 4
+        bool inputs:normalize = 1
+        double3 xformOp:translate = (1, 2, 3)
+        double3 xformOp:scale = (2, 2, 2)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:scale"]
+    }
+    def SphereLight "Bulb" {
+        float inputs:radius = 0.1
+        float inputs:intensity = 5
+        bool treatAsPoint = 1
+    }''')))
+    (ball,) = s["spheres"]
+    assert ball["centre"] == [1, 2, 3] and ball["radius"] == pytest.approx(1.0)
+    assert emitter(s, ball["material"]) == pytest.approx([4 / (4 * math.pi)] * 3)
+    (bulb,) = s["lights"]
+    # Radiant intensity of the sphere it stands for: L * pi * r^2.
+    assert bulb["kind"]["point"]["intensity"] == pytest.approx([5 * math.pi * 0.01] * 3)
+
+
+def test_distant_light_direction_and_irradiance(stage_file, converted):
+    s = converted(stage_file(world('''
+    def DistantLight "Sun" {
+        float inputs:intensity = 2
+        float inputs:angle = 0.53
+        double3 xformOp:rotateXYZ = (-90, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ"]
+    }
+    def DistantLight "Normalized" {
+        float inputs:intensity = 2
+        bool inputs:normalize = 1
+    }''')))
+    sun, normalized = (l["kind"]["directional"] for l in s["lights"])
+    assert sun["direction"] == pytest.approx([0, -1, 0], abs=1e-9)  # -Z turned to -Y: downwards
+    half = math.radians(0.53) / 2
+    assert sun["irradiance"] == pytest.approx([2 * math.pi * math.sin(half) ** 2] * 3)
+    assert normalized["irradiance"] == pytest.approx([2, 2, 2])  # normalized: irradiance
+    assert s.warnings_about("0.53 degrees is rendered as a parallel light")
+
+
+def test_color_temperature(stage_file, converted):
+    s = converted(stage_file(world('''
+    def DistantLight "White" {
+        bool inputs:enableColorTemperature = 1
+        float inputs:intensity = 1
+        float inputs:colorTemperature = 6500
+        bool inputs:normalize = 1
+    }
+    def DistantLight "Warm" {
+        bool inputs:enableColorTemperature = 1
+        float inputs:intensity = 1
+        float inputs:colorTemperature = 3000
+        bool inputs:normalize = 1
+    }''')))
+    white, warm = (l["kind"]["directional"]["irradiance"] for l in s["lights"])
+    assert white == pytest.approx([1, 1, 1])
+    assert warm[0] > warm[1] > warm[2]
+
+
+def test_constant_dome(stage_file, converted):
+    s = converted(stage_file(world('def DomeLight "Sky" {\n float inputs:intensity = 0.5\n'
+                                   ' color3f inputs:color = (1, 0.5, 1)\n}')))
+    assert s["environment"] == {"constant": [0.5, 0.25, 0.5]}
+
+
+def render(path, out, *args):
+    subprocess.run([lucerna_bin(), "render", str(path), "-o", str(out), "-q", *map(str, args)],
+                   check=True, capture_output=True)
+    return oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[..., :3]
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_dome_texture_orientation_follows_openexr_latlong(stage_file, tmp_path, up):
+    # A black map with a bright band at longitude +pi/2, which OpenEXR's lat-long
+    # convention (and USD's DomeLight) puts along +X: u = 0.5 - longitude / 2 pi = 0.25.
+    w, h = 32, 16
+    pixels = np.zeros((h, w, 3), np.float32)
+    pixels[4:12, 6:10] = 50.0
+    out = oiio.ImageOutput.create(str(tmp_path / "sky.exr"))
+    out.open(str(tmp_path / "sky.exr"), oiio.ImageSpec(w, h, 3, oiio.FLOAT))
+    out.write_image(pixels)
+    out.close()
+    # The camera looks along -Z from +Z (Y up): image right is +X. For a Z-up stage the
+    # same view: a DomeLight_1 whose pole follows the stage's up axis, the camera looking
+    # along +Y from -Y.
+    if up == "Y":
+        dome = 'def DomeLight "Sky" {\n asset inputs:texture:file = @./sky.exr@\n}'
+        camera = 'double3 xformOp:translate = (0, 0, 5)\n uniform token[] xformOpOrder = ["xformOp:translate"]'
+    else:
+        dome = 'def DomeLight_1 "Sky" {\n asset inputs:texture:file = @./sky.exr@\n}'
+        camera = ('double3 xformOp:translate = (0, -5, 0)\n double3 xformOp:rotateXYZ = (90, 0, 0)\n'
+                  ' uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]')
+    text = (f'#usda 1.0\n(\n defaultPrim = "World"\n metersPerUnit = 1\n upAxis = "{up}"\n)\n'
+            + world(dome + f'\n def Camera "Cam" {{\n {camera}\n }}\n def Sphere "Ball" {{\n double radius = 1\n }}'))
+    image = render(stage_file(text), tmp_path / "dome.exr", "--spp", "16", "--resolution", "32x32")
+    ball = image[8:24]
+    left, right = ball[:, 4:14].mean(), ball[:, 18:28].mean()
+    assert right > 10 * left, (left, right)

@@ -1,0 +1,171 @@
+"""UsdPreviewSurface networks: constants, textures, channel layouts, opacity, transforms,
+and the approximations that are reported."""
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+QUAD = '''
+    def Mesh "Quad" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+        texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] (interpolation = "vertex")
+        rel material:binding = </World/M>
+    }
+'''
+
+
+def stage(inputs, nodes=""):
+    return ('def Xform "World" {\n' + QUAD + '''
+    def Material "M" {
+        token outputs:surface.connect = </World/M/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+''' + inputs + '''
+            token outputs:surface
+        }
+        def Shader "R" {
+            uniform token info:id = "UsdPrimvarReader_float2"
+            string inputs:varname = "st"
+            float2 outputs:result
+        }
+''' + nodes + "\n    }\n}\n")
+
+
+def texture(name, file, outputs, extra=""):
+    return f'''
+        def Shader "{name}" {{
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @{file}@
+            float2 inputs:st.connect = </World/M/R.outputs:result>
+            {extra}
+            {outputs}
+        }}'''
+
+
+def write_image(path, pixels, fmt=oiio.UINT8):
+    pixels = np.asarray(pixels, dtype=np.uint8 if fmt == oiio.UINT8 else np.float32)
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt))
+    out.write_image(pixels)
+    out.close()
+
+
+def material(s):
+    return s["materials"][s.mesh("/World/Quad")["material"]]
+
+
+def texels(s, ref):
+    t = s["textures"][ref["texture"]]
+    if t["encoding"] == "rgba8":
+        return s.array(t["texels"], "<u1", 4).reshape(t["height"], t["width"], 4)
+    return s.array(t["texels"], "<f4", 4).reshape(t["height"], t["width"], 4)
+
+
+def test_constants(stage_file, converted):
+    s = converted(stage_file(stage('''
+            color3f inputs:diffuseColor = (0.1, 0.2, 0.3)
+            color3f inputs:emissiveColor = (4, 5, 6)
+            float inputs:metallic = 0.25
+            float inputs:roughness = 0.75
+            float inputs:ior = 1.33''')))
+    m = material(s)
+    assert m["base_color"] == pytest.approx([0.1, 0.2, 0.3, 1.0])
+    assert m["emissive"] == [4, 5, 6] and m["ior"] == pytest.approx(1.33)
+    assert (m["metallic"], m["roughness"], m["alpha_mode"]) == (0.25, 0.75, "opaque")
+    assert m["model"] == "gltf_pbr"
+
+
+def test_diffuse_texture_passes_8_bit_srgb_through(stage_file, converted, tmp_path):
+    write_image(tmp_path / "albedo.png", np.arange(2 * 2 * 3).reshape(2, 2, 3) * 10)
+    s = converted(stage_file(stage(
+        "color3f inputs:diffuseColor.connect = </World/M/T.outputs:rgb>",
+        texture("T", "albedo.png", "float3 outputs:rgb", 'token inputs:wrapS = "mirror"'))))
+    ref = material(s)["base_color_texture"]
+    t = texels(s, ref)
+    assert t.dtype == np.uint8 and t[0, 0].tolist() == [0, 10, 20, 255]
+    assert s["textures"][ref["texture"]]["wrap_u"] == "mirrored_repeat"
+
+
+def test_scaled_texture_is_baked_linear(stage_file, converted, tmp_path):
+    write_image(tmp_path / "albedo.png", np.full((1, 1, 3), 255))
+    s = converted(stage_file(stage(
+        "color3f inputs:diffuseColor.connect = </World/M/T.outputs:rgb>",
+        texture("T", "albedo.png", "float3 outputs:rgb", "float4 inputs:scale = (0.5, 0.25, 1, 1)"))))
+    t = texels(s, material(s)["base_color_texture"])
+    assert t.dtype == np.float32 and t[0, 0].tolist() == pytest.approx([0.5, 0.25, 1, 1])
+
+
+def test_metallic_and_roughness_from_two_images_share_one_texture(stage_file, converted, tmp_path):
+    write_image(tmp_path / "metal.png", np.full((2, 2, 1), 255))
+    write_image(tmp_path / "rough.exr", np.full((4, 4, 3), [0.0, 0.3, 0.0], np.float32), oiio.FLOAT)
+    s = converted(stage_file(stage('''
+            float inputs:metallic.connect = </World/M/Metal.outputs:r>
+            float inputs:roughness.connect = </World/M/Rough.outputs:g>''',
+        texture("Metal", "metal.png", "float outputs:r", 'token inputs:sourceColorSpace = "raw"')
+        + texture("Rough", "rough.exr", "float outputs:g"))))
+    m = material(s)
+    t = texels(s, m["metallic_roughness_texture"])
+    assert t.shape == (4, 4, 4)  # the larger image's size
+    assert t[..., 1] == pytest.approx(0.3) and t[..., 2] == pytest.approx(1.0)
+    assert (m["metallic"], m["roughness"]) == (1.0, 1.0)
+
+
+def test_opacity_threshold_masks_and_opacity_blends(stage_file, converted, tmp_path):
+    s = converted(stage_file(stage("float inputs:opacity = 0.3\n float inputs:opacityThreshold = 0.5")))
+    assert material(s)["alpha_mode"] == {"mask": {"cutoff": 0.5}}
+    assert material(s)["base_color"][3] == pytest.approx(0.3)
+    s = converted(stage_file(stage("float inputs:opacity = 0.3"), "blend.usda"))
+    assert material(s)["alpha_mode"] == "blend"
+
+
+def test_opacity_from_the_diffuse_texture_alpha(stage_file, converted, tmp_path):
+    write_image(tmp_path / "leaf.png", np.array([[[10, 20, 30, 0], [10, 20, 30, 255]]]))
+    s = converted(stage_file(stage('''
+            color3f inputs:diffuseColor.connect = </World/M/T.outputs:rgb>
+            float inputs:opacity.connect = </World/M/T.outputs:a>
+            float inputs:opacityThreshold = 0.5''',
+        texture("T", "leaf.png", "float3 outputs:rgb\n float outputs:a"))))
+    t = texels(s, material(s)["base_color_texture"])
+    assert t.dtype == np.uint8 and t[0, :, 3].tolist() == [0, 255]
+
+
+def test_normal_map_and_uv_transform(stage_file, converted, tmp_path):
+    write_image(tmp_path / "normal.png", np.full((2, 2, 3), [128, 128, 255]))
+    s = converted(stage_file(stage(
+        "normal3f inputs:normal.connect = </World/M/N.outputs:rgb>",
+        texture("N", "normal.png", "float3 outputs:rgb",
+                'token inputs:sourceColorSpace = "raw"\n float4 inputs:scale = (2, 2, 2, 1)\n'
+                ' float4 inputs:bias = (-1, -1, -1, 0)').replace(
+            "</World/M/R.outputs:result>", "</World/M/X.outputs:result>") + '''
+        def Shader "X" {
+            uniform token info:id = "UsdTransform2d"
+            float2 inputs:in.connect = </World/M/R.outputs:result>
+            float2 inputs:scale = (2, 2)
+            float2 inputs:translation = (0.5, 0)
+            float2 outputs:result
+        }''')))
+    ref = material(s)["normal_texture"]
+    assert texels(s, ref).dtype == np.uint8  # the standard encoding is passed through
+    # st (0.25, 0.25) -> st' = (1.0, 0.5); in lucerna's uv (v = 1 - t): (0.25, 0.75) -> (1.0, 0.5).
+    tr = ref["transform"]
+    uv = np.array(tr["x"]) * 0.25 + np.array(tr["y"]) * 0.75 + np.array(tr["offset"])
+    assert uv == pytest.approx([1.0, 0.5])
+
+
+def test_specular_workflow_and_clearcoat_are_reported(stage_file, converted):
+    s = converted(stage_file(stage('''
+            int inputs:useSpecularWorkflow = 1
+            color3f inputs:specularColor = (0.04, 0.04, 0.04)
+            float inputs:clearcoat = 1''')))
+    assert material(s)["ior"] == pytest.approx(1.5, abs=1e-3)  # F0 = 0.04
+    assert s.warnings_about("specular workflow approximated")
+    assert s.warnings_about("clearcoat is not supported")
+
+
+def test_unknown_shader_is_a_warning_with_the_defaults(stage_file, converted):
+    text = stage("").replace('"UsdPreviewSurface"', '"MySurface"')
+    s = converted(stage_file(text), no_validate=True)
+    assert s.warnings_about("unknown shader 'MySurface'")
+    assert material(s)["base_color"] == pytest.approx([0.18, 0.18, 0.18, 1])
