@@ -83,7 +83,7 @@ class Converter:
 
     # ---- traversal -----------------------------------------------------------------
     def run(self):
-        groups = self._children(self.stage.GetPseudoRoot(), self.stage.GetPseudoRoot().GetFilteredChildren(Usd.PrimDefaultPredicate), None)
+        groups = self._children(self.stage.GetPseudoRoot().GetFilteredChildren(Usd.PrimDefaultPredicate), None)
         for g in groups:
             world_usd = g.mats
             world = g.mats @ self.to_lucerna
@@ -110,7 +110,7 @@ class Converter:
             self.warn("stage", "no renderable geometry")
         return self.writer
 
-    def _children(self, parent, children, inherited):
+    def _children(self, children, inherited):
         groups = []
         for child in children:
             local, resets = np.identity(4), False
@@ -153,8 +153,8 @@ class Converter:
         if prim.IsInstance():
             proto = prim.GetPrototype()
             bound = self._bound_material(prim) or inherited
-            return groups + self._children(proto, proto.GetFilteredChildren(Usd.PrimDefaultPredicate), bound)
-        return groups + self._children(prim, prim.GetFilteredChildren(Usd.PrimDefaultPredicate), inherited)
+            return groups + self._children(proto.GetFilteredChildren(Usd.PrimDefaultPredicate), bound)
+        return groups + self._children(prim.GetFilteredChildren(Usd.PrimDefaultPredicate), inherited)
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

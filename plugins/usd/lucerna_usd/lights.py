@@ -144,15 +144,16 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
             usd_scale = float(np.linalg.norm(np.asarray(usd_world)[:3, :3], axis=1).mean())
             r_world = radius * float(scales.mean())
             centre = [float(x) for x in world[3, :3]]
+            L = radiance
             if normalize and radius > 0:
-                radiance = radiance / (4 * math.pi * (radius * usd_scale) ** 2)
+                L = radiance / (4 * math.pi * (radius * usd_scale) ** 2)
             if light.GetTreatAsPointAttr().Get(time) or radius <= 0.0:
-                intensity = radiance * math.pi * r_world ** 2 if radius > 0 else radiance
+                intensity = L * math.pi * r_world ** 2 if radius > 0 else L
                 writer.lights.append({"name": name, "kind": {"point": {
                     "position": centre, "intensity": [float(c) for c in intensity]}}})
             else:
                 writer.spheres.append({"name": name, "centre": centre, "radius": r_world,
-                                       "material": _emitter(writer, name, radiance)})
+                                       "material": _emitter(writer, name, L)})
         elif prim.IsA(UsdLux.DistantLight):
             angle = math.radians(min(max(float(UsdLux.DistantLight(prim).GetAngleAttr().Get(time)), 0.0), 180.0))
             if normalize or angle == 0.0:
