@@ -8,55 +8,15 @@ placed by 800 nodes (lucerna flattens them, so the BVH holds every triangle).
     python3 tools/gen_sphere_field.py [output.glb]
 """
 import json
-import math
 import random
 import struct
 import sys
 from pathlib import Path
 
+from gltf_writer import icosphere, rotation_between, unit
+
 SUBDIVISIONS = 3
 GRID = (40, 20)
-
-
-def icosphere(subdivisions):
-    t = (1 + math.sqrt(5)) / 2
-    verts = [(-1, t, 0), (1, t, 0), (-1, -t, 0), (1, -t, 0), (0, -1, t), (0, 1, t), (0, -1, -t),
-             (0, 1, -t), (t, 0, -1), (t, 0, 1), (-t, 0, -1), (-t, 0, 1)]
-    verts = [tuple(c / math.sqrt(sum(x * x for x in v)) for c in v) for v in verts]
-    faces = [(0, 11, 5), (0, 5, 1), (0, 1, 7), (0, 7, 10), (0, 10, 11), (1, 5, 9), (5, 11, 4),
-             (11, 10, 2), (10, 7, 6), (7, 1, 8), (3, 9, 4), (3, 4, 2), (3, 2, 6), (3, 6, 8),
-             (3, 8, 9), (4, 9, 5), (2, 4, 11), (6, 2, 10), (8, 6, 7), (9, 8, 1)]
-    for _ in range(subdivisions):
-        cache = {}
-
-        def mid(a, b):
-            key = (min(a, b), max(a, b))
-            if key not in cache:
-                m = [(verts[a][k] + verts[b][k]) / 2 for k in range(3)]
-                n = math.sqrt(sum(x * x for x in m))
-                verts.append(tuple(x / n for x in m))
-                cache[key] = len(verts) - 1
-            return cache[key]
-
-        next_faces = []
-        for a, b, c in faces:
-            ab, bc, ca = mid(a, b), mid(b, c), mid(c, a)
-            next_faces += [(a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca)]
-        faces = next_faces
-    return verts, faces
-
-
-def rotation_between(a, b):
-    """Unit quaternion (x, y, z, w) turning unit vector a into unit vector b."""
-    cx, cy, cz = a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
-    w = 1 + sum(x * y for x, y in zip(a, b))
-    n = math.sqrt(cx * cx + cy * cy + cz * cz + w * w)
-    return [cx / n, cy / n, cz / n, w / n]
-
-
-def unit(v):
-    n = math.sqrt(sum(x * x for x in v))
-    return [x / n for x in v]
 
 
 def build():

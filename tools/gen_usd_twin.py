@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from pxr import Gf, Sdf, Usd, UsdGeom, UsdLux, UsdShade
 
-from gltf_writer import GltfWriter, box, icosphere, look_rotation, unit
+from gltf_writer import GltfWriter, box, icosphere, look_rotation
 
 EYE, TARGET, YFOV, ASPECT = [0.0, 1.4, 4.5], [0.0, 0.7, 0.0], 0.75, 1.5
 LIGHT_RADIANCE, LIGHT_SIZE, LIGHT_HEIGHT = 12.0, (1.0, 0.6), 2.5

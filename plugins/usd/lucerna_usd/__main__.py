@@ -55,7 +55,7 @@ def _open(path):
     from pxr import Tf, Usd
 
     if not os.path.isfile(path):
-        raise FileNotFoundError(path)
+        return None, "no such file"
     captured = []
     try:
         with _captured_stderr(captured):
@@ -121,11 +121,7 @@ def _convert(path, output, frame, no_validate, quiet):
     from .convert import Converter
 
     started = clock.monotonic()
-    try:
-        stage, reason = _open(path)
-    except FileNotFoundError:
-        _error(path, "file", "no such file")
-        return EXIT_BAD_INPUT
+    stage, reason = _open(path)
     if stage is None:
         _error(path, "stage", reason)
         return EXIT_BAD_INPUT
@@ -185,7 +181,7 @@ def main(argv=None):
               file=sys.stderr)
         return EXIT_MISSING_PACKAGE
     if args.command == "validate":
-        stage, reason = _open(args.stage) if os.path.isfile(args.stage) else (None, "no such file")
+        stage, reason = _open(args.stage)
         if stage is None:
             _error(args.stage, "stage", reason)
             return EXIT_BAD_INPUT

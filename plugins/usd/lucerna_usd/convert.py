@@ -21,7 +21,7 @@ from pxr import Usd, UsdGeom, UsdLux, UsdShade
 from . import lights
 from .materials import MaterialConverter
 from .mesh import MeshData
-from .scene_file import SceneWriter, matrix
+from .scene_file import SceneWriter, matrix, mean_scale
 
 # Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
 _SKIPPED_GPRIMS = (UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane,
@@ -93,13 +93,13 @@ class Converter:
             elif g.kind == "sphere":
                 radius, material, name = g.payload
                 for k, m in enumerate(world):
-                    scales = np.linalg.norm(m[:3, :3], axis=1)
-                    if scales.max() > scales.min() * (1 + 1e-4):
+                    scale, uniform = mean_scale(m[:3, :3])
+                    if not uniform:
                         self.warn(name, "non-uniform scale on a Sphere: the mean scale is used")
                     self.writer.spheres.append({
                         "name": name if len(world) == 1 else f"{name}[{k}]",
                         "centre": [float(x) for x in m[3, :3]],
-                        "radius": float(radius * scales.mean()), "material": material})
+                        "radius": radius * scale, "material": material})
             elif g.kind == "camera":
                 for m in world:
                     self._camera(g.payload, m)

@@ -23,7 +23,7 @@ import numpy as np
 from pxr import UsdGeom, UsdLux
 
 from . import images
-from .scene_file import default_material, matrix
+from .scene_file import default_material, matrix, mean_scale
 
 SEGMENTS = 64
 
@@ -137,12 +137,11 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
         elif prim.IsA(UsdLux.SphereLight):
             light = UsdLux.SphereLight(prim)
             radius = float(light.GetRadiusAttr().Get(time))
-            linear = world[:3, :3]
-            scales = np.linalg.norm(linear, axis=1)
-            if scales.max() > scales.min() * (1 + 1e-4):
+            scale, uniform = mean_scale(world[:3, :3])
+            if not uniform:
                 warn(name, "non-uniform scale on a SphereLight: the mean scale is used")
-            usd_scale = float(np.linalg.norm(np.asarray(usd_world)[:3, :3], axis=1).mean())
-            r_world = radius * float(scales.mean())
+            usd_scale = mean_scale(np.asarray(usd_world)[:3, :3])[0]
+            r_world = radius * scale
             centre = [float(x) for x in world[3, :3]]
             L = radiance
             if normalize and radius > 0:

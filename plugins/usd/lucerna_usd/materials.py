@@ -158,14 +158,12 @@ class MaterialConverter:
         return "value", default
 
     def _string_input(self, node, name):
-        inp = node.GetInput(name)
-        if not inp:
-            return None
-        attrs = inp.GetValueProducingAttributes()
-        value = attrs[0].Get(self.time) if attrs and not UsdShade.Output.IsOutput(attrs[0]) else None
+        value = self._value(node, name, None)
         return str(value) if value else None
 
     def _value(self, node, name, default):
+        """The value an input of `node` gets (through material interface connections), or
+        `default`."""
         inp = node.GetInput(name)
         attrs = inp.GetValueProducingAttributes() if inp else []
         if attrs and not UsdShade.Output.IsOutput(attrs[0]):

@@ -136,12 +136,11 @@ class MeshData:
         if normals is not None:
             n = normals[corners]
             length = np.linalg.norm(n, axis=1, keepdims=True)
-            bad = (length[:, 0] == 0)
-            if bad.any():
-                self.warn(name, f"{int(bad.sum())} zero-length normals: flat shading there")
-            out_normals = np.where(length > 0, n / np.where(length > 0, length, 1), 0.0)
-            if bad.any():
-                out_normals = None
+            zero = int((length == 0).sum())
+            if zero:
+                self.warn(name, f"{zero} zero-length normals: the mesh is flat-shaded")
+            else:
+                out_normals = n / length
         out_uvs = None
         if uvs is not None:
             out_uvs = np.stack([uvs[corners, 0], 1.0 - uvs[corners, 1]], 1)

@@ -22,6 +22,12 @@ def matrix(m):
     return [float(x) for x in np.asarray(m, dtype=np.float64).reshape(16)]
 
 
+def mean_scale(linear):
+    """(mean scale, whether the scale is uniform) of a row-vector 3x3 linear part."""
+    scales = np.linalg.norm(np.asarray(linear, dtype=np.float64), axis=1)
+    return float(scales.mean()), bool(scales.max() <= scales.min() * (1 + 1e-4))
+
+
 def default_material(name, **fields):
     """A material with the renderer's defaults (glTF metallic-roughness, opaque, one-sided)
     and `fields` overriding them."""

@@ -1,6 +1,5 @@
 """Meshes, primvars, subsets, transforms, instancing, composition, cameras, units."""
 
-import json
 import math
 
 import numpy as np
@@ -51,6 +50,32 @@ def test_left_handed_orientation_flips_the_winding(stage_file, converted):
     assert all(normal_of(p, t)[2] < -0.99 for t in s.triangles(m))
 
 
+def diffuse_texture_material(file, texture_inputs=""):
+    """/World/Tex: a UsdPreviewSurface whose diffuseColor is the texture `file` read at
+    primvar st."""
+    return f'''
+    def Material "Tex" {{
+        token outputs:surface.connect = </World/Tex/S.outputs:surface>
+        def Shader "S" {{
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor.connect = </World/Tex/T.outputs:rgb>
+            token outputs:surface
+        }}
+        def Shader "T" {{
+            uniform token info:id = "UsdUVTexture"
+            asset inputs:file = @{file}@
+            {texture_inputs}
+            float2 inputs:st.connect = </World/Tex/R.outputs:result>
+            float3 outputs:rgb
+        }}
+        def Shader "R" {{
+            uniform token info:id = "UsdPrimvarReader_float2"
+            string inputs:varname = "st"
+            float2 outputs:result
+        }}
+    }}'''
+
+
 def write_png(path, rgb):
     """A small 8-bit RGB image (H, W, 3) of values in 0..255."""
     rgb = np.asarray(rgb, dtype=np.uint8)
@@ -72,25 +97,7 @@ def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
         int[] primvars:st:indices = [0, 1, 2, 3, 0, 1, 2, 3]
         rel material:binding = </World/Tex>
     }
-    def Material "Tex" {
-        token outputs:surface.connect = </World/Tex/S.outputs:surface>
-        def Shader "S" {
-            uniform token info:id = "UsdPreviewSurface"
-            color3f inputs:diffuseColor.connect = </World/Tex/T.outputs:rgb>
-            token outputs:surface
-        }
-        def Shader "T" {
-            uniform token info:id = "UsdUVTexture"
-            asset inputs:file = @checker.png@
-            float2 inputs:st.connect = </World/Tex/R.outputs:result>
-            float3 outputs:rgb
-        }
-        def Shader "R" {
-            uniform token info:id = "UsdPrimvarReader_float2"
-            string inputs:varname = "st"
-            float2 outputs:result
-        }
-    }''')))
+''' + diffuse_texture_material("checker.png"))))
     m = s.mesh("/World/M")
     # Uniform normals split the shared edge: 4 + 4 vertices, not 6.
     assert m["positions"]["count"] == 8
@@ -106,21 +113,8 @@ def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
 
 
 def test_missing_texture_is_a_validation_error_and_a_warning_without_validation(stage_file, converted, tmp_path):
-    text = world(QUAD.format(extra='rel material:binding = </World/Tex>') + '''
-    def Material "Tex" {
-        token outputs:surface.connect = </World/Tex/S.outputs:surface>
-        def Shader "S" {
-            uniform token info:id = "UsdPreviewSurface"
-            color3f inputs:diffuseColor.connect = </World/Tex/T.outputs:rgb>
-            token outputs:surface
-        }
-        def Shader "T" {
-            uniform token info:id = "UsdUVTexture"
-            asset inputs:file = @missing.png@
-            float4 inputs:fallback = (0.5, 0.25, 0.125, 1)
-            float3 outputs:rgb
-        }
-    }''')
+    text = world(QUAD.format(extra='rel material:binding = </World/Tex>')
+                 + diffuse_texture_material("missing.png", "float4 inputs:fallback = (0.5, 0.25, 0.125, 1)"))
     path = stage_file(text)
     assert convert(str(path), str(tmp_path / "x.lucerna"), quiet=True) == 2
     s = converted(path, no_validate=True)
