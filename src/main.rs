@@ -310,13 +310,20 @@ fn render_command(args: RenderArgs) -> Result<()> {
         format!(", peak memory {:.1} MB", b as f64 / 1e6)
     });
     eprintln!(
-        "lucerna: wrote {} ({}x{}, {} threads): scene prepared in {:.2} s ({} triangles, BVH built in {:.2} s); rendered in {}{peak}",
+        "lucerna: wrote {} ({}x{}, {} threads): scene prepared in {:.2} s ({} primitives{}, BVH built in {:.2} s); rendered in {}{peak}",
         args.output.display(),
         film.width,
         film.height,
         pool.current_num_threads(),
         build_seconds,
-        world.surfaces.prims.len(),
+        world.primitive_count(),
+        match world.surfaces.placements.len() {
+            0 => String::new(),
+            n => format!(
+                ", {n} placements of {} shared meshes",
+                world.surfaces.shared_meshes.len()
+            ),
+        },
         world.bvh_seconds,
         stats.summary()
     );

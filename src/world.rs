@@ -10,16 +10,19 @@
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
 use crate::geometry::frame::Frame;
+use crate::geometry::instances::{InstancedBvh, Placement, transformed_bounds};
 use crate::geometry::ray::Ray;
 use crate::geometry::triangle::geometric_normal;
-use crate::geometry::{ALPHA_TESTED, Bvh, CULL_BACK, Hit, Primitive, PrimitiveHit, sphere};
+use crate::geometry::{
+    ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, sphere,
+};
 use crate::integrator::LightSelect;
 use crate::light::environment::{Environment, EnvironmentMap};
 use crate::light::{Light, LightSet, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
-use glam::{DMat3, DMat4, DVec3, Vec2, Vec3, Vec4};
+use glam::{Affine3A, DMat3, DMat4, DVec3, Mat3A, Vec2, Vec3, Vec4};
 
 /// World space to render space: `(p - centre) * scale`, `scale` a power of two.
 #[derive(Clone, Copy, Debug)]
@@ -74,11 +77,26 @@ pub struct RenderSphere {
     pub material: u32,
 }
 
+/// A placement of a shared (object-space) mesh, as shading needs it.
+#[derive(Clone, Copy, Debug)]
+pub struct PlacedMesh {
+    /// Index into [`Surfaces::shared_meshes`].
+    pub mesh: u32,
+    /// Object space to render space.
+    pub to_render: Affine3A,
+    /// Transforms object-space normals to render space (the inverse transpose).
+    pub normal_matrix: Mat3A,
+}
+
 /// What shading reads: meshes, spheres, materials, textures, and what each BVH primitive is.
 #[derive(Clone, Debug)]
 pub struct Surfaces {
-    /// Every mesh instance, flattened into render space.
+    /// Mesh instances flattened into render space: meshes placed once, and emitters.
     pub meshes: Vec<Mesh>,
+    /// Meshes placed several times, in object space, each stored once.
+    pub shared_meshes: Vec<Mesh>,
+    /// The placements of shared meshes, indexed by [`Hit::instance`].
+    pub placements: Vec<PlacedMesh>,
     pub spheres: Vec<RenderSphere>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
@@ -101,8 +119,10 @@ pub struct Interaction {
     /// Shading frame; `frame.n` is on the same side as `ng` and sees the ray's origin.
     pub frame: Frame,
     pub attrs: SurfaceAttributes,
-    /// The BVH primitive hit.
+    /// The BVH primitive hit (in the shared mesh for a placed hit).
     pub prim: u32,
+    /// The placement hit, or [`NOT_PLACED`].
+    pub instance: u32,
     pub material: u32,
     /// True if the ray arrived on the primitive's front (counter-clockwise side, outside).
     pub front: bool,
@@ -110,7 +130,10 @@ pub struct Interaction {
 
 /// The scene prepared for rendering.
 pub struct World {
+    /// The flattened geometry and spheres.
     pub bvh: Bvh,
+    /// The placements of shared meshes, when the scene has any.
+    pub placed: Option<InstancedBvh>,
     pub surfaces: Surfaces,
     pub lights: LightSet,
     pub camera: Camera,
@@ -190,22 +213,24 @@ fn mean_emission(m: &Material, textures: &[Texture]) -> Vec3 {
         })
 }
 
+/// The BVH intersection flags of primitives made of material `m`.
+fn intersection_flags(m: &Material) -> u8 {
+    let mut f = 0;
+    if !m.double_sided {
+        f |= CULL_BACK;
+    }
+    if m.alpha_mode != AlphaMode::Opaque {
+        f |= ALPHA_TESTED;
+    }
+    f
+}
+
 /// Every primitive for the BVH with its intersection flags and scene reference.
 fn primitives(
     meshes: &[Mesh],
     spheres: &[RenderSphere],
     materials: &[Material],
 ) -> (Vec<Primitive>, Vec<u8>, Vec<PrimRef>) {
-    let flags_of = |m: &Material| {
-        let mut f = 0;
-        if !m.double_sided {
-            f |= CULL_BACK;
-        }
-        if m.alpha_mode != AlphaMode::Opaque {
-            f |= ALPHA_TESTED;
-        }
-        f
-    };
     let count = meshes.iter().map(|m| m.triangles.len()).sum::<usize>() + spheres.len();
     let (mut prims, mut flags, mut refs) = (
         Vec::with_capacity(count),
@@ -213,7 +238,7 @@ fn primitives(
         Vec::with_capacity(count),
     );
     for (mi, mesh) in meshes.iter().enumerate() {
-        let f = flags_of(&materials[mesh.material as usize]);
+        let f = intersection_flags(&materials[mesh.material as usize]);
         for (ti, t) in mesh.triangles.iter().enumerate() {
             prims.push(Primitive::Triangle(t.map(|i| mesh.positions[i as usize])));
             flags.push(f);
@@ -228,10 +253,135 @@ fn primitives(
             centre: s.centre,
             radius: s.radius,
         });
-        flags.push(flags_of(&materials[s.material as usize]));
+        flags.push(intersection_flags(&materials[s.material as usize]));
         refs.push(PrimRef::Sphere(si as u32));
     }
     (prims, flags, refs)
+}
+
+/// Marks a mesh that is flattened into render space in [`shared_mesh_indices`].
+const NOT_SHARED: u32 = u32::MAX;
+
+/// For each scene mesh, its index among the shared meshes, or [`NOT_SHARED`]. A mesh is
+/// shared (traced once in object space, placed through the top-level BVH) when several
+/// instances place it and it does not emit: emitters are flattened so that every emitting
+/// triangle is a light of its own.
+fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
+    let mut uses = vec![0u32; scene.meshes.len()];
+    for inst in &scene.instances {
+        uses[inst.mesh as usize] += 1;
+    }
+    let mut next = 0;
+    scene
+        .meshes
+        .iter()
+        .zip(uses)
+        .map(|(mesh, uses)| {
+            if uses >= 2 && !scene.materials[mesh.material as usize].is_emissive() {
+                next += 1;
+                next - 1
+            } else {
+                NOT_SHARED
+            }
+        })
+        .collect()
+}
+
+/// The shared meshes (object space) and their placements, before their BVHs are built.
+struct PlacedGeometry {
+    meshes: Vec<Mesh>,
+    /// Per placement: the shared mesh and object space to render space (in double
+    /// precision, so that the inverse is accurate too).
+    placements: Vec<(u32, DMat4)>,
+    /// Per placement: its render-space bounds.
+    bounds: Vec<(Vec3, Vec3)>,
+}
+
+impl PlacedGeometry {
+    /// Moves the shared meshes out of `scene` and collects their placements.
+    fn new(scene: &mut Scene, shared_index: &[u32], to_render: &DMat4) -> Self {
+        let mut meshes = Vec::new();
+        for (mesh, &index) in scene.meshes.iter_mut().zip(shared_index) {
+            if index != NOT_SHARED {
+                meshes.push(std::mem::take(mesh));
+            }
+        }
+        let object_bounds: Vec<(Vec3, Vec3)> = meshes
+            .iter()
+            .map(|m| {
+                m.positions
+                    .iter()
+                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(*p), hi.max(*p))
+                    })
+            })
+            .collect();
+        let (mut placements, mut bounds) = (Vec::new(), Vec::new());
+        for inst in &scene.instances {
+            let index = shared_index[inst.mesh as usize];
+            if index == NOT_SHARED {
+                continue;
+            }
+            let m = *to_render * inst.transform;
+            let (lo, hi) = object_bounds[index as usize];
+            bounds.push(transformed_bounds(
+                lo,
+                hi,
+                &Affine3A::from_mat4(m.as_mat4()),
+            ));
+            placements.push((index, m));
+        }
+        Self {
+            meshes,
+            placements,
+            bounds,
+        }
+    }
+
+    /// One BVH per shared mesh, the top level over the placements, and the placements as
+    /// shading reads them.
+    fn build(&self, materials: &[Material]) -> (Option<InstancedBvh>, Vec<PlacedMesh>) {
+        if self.placements.is_empty() {
+            return (None, Vec::new());
+        }
+        let shared = self
+            .meshes
+            .iter()
+            .map(|mesh| {
+                let prims: Vec<Primitive> = mesh
+                    .triangles
+                    .iter()
+                    .map(|t| Primitive::Triangle(t.map(|i| mesh.positions[i as usize])))
+                    .collect();
+                let flags =
+                    vec![intersection_flags(&materials[mesh.material as usize]); prims.len()];
+                Bvh::build(&prims, &flags)
+            })
+            .collect();
+        let placements: Vec<Placement> = self
+            .placements
+            .iter()
+            .map(|&(shared, to_render)| Placement {
+                shared,
+                to_object: Affine3A::from_mat4(to_render.inverse().as_mat4()),
+            })
+            .collect();
+        let shading = self
+            .placements
+            .iter()
+            .map(|&(mesh, to_render)| PlacedMesh {
+                mesh,
+                to_render: Affine3A::from_mat4(to_render.as_mat4()),
+                normal_matrix: Mat3A::from(
+                    DMat3::from_mat4(to_render).inverse().transpose().as_mat3(),
+                ),
+            })
+            .collect();
+        (
+            Some(InstancedBvh::build(shared, &placements, &self.bounds)),
+            shading,
+        )
+    }
 }
 
 /// The area lights: one per primitive whose material emits, and the primitive-to-light map.
@@ -316,6 +466,21 @@ fn punctual_lights(scene: &Scene, space: &RenderSpace) -> Vec<Light> {
             LightKind::Directional {
                 direction,
                 irradiance,
+                angle,
+            } if *angle > 0.0 => {
+                // 1 - cos of the half-angle as 2 sin²(angle / 4), free of cancellation.
+                let one_minus_cos = 2.0 * (*angle as f64 / 4.0).sin().powi(2);
+                let sin2 = one_minus_cos * (2.0 - one_minus_cos);
+                Light::DistantCone {
+                    to_light: -direction.normalize().as_vec3(),
+                    radiance: *irradiance / (std::f64::consts::PI * sin2) as f32,
+                    one_minus_cos: one_minus_cos as f32,
+                }
+            }
+            LightKind::Directional {
+                direction,
+                irradiance,
+                ..
             } => Light::Directional {
                 direction: direction.normalize().as_vec3(),
                 irradiance: *irradiance,
@@ -329,7 +494,7 @@ impl World {
     /// else one framing the scene) at `resolution` (else from the camera's aspect ratio),
     /// choosing lights for light sampling by `light_select`.
     pub fn build(
-        scene: Scene,
+        mut scene: Scene,
         camera_name: Option<&str>,
         resolution: Option<(u32, u32)>,
         light_select: LightSelect,
@@ -346,9 +511,11 @@ impl World {
         }
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
+        let shared_index = shared_mesh_indices(&scene);
         let meshes: Vec<Mesh> = scene
             .instances
             .iter()
+            .filter(|inst| shared_index[inst.mesh as usize] == NOT_SHARED)
             .map(|inst| {
                 transform_mesh(
                     &scene.meshes[inst.mesh as usize],
@@ -356,6 +523,7 @@ impl World {
                 )
             })
             .collect();
+        let placed = PlacedGeometry::new(&mut scene, &shared_index, &to_render);
         let spheres: Vec<RenderSphere> = scene
             .spheres
             .iter()
@@ -369,6 +537,12 @@ impl World {
             .iter()
             .flat_map(|m| m.positions.iter().map(|p| p.length()))
             .chain(spheres.iter().map(|s| s.centre.length() + s.radius))
+            .chain(
+                placed
+                    .bounds
+                    .iter()
+                    .map(|(lo, hi)| lo.abs().max(hi.abs()).length()),
+            )
             .fold(0.0f32, f32::max);
 
         let (prims, flags, refs) = primitives(&meshes, &spheres, &scene.materials);
@@ -383,8 +557,9 @@ impl World {
         lights.extend(punctual_lights(&scene, &space));
         let bvh_start = std::time::Instant::now();
         let bvh = Bvh::build(&prims, &flags);
-        let bvh_seconds = bvh_start.elapsed().as_secs_f64();
         drop(prims);
+        let (placed_bvh, placements) = placed.build(&scene.materials);
+        let bvh_seconds = bvh_start.elapsed().as_secs_f64();
 
         let scene_camera = match camera_name {
             Some(name) => scene.camera(name).cloned().ok_or_else(|| {
@@ -406,9 +581,12 @@ impl World {
         let environment = build_environment(&scene);
         Ok(Self {
             bvh,
+            placed: placed_bvh,
             lights: LightSet::new(lights, environment, radius.max(1e-6), light_select),
             surfaces: Surfaces {
                 meshes,
+                shared_meshes: placed.meshes,
+                placements,
                 spheres,
                 materials: scene.materials,
                 textures: scene.textures,
@@ -425,8 +603,22 @@ impl World {
     /// Closest surface along `ray`, honouring back-face culling and alpha.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
-        self.bvh
-            .intersect(ray, |prim, hit| self.surfaces.alpha_passes(prim, hit, ray))
+        let hit = self
+            .bvh
+            .intersect(ray, |prim, hit| self.surfaces.alpha_passes(prim, hit, ray));
+        let Some(placed) = &self.placed else {
+            return hit;
+        };
+        let nearer = Ray {
+            tmax: hit.map_or(ray.tmax, |h| h.t),
+            ..*ray
+        };
+        placed
+            .intersect(&nearer, |placement, prim, hit, object_ray| {
+                self.surfaces
+                    .placed_alpha_passes(placement, prim, hit, object_ray)
+            })
+            .or(hit)
     }
 
     /// True if something blocks `ray` before `ray.tmax`.
@@ -434,6 +626,29 @@ impl World {
     pub fn occluded(&self, ray: &Ray) -> bool {
         self.bvh
             .occluded(ray, |prim, hit| self.surfaces.alpha_passes(prim, hit, ray))
+            || self.placed.as_ref().is_some_and(|placed| {
+                placed.occluded(ray, |placement, prim, hit, object_ray| {
+                    self.surfaces
+                        .placed_alpha_passes(placement, prim, hit, object_ray)
+                })
+            })
+    }
+
+    /// Primitives the renderer intersects: flattened triangles and spheres, plus every
+    /// triangle of every placement.
+    pub fn primitive_count(&self) -> usize {
+        self.surfaces.prims.len()
+            + self
+                .surfaces
+                .placements
+                .iter()
+                .map(|p| self.surfaces.shared_meshes[p.mesh as usize].triangles.len())
+                .sum::<usize>()
+    }
+
+    /// Bytes of the acceleration structures (both levels).
+    pub fn bvh_bytes(&self) -> usize {
+        self.bvh.bytes() + self.placed.as_ref().map_or(0, InstancedBvh::bytes)
     }
 
     /// The shading point of `hit` along `ray`.
@@ -442,12 +657,16 @@ impl World {
         self.surfaces.interaction(ray, hit)
     }
 
-    /// Index of the light that primitive `prim` is, if it emits.
+    /// Index of the light that the primitive of `it` is, if it emits (emitters are never
+    /// placed through a shared mesh).
     #[inline]
-    pub fn light_index(&self, prim: u32) -> Option<usize> {
+    pub fn light_index(&self, it: &Interaction) -> Option<usize> {
+        if it.instance != NOT_PLACED {
+            return None;
+        }
         self.surfaces
             .prim_light
-            .get(prim as usize)
+            .get(it.prim as usize)
             .filter(|&&l| l != NO_LIGHT)
             .map(|&l| l as usize)
     }
@@ -523,13 +742,47 @@ impl Surfaces {
     /// ray so that the decision is deterministic.
     fn alpha_passes(&self, prim: u32, hit: &PrimitiveHit, ray: &Ray) -> bool {
         let (mat, attrs) = self.material_at(prim, self.coords(prim, hit, ray));
-        let alpha = material::alpha(mat, &self.textures, &attrs);
+        self.alpha_decides(mat, &attrs, prim, hit, ray)
+    }
+
+    /// [`Surfaces::alpha_passes`] for a hit on triangle `prim` of placement `placement`,
+    /// found along the object-space ray `ray`.
+    fn placed_alpha_passes(
+        &self,
+        placement: u32,
+        prim: u32,
+        hit: &PrimitiveHit,
+        ray: &Ray,
+    ) -> bool {
+        let mesh = &self.shared_meshes[self.placements[placement as usize].mesh as usize];
+        let attrs = self.triangle_attributes(mesh, mesh.triangles[prim as usize], hit.b1, hit.b2);
+        let key = prim ^ hash_u32(placement);
+        self.alpha_decides(
+            &self.materials[mesh.material as usize],
+            &attrs,
+            key,
+            hit,
+            ray,
+        )
+    }
+
+    /// The alpha decision for a hit with surface attributes `attrs`; `key` identifies the
+    /// primitive in the hash of a blended surface.
+    fn alpha_decides(
+        &self,
+        mat: &Material,
+        attrs: &SurfaceAttributes,
+        key: u32,
+        hit: &PrimitiveHit,
+        ray: &Ray,
+    ) -> bool {
+        let alpha = material::alpha(mat, &self.textures, attrs);
         match mat.alpha_mode {
             AlphaMode::Opaque => true,
             AlphaMode::Mask { cutoff } => alpha >= cutoff,
             AlphaMode::Blend => {
                 let h = hash_u32(
-                    prim ^ hash_u32(
+                    key ^ hash_u32(
                         ray.origin.x.to_bits() ^ hash_u32(ray.dir.y.to_bits() ^ hit.t.to_bits()),
                     ),
                 );
@@ -541,21 +794,25 @@ impl Surfaces {
     /// The shading point of `hit` along `ray`.
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
         let wo = -ray.dir.normalize();
-        let (p, n_front, ns_front, attrs, material) = match self.prims[hit.prim as usize] {
-            PrimRef::Triangle { mesh, tri } => {
-                self.triangle_surface(&self.meshes[mesh as usize], tri, hit)
-            }
-            PrimRef::Sphere(s) => {
-                let s = &self.spheres[s as usize];
-                // Back onto the sphere: the hit point along the ray carries t's rounding.
-                let n = (ray.at(hit.t) - s.centre).normalize_or(Vec3::Y);
-                (
-                    s.centre + s.radius * n,
-                    n,
-                    n,
-                    Self::sphere_attributes(sphere::uv(n)),
-                    s.material,
-                )
+        let (p, n_front, ns_front, attrs, material) = if hit.instance != NOT_PLACED {
+            self.placed_surface(hit)
+        } else {
+            match self.prims[hit.prim as usize] {
+                PrimRef::Triangle { mesh, tri } => {
+                    self.triangle_surface(&self.meshes[mesh as usize], tri, hit)
+                }
+                PrimRef::Sphere(s) => {
+                    let s = &self.spheres[s as usize];
+                    // Back onto the sphere: the hit point along the ray carries t's rounding.
+                    let n = (ray.at(hit.t) - s.centre).normalize_or(Vec3::Y);
+                    (
+                        s.centre + s.radius * n,
+                        n,
+                        n,
+                        Self::sphere_attributes(sphere::uv(n)),
+                        s.material,
+                    )
+                }
             }
         };
         let front = n_front.dot(wo) > 0.0;
@@ -573,9 +830,27 @@ impl Surfaces {
             frame: Frame::from_normal(ns),
             attrs,
             prim: hit.prim,
+            instance: hit.instance,
             material,
             front,
         }
+    }
+
+    /// [`Surfaces::triangle_surface`] of a placed hit, moved from the shared mesh's object
+    /// space into render space.
+    fn placed_surface(&self, hit: &Hit) -> (Vec3, Vec3, Vec3, SurfaceAttributes, u32) {
+        let placed = &self.placements[hit.instance as usize];
+        let mesh = &self.shared_meshes[placed.mesh as usize];
+        let (p, n, ns, attrs, material) = self.triangle_surface(mesh, hit.prim, hit);
+        let to_render = |n: Vec3| (placed.normal_matrix * n).normalize_or_zero();
+        let n = to_render(n);
+        (
+            placed.to_render.transform_point3(p),
+            n,
+            to_render(ns).try_normalize().unwrap_or(n),
+            attrs,
+            material,
+        )
     }
 
     /// Position, front geometric normal, front shading normal (interpolated, then

@@ -291,6 +291,38 @@ fn visible_solid_angle(light: &Light, origin: Vec3) -> f64 {
 }
 
 #[test]
+fn distant_cone_light() {
+    // A wide cone so that its directions span many bins, about a tilted axis.
+    let half_angle = 0.5f32;
+    let light = Light::DistantCone {
+        to_light: Vec3::new(0.3, 0.8, -0.5).normalize(),
+        radiance: Vec3::ONE,
+        one_minus_cos: 1.0 - half_angle.cos(),
+    };
+    let mut rng = Pcg32::new(11, 0);
+    let p = Vec3::new(0.2, -0.1, 0.4);
+    chi2::sphere(
+        "distant cone",
+        N,
+        |_| {
+            light
+                .sample(p, None, LightSampling::Area, u2(&mut rng))
+                .map(|s| s.wi)
+        },
+        |d| light.pdf(p, d, f32::INFINITY, LightSampling::Area) as f64,
+    );
+    // Escaping rays see the radiance exactly where the density is positive.
+    for _ in 0..10_000 {
+        let d = warp::square_to_uniform_sphere(u2(&mut rng));
+        let seen = light.radiance_at_infinity(d) != Vec3::ZERO;
+        assert_eq!(
+            seen,
+            light.pdf(p, d, f32::INFINITY, LightSampling::Area) > 0.0
+        );
+    }
+}
+
+#[test]
 fn environment_map_importance_sampling() {
     let (w, h) = (32u32, 16u32);
     let texels: Vec<[f32; 4]> = (0..w * h)

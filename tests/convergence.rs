@@ -2,7 +2,7 @@
 //!
 //! Each setting (each MIS heuristic, each Russian roulette mode, splitting on and off, each
 //! light selection and light sampling strategy, each sampler) renders the Cornell box, the
-//! MIS plates and the indirect room at a small resolution; every 4×4-pixel block's mean
+//! MIS plates (also under a sun with an angular size) and the indirect room at a small resolution; every 4×4-pixel block's mean
 //! (per colour channel) is compared with the same block of a reference rendered with the
 //! default settings and another seed. Each render's `variance` layer (the variance of each
 //! pixel mean) gives the block mean's variance, so under "both estimators have the same
@@ -86,6 +86,22 @@ fn erfc(x: f64) -> f64 {
     common::chi2::upper_regularized_gamma(0.5, x * x)
 }
 
+/// The MIS plates with a sun of 12 degrees angular diameter added: escaping rays reach it,
+/// light sampling samples its cone, and every MIS weight needs both densities.
+fn plates_under_a_sun(root: &Path) -> Scene {
+    let mut scene =
+        ingest::load(&root.join("mis-plates/mis-plates.glb"), &Default::default()).unwrap();
+    scene.lights.push(lucerna::scene::Light {
+        name: "sun".into(),
+        kind: lucerna::scene::LightKind::Directional {
+            direction: glam::DVec3::new(0.2, -1.0, -0.6),
+            irradiance: glam::Vec3::new(1.0, 0.9, 0.8),
+            angle: 0.2,
+        },
+    });
+    scene
+}
+
 /// Per block and channel: the mean and the variance of that mean.
 fn block_means(film: &Film) -> Vec<(f64, f64)> {
     let beauty = film.planes(Aov::Beauty);
@@ -135,6 +151,7 @@ fn every_configuration_converges_to_the_same_image() {
             ingest::load(&root.join("mis-plates/mis-plates.glb"), &Default::default()).unwrap(),
             1024,
         ),
+        ("mis-plates+sun", plates_under_a_sun(&root), 1024),
         (
             "indirect-room",
             ingest::load(

@@ -142,3 +142,41 @@ fn rough_f0_one_ggx_shows_its_directional_albedo() {
         }
     }
 }
+
+/// A sun gives the same irradiance whatever its angular size: a Lambertian plane of albedo
+/// 0.5 facing a sun of irradiance 1 shows 0.5 / π, through light sampling, and through BSDF
+/// sampling alone once the sun has a size that escaping rays can find.
+#[test]
+fn sun_irradiance_does_not_depend_on_its_angle() {
+    let expected = 0.5 / std::f64::consts::PI;
+    for (angle, mis) in [
+        (0.0f32, "power"),
+        (0.01, "power"),
+        (1.0, "power"),
+        (2.0, "nee-only"),
+        (2.0, "bsdf-only"),
+    ] {
+        let mut s = scene(
+            vec![(quad(), DMat4::IDENTITY)],
+            material(BsdfModel::Lambert, Vec3::splat(0.5), 0.0, 1.0),
+            Vec3::ZERO,
+            ortho_camera(DVec3::new(0.0, 0.0, 3.0), 0.9),
+        );
+        s.lights.push(lucerna::scene::Light {
+            name: "sun".into(),
+            kind: lucerna::scene::LightKind::Directional {
+                direction: -DVec3::Z,
+                irradiance: Vec3::ONE,
+                angle,
+            },
+        });
+        let mut settings = settings();
+        settings.set("mis", mis).unwrap();
+        let (film, _) = render(s, (16, 16), 64, settings, 2);
+        let (m, se) = mean_and_error(&film, 0, |_| true);
+        assert!(
+            (m - expected).abs() <= 4.5 * se + 1e-5,
+            "angle {angle}, {mis}: {m} ± {se}, expected {expected}"
+        );
+    }
+}

@@ -2,6 +2,7 @@
 //! and the two ray queries the integrator needs: closest hit and occlusion.
 
 pub mod frame;
+pub mod instances;
 pub mod ray;
 pub mod sphere;
 pub mod triangle;
@@ -59,12 +60,18 @@ pub const ALPHA_TESTED: u8 = 2;
 #[derive(Clone, Copy, Debug)]
 pub struct Hit {
     pub t: f32,
-    /// Index of the primitive in the order given to [`Bvh::build`].
+    /// Index of the primitive in the order given to [`Bvh::build`] (of the shared BVH for
+    /// a placed hit).
     pub prim: u32,
     pub b1: f32,
     pub b2: f32,
     pub front: bool,
+    /// The placement hit in an [`instances::InstancedBvh`], or [`NOT_PLACED`].
+    pub instance: u32,
 }
+
+/// [`Hit::instance`] of a hit on geometry that is not placed through a shared BVH.
+pub const NOT_PLACED: u32 = u32::MAX;
 
 /// A BVH over primitives with per-primitive flags, answering closest-hit and occlusion
 /// queries.
@@ -245,6 +252,7 @@ impl Bvh {
             b1: h.b1,
             b2: h.b2,
             front: h.front,
+            instance: NOT_PLACED,
         })
     }
 
@@ -318,7 +326,7 @@ mod tests {
     }
 
     /// A closed unit cube of 12 triangles, wound outwards.
-    fn cube() -> Vec<[Vec3; 3]> {
+    pub(super) fn cube() -> Vec<[Vec3; 3]> {
         let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
         let quads = [
             [c(0., 0., 0.), c(0., 1., 0.), c(1., 1., 0.), c(1., 0., 0.)],

@@ -904,6 +904,7 @@ impl<'a> Importer<'a> {
             gltf::khr_lights_punctual::Kind::Directional => LightKind::Directional {
                 direction,
                 irradiance: radiant,
+                angle: 0.0,
             },
             gltf::khr_lights_punctual::Kind::Spot {
                 inner_cone_angle,

@@ -284,12 +284,25 @@ impl<'a> PathTracer<'a> {
                     };
                     path.reached_emitter(self, walk, rec, e);
                 }
+                for &index in &world.lights.distant_cones {
+                    let dir = ray.dir.normalize();
+                    let le = world.lights.lights[index as usize].radiance_at_infinity(dir);
+                    if le != Vec3::ZERO {
+                        let e = Emitter {
+                            le,
+                            light: index as usize,
+                            dir,
+                            dist: f32::INFINITY,
+                        };
+                        path.reached_emitter(self, walk, rec, e);
+                    }
+                }
                 return;
             };
             let it = world.interaction(&ray, &hit);
             let le = world.surfaces.emitted(&it);
             if le != Vec3::ZERO
-                && let Some(index) = world.light_index(it.prim)
+                && let Some(index) = world.light_index(&it)
             {
                 let e = Emitter {
                     le,

@@ -1,6 +1,6 @@
 //! Lights in render space and their sampling: emissive triangles and spheres (area lights,
-//! sampled by area or by solid angle), point, spot and directional lights, and the
-//! environment. Which light to sample is `selection`'s job.
+//! sampled by area or by solid angle), point, spot and directional lights, distant lights
+//! with an angular size, and the environment. Which light to sample is `selection`'s job.
 
 pub mod environment;
 pub mod selection;
@@ -8,9 +8,12 @@ pub mod solid_angle;
 pub mod tree;
 
 use crate::color::luminance;
+use crate::geometry::frame::Frame;
 use crate::geometry::ray::offset_ray_origin;
 use crate::integrator::LightSampling;
-use crate::sampling::warp::{square_to_uniform_sphere, square_to_uniform_triangle};
+use crate::sampling::warp::{
+    square_to_uniform_cone, square_to_uniform_sphere, square_to_uniform_triangle, uniform_cone_pdf,
+};
 use environment::Environment;
 use glam::{Vec2, Vec3};
 pub use selection::LightSet;
@@ -37,6 +40,16 @@ pub enum Light {
         /// Unit direction the light travels in.
         direction: Vec3,
         irradiance: Vec3,
+    },
+    /// A light at infinity seen as a disc of directions (the sun with its angular size):
+    /// uniform radiance inside a cone, sampled uniformly in it, and reached by escaping rays
+    /// as the environment is.
+    DistantCone {
+        /// Unit direction towards the light (the cone's axis).
+        to_light: Vec3,
+        radiance: Vec3,
+        /// 1 - cos of the cone's half-angle.
+        one_minus_cos: f32,
     },
     Environment,
 }
@@ -151,6 +164,14 @@ impl Light {
                 ..
             } => 2.0 * PI * luminance(*intensity) * (1.0 - 0.5 * (cos_inner + cos_outer)),
             Self::Directional { irradiance, .. } => PI * radius * radius * luminance(*irradiance),
+            Self::DistantCone {
+                radiance,
+                one_minus_cos,
+                ..
+            } => {
+                let irradiance = PI * one_minus_cos * (2.0 - one_minus_cos) * luminance(*radiance);
+                PI * radius * radius * irradiance
+            }
             Self::Environment => {
                 environment.map_or(0.0, |e| PI * radius * radius * e.luminance_integral())
             }
@@ -280,6 +301,19 @@ impl Light {
                 pdf: 1.0,
                 delta: true,
             }),
+            Self::DistantCone {
+                to_light,
+                radiance,
+                one_minus_cos,
+            } => Some(LightSample {
+                wi: Frame::from_normal(*to_light)
+                    .to_world(square_to_uniform_cone(u, *one_minus_cos)),
+                target: None,
+                area_point: None,
+                radiance: *radiance,
+                pdf: uniform_cone_pdf(*one_minus_cos),
+                delta: false,
+            }),
             Self::Environment => {
                 let s = environment?.sample(u)?;
                 Some(LightSample {
@@ -295,7 +329,8 @@ impl Light {
     }
 
     /// Solid-angle density with which [`Light::sample`] from `p` produces the point of this
-    /// area light found at distance `dist` along unit direction `wi` (excluding selection).
+    /// area light found at distance `dist` along unit direction `wi` (excluding selection);
+    /// for a distant cone, the density of direction `wi`.
     /// The same rules as sampling decide the measure.
     #[inline]
     pub fn pdf(&self, p: Vec3, wi: Vec3, dist: f32, sampling: LightSampling) -> f32 {
@@ -327,7 +362,26 @@ impl Light {
                     0.0
                 }
             }
+            Self::DistantCone {
+                to_light,
+                one_minus_cos,
+                ..
+            } if wi.dot(*to_light) >= 1.0 - one_minus_cos => uniform_cone_pdf(*one_minus_cos),
             _ => 0.0,
+        }
+    }
+
+    /// Radiance a ray escaping the scene along unit direction `dir` receives from this
+    /// light, for lights at infinity other than the environment.
+    #[inline]
+    pub fn radiance_at_infinity(&self, dir: Vec3) -> Vec3 {
+        match self {
+            Self::DistantCone {
+                to_light,
+                radiance,
+                one_minus_cos,
+            } if dir.dot(*to_light) >= 1.0 - one_minus_cos => *radiance,
+            _ => Vec3::ZERO,
         }
     }
 }

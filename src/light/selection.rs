@@ -28,6 +28,8 @@ pub struct LightSet {
     pub environment: Option<Environment>,
     /// Index of the environment in `lights`, if any.
     pub environment_index: Option<u32>,
+    /// Indices of the distant lights with an angular size, which escaping rays can reach.
+    pub distant_cones: Vec<u32>,
     selector: Option<Selector>,
 }
 
@@ -75,7 +77,7 @@ fn bounds(l: &Light, environment: Option<&Environment>, radius: f32) -> Option<L
                 (cos_outer.clamp(-1.0, 1.0).acos() - cos_inner.clamp(-1.0, 1.0).acos()).cos();
             point(*position, *axis, *cos_inner, cos_e)
         }
-        Light::Directional { .. } | Light::Environment => return None,
+        Light::Directional { .. } | Light::DistantCone { .. } | Light::Environment => return None,
     })
 }
 
@@ -115,10 +117,14 @@ impl LightSet {
                 })
             }
         };
+        let distant_cones = (0..lights.len() as u32)
+            .filter(|&i| matches!(lights[i as usize], Light::DistantCone { .. }))
+            .collect();
         Self {
             lights,
             environment,
             environment_index,
+            distant_cones,
             selector,
         }
     }

@@ -133,7 +133,7 @@ pub fn sample_sphere_cone(p: Vec3, c: Vec3, r: f32, one_minus_cos_max: f32, u: V
 /// Solid-angle density of [`sample_sphere_cone`].
 #[inline]
 pub fn sphere_cone_pdf(one_minus_cos_max: f32) -> f32 {
-    1.0 / (2.0 * PI * one_minus_cos_max)
+    crate::sampling::warp::uniform_cone_pdf(one_minus_cos_max)
 }
 
 #[cfg(test)]

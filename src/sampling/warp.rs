@@ -80,6 +80,26 @@ pub fn phong_lobe_pdf(cos_theta: f32, exponent: f32) -> f32 {
     (exponent + 1.0) / (2.0 * PI) * cos_theta.powf(exponent)
 }
 
+/// Direction about +z uniform in the cone of half-angle θmax, given as `1 - cos θmax` so
+/// that tiny cones (the sun: 2e-5) keep their digits; density [`uniform_cone_pdf`].
+#[inline]
+pub fn square_to_uniform_cone(u: Vec2, one_minus_cos_max: f32) -> Vec3 {
+    let one_minus_cos = u.x * one_minus_cos_max;
+    let sin_theta = (one_minus_cos * (2.0 - one_minus_cos)).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.y;
+    Vec3::new(
+        sin_theta * phi.cos(),
+        sin_theta * phi.sin(),
+        1.0 - one_minus_cos,
+    )
+}
+
+/// Solid-angle density of [`square_to_uniform_cone`] inside the cone.
+#[inline]
+pub fn uniform_cone_pdf(one_minus_cos_max: f32) -> f32 {
+    1.0 / (2.0 * PI * one_minus_cos_max)
+}
+
 /// Uniform point on a triangle as barycentric weights `(b1, b2)` of vertices 1 and 2
 /// (Heitz 2019, "A Low-Distortion Map Between Triangle and Square"). Density 1/area.
 #[inline]

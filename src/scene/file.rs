@@ -545,11 +545,13 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             LightKind::Directional {
                 direction,
                 irradiance,
+                angle,
             } => {
                 direction.is_finite()
                     && direction.length_squared() > 0.0
                     && irradiance.is_finite()
                     && irradiance.min_element() >= 0.0
+                    && (0.0..=std::f32::consts::PI).contains(angle)
             }
         };
         if !ok {

@@ -90,8 +90,16 @@ pub enum LightKind {
         inner_cone: f32,
         outer_cone: f32,
     },
-    /// Parallel light travelling along `direction` with irradiance `irradiance`.
-    Directional { direction: DVec3, irradiance: Vec3 },
+    /// Light from infinitely far away travelling along `direction`, with irradiance
+    /// `irradiance` on a surface facing it. `angle` is the angular diameter of the source in
+    /// radians (the sun: 0.0093): 0 is a parallel light with sharp shadows; a wider source
+    /// has uniform radiance over that disc of directions and gives soft shadows.
+    Directional {
+        direction: DVec3,
+        irradiance: Vec3,
+        #[serde(default)]
+        angle: f32,
+    },
 }
 
 /// Light arriving from infinitely far away.
@@ -146,15 +154,52 @@ impl Scene {
     }
 
     /// World-space bounds of all instanced geometry and spheres, or `None` when there is
-    /// none.
+    /// none. A mesh placed once contributes its transformed vertices; a mesh placed several
+    /// times contributes the transformed corners of its object-space box, so that the cost
+    /// grows with the instance count, not with instances times vertices.
     pub fn bounds(&self) -> Option<(DVec3, DVec3)> {
         let mut lo = DVec3::splat(f64::INFINITY);
         let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        let mut uses = vec![0u32; self.meshes.len()];
         for inst in &self.instances {
-            for p in &self.meshes[inst.mesh as usize].positions {
-                let w = inst.transform.transform_point3(p.as_dvec3());
+            uses[inst.mesh as usize] += 1;
+        }
+        let object_boxes: Vec<Option<[DVec3; 8]>> = self
+            .meshes
+            .iter()
+            .zip(&uses)
+            .map(|(m, &uses)| {
+                if uses < 2 || m.positions.is_empty() {
+                    return None;
+                }
+                let (a, b) = m
+                    .positions
+                    .iter()
+                    .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(a, b), p| {
+                        (a.min(p.as_dvec3()), b.max(p.as_dvec3()))
+                    });
+                Some(std::array::from_fn(|c| {
+                    DVec3::new(
+                        if c & 1 == 0 { a.x } else { b.x },
+                        if c & 2 == 0 { a.y } else { b.y },
+                        if c & 4 == 0 { a.z } else { b.z },
+                    )
+                }))
+            })
+            .collect();
+        for inst in &self.instances {
+            let mesh = inst.mesh as usize;
+            let mut add = |p: DVec3| {
+                let w = inst.transform.transform_point3(p);
                 lo = lo.min(w);
                 hi = hi.max(w);
+            };
+            match &object_boxes[mesh] {
+                Some(corners) => corners.iter().for_each(|&c| add(c)),
+                None => self.meshes[mesh]
+                    .positions
+                    .iter()
+                    .for_each(|p| add(p.as_dvec3())),
             }
         }
         for s in &self.spheres {

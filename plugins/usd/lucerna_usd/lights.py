@@ -12,7 +12,8 @@ surface facing it. Lights are visible to the camera, as in Karma and RenderMan.
   sides whose radius keeps the true surface area, so their power is exact.
 - SphereLight: an analytic emissive sphere (sampled by solid angle); with treatAsPoint a
   point light of the same radiant intensity L * pi * r^2.
-- DistantLight: a directional light with the cone's irradiance.
+- DistantLight: a directional light with its angular diameter (a cone of uniform radiance
+  in the renderer; 0 is a parallel light) and the cone's irradiance.
 - DomeLight, DomeLight_1: the environment, constant or a lat-long map (OpenEXR's
   convention: +Y pole, longitude 0 along +Z).
 """
@@ -159,14 +160,11 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
                 irradiance = radiance
             else:
                 irradiance = radiance * math.pi * math.sin(angle / 2) ** 2
-            if angle > 0.0:
-                warn(name, f"angle {math.degrees(angle):.3g} degrees is rendered as a parallel "
-                     "light with the same irradiance (sharp shadows)")
             direction = np.array([0.0, 0.0, -1.0]) @ world[:3, :3]
             direction /= np.linalg.norm(direction)
             writer.lights.append({"name": name, "kind": {"directional": {
                 "direction": [float(x) for x in direction],
-                "irradiance": [float(c) for c in irradiance]}}})
+                "irradiance": [float(c) for c in irradiance], "angle": angle}}})
         elif prim.IsA(UsdLux.DomeLight) or prim.IsA(UsdLux.DomeLight_1):
             _dome(writer, prim, world, radiance, time, warn, name)
         else:

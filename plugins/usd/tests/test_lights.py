@@ -115,7 +115,9 @@ def test_distant_light_direction_and_irradiance(stage_file, converted):
     half = math.radians(0.53) / 2
     assert sun["irradiance"] == pytest.approx([2 * math.pi * math.sin(half) ** 2] * 3)
     assert normalized["irradiance"] == pytest.approx([2, 2, 2])  # normalized: irradiance
-    assert s.warnings_about("0.53 degrees is rendered as a parallel light")
+    assert sun["angle"] == pytest.approx(math.radians(0.53))
+    assert normalized["angle"] == pytest.approx(math.radians(0.53))  # the schema's default
+    assert s["warnings"] == ["stage: no renderable geometry"]  # the angle is kept, not warned about
 
 
 def test_color_temperature(stage_file, converted):
