@@ -356,6 +356,14 @@ fn inspect_command(path: &Path, load: &LoadArgs) -> Result<()> {
         scene.instanced_triangle_count(),
         vertices
     );
+    if !(scene.spheres.is_empty() && scene.disks.is_empty() && scene.cylinders.is_empty()) {
+        println!(
+            "  analytic shapes: {} spheres, {} disks, {} cylinders",
+            scene.spheres.len(),
+            scene.disks.len(),
+            scene.cylinders.len()
+        );
+    }
     if let Some((lo, hi)) = scene.bounds() {
         println!(
             "  bounds: [{:.4}, {:.4}, {:.4}] .. [{:.4}, {:.4}, {:.4}]",

@@ -11,14 +11,15 @@ use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
 use crate::geometry::frame::Frame;
 use crate::geometry::instances::{InstancedBvh, Placement, transformed_bounds};
+use crate::geometry::quadric::Quadric;
 use crate::geometry::ray::Ray;
 use crate::geometry::triangle::geometric_normal;
 use crate::geometry::{
-    ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, sphere,
+    ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, quadric, sphere,
 };
 use crate::integrator::LightSelect;
 use crate::light::environment::{Environment, EnvironmentMap};
-use crate::light::{Light, LightSet, SphereLight, TriangleLight};
+use crate::light::{Light, LightSet, QuadricLight, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
@@ -67,6 +68,7 @@ impl RenderSpace {
 pub enum PrimRef {
     Triangle { mesh: u32, tri: u32 },
     Sphere(u32),
+    Quadric(u32),
 }
 
 /// A sphere in render space.
@@ -74,6 +76,13 @@ pub enum PrimRef {
 pub struct RenderSphere {
     pub centre: Vec3,
     pub radius: f32,
+    pub material: u32,
+}
+
+/// A disk or cylinder in render space.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderQuadric {
+    pub quadric: Quadric,
     pub material: u32,
 }
 
@@ -98,6 +107,7 @@ pub struct Surfaces {
     /// The placements of shared meshes, indexed by [`Hit::instance`].
     pub placements: Vec<PlacedMesh>,
     pub spheres: Vec<RenderSphere>,
+    pub quadrics: Vec<RenderQuadric>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     /// Primitive index (as given to the BVH) to what it is.
@@ -229,9 +239,11 @@ fn intersection_flags(m: &Material) -> u8 {
 fn primitives(
     meshes: &[Mesh],
     spheres: &[RenderSphere],
+    quadrics: &[RenderQuadric],
     materials: &[Material],
 ) -> (Vec<Primitive>, Vec<u8>, Vec<PrimRef>) {
-    let count = meshes.iter().map(|m| m.triangles.len()).sum::<usize>() + spheres.len();
+    let count =
+        meshes.iter().map(|m| m.triangles.len()).sum::<usize>() + spheres.len() + quadrics.len();
     let (mut prims, mut flags, mut refs) = (
         Vec::with_capacity(count),
         Vec::with_capacity(count),
@@ -255,6 +267,11 @@ fn primitives(
         });
         flags.push(intersection_flags(&materials[s.material as usize]));
         refs.push(PrimRef::Sphere(si as u32));
+    }
+    for (qi, q) in quadrics.iter().enumerate() {
+        prims.push(Primitive::Quadric(q.quadric));
+        flags.push(intersection_flags(&materials[q.material as usize]));
+        refs.push(PrimRef::Quadric(qi as u32));
     }
     (prims, flags, refs)
 }
@@ -391,11 +408,13 @@ fn area_lights(
     surfaces_materials: &[Material],
     meshes: &[Mesh],
     spheres: &[RenderSphere],
+    quadrics: &[RenderQuadric],
     textures: &[Texture],
 ) -> (Vec<Light>, Vec<u32>) {
     let material_of = |r: &PrimRef| match *r {
         PrimRef::Triangle { mesh, .. } => meshes[mesh as usize].material,
         PrimRef::Sphere(s) => spheres[s as usize].material,
+        PrimRef::Quadric(q) => quadrics[q as usize].material,
     };
     if !refs
         .iter()
@@ -431,9 +450,38 @@ fn area_lights(
                 two_sided: m.double_sided,
                 mean_radiance,
             }),
+            Primitive::Quadric(quadric) => Light::Quadric(QuadricLight {
+                prim: i as u32,
+                quadric,
+                two_sided: m.double_sided,
+                mean_radiance,
+            }),
         });
     }
     (lights, prim_light)
+}
+
+/// The scene's disks and cylinders in render space.
+fn render_quadrics(scene: &Scene, space: &RenderSpace) -> Vec<RenderQuadric> {
+    let length = |l: f64| (l * space.scale) as f32;
+    let disks = scene.disks.iter().map(|d| RenderQuadric {
+        quadric: Quadric::Disk(quadric::Disk {
+            centre: space.point(d.centre),
+            normal: d.normal.normalize().as_vec3(),
+            radius: length(d.radius),
+        }),
+        material: d.material,
+    });
+    let cylinders = scene.cylinders.iter().map(|c| RenderQuadric {
+        quadric: Quadric::Cylinder(quadric::Cylinder {
+            centre: space.point(c.centre),
+            axis: c.axis.normalize().as_vec3(),
+            radius: length(c.radius),
+            half_length: length(0.5 * c.length),
+        }),
+        material: c.material,
+    });
+    disks.chain(cylinders).collect()
 }
 
 /// The punctual lights in render space: radiant intensity scales with the square of lengths.
@@ -533,10 +581,15 @@ impl World {
                 material: s.material,
             })
             .collect();
+        let quadrics = render_quadrics(&scene, &space);
         let radius = meshes
             .iter()
             .flat_map(|m| m.positions.iter().map(|p| p.length()))
             .chain(spheres.iter().map(|s| s.centre.length() + s.radius))
+            .chain(quadrics.iter().map(|q| {
+                let (lo, hi) = q.quadric.bounds();
+                lo.abs().max(hi.abs()).length()
+            }))
             .chain(
                 placed
                     .bounds
@@ -545,13 +598,14 @@ impl World {
             )
             .fold(0.0f32, f32::max);
 
-        let (prims, flags, refs) = primitives(&meshes, &spheres, &scene.materials);
+        let (prims, flags, refs) = primitives(&meshes, &spheres, &quadrics, &scene.materials);
         let (mut lights, prim_light) = area_lights(
             &prims,
             &refs,
             &scene.materials,
             &meshes,
             &spheres,
+            &quadrics,
             &scene.textures,
         );
         lights.extend(punctual_lights(&scene, &space));
@@ -588,6 +642,7 @@ impl World {
                 shared_meshes: placed.meshes,
                 placements,
                 spheres,
+                quadrics,
                 materials: scene.materials,
                 textures: scene.textures,
                 prims: refs,
@@ -697,9 +752,10 @@ impl Surfaces {
         }
     }
 
-    /// Attributes of a sphere point from its lat-long coordinates (both UV sets).
+    /// Attributes of a point of an analytic shape from its texture coordinates (both UV
+    /// sets).
     #[inline]
-    fn sphere_attributes(uv: Vec2) -> SurfaceAttributes {
+    fn shape_attributes(uv: Vec2) -> SurfaceAttributes {
         SurfaceAttributes {
             uv: [uv, uv],
             color: Vec4::ONE,
@@ -720,7 +776,11 @@ impl Surfaces {
             }
             PrimRef::Sphere(s) => (
                 &self.materials[self.spheres[s as usize].material as usize],
-                Self::sphere_attributes(b),
+                Self::shape_attributes(b),
+            ),
+            PrimRef::Quadric(q) => (
+                &self.materials[self.quadrics[q as usize].material as usize],
+                Self::shape_attributes(b),
             ),
         }
     }
@@ -734,6 +794,7 @@ impl Surfaces {
                 let s = &self.spheres[s as usize];
                 sphere::uv((ray.at(hit.t) - s.centre).normalize_or(Vec3::Y))
             }
+            PrimRef::Quadric(q) => self.quadrics[q as usize].quadric.uv(ray.at(hit.t)),
         }
     }
 
@@ -809,9 +870,14 @@ impl Surfaces {
                         s.centre + s.radius * n,
                         n,
                         n,
-                        Self::sphere_attributes(sphere::uv(n)),
+                        Self::shape_attributes(sphere::uv(n)),
                         s.material,
                     )
+                }
+                PrimRef::Quadric(q) => {
+                    let q = &self.quadrics[q as usize];
+                    let (p, n) = q.quadric.surface(ray.at(hit.t));
+                    (p, n, n, Self::shape_attributes(q.quadric.uv(p)), q.material)
                 }
             }
         };

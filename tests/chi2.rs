@@ -5,12 +5,13 @@ mod common;
 
 use common::chi2;
 use glam::{Mat3, Vec2, Vec3};
+use lucerna::geometry::quadric::{self, Quadric};
 use lucerna::geometry::ray::Ray;
 use lucerna::geometry::sphere;
 use lucerna::geometry::triangle::{RayShear, intersect};
 use lucerna::integrator::LightSampling;
 use lucerna::light::environment::{Environment, EnvironmentMap};
-use lucerna::light::{Light, SphereLight, TriangleLight};
+use lucerna::light::{Light, QuadricLight, SphereLight, TriangleLight};
 use lucerna::material::Bsdf;
 use lucerna::material::gltf_pbr::GltfPbr;
 use lucerna::material::lambert::Lambert;
@@ -160,6 +161,10 @@ fn area_light_density(light: &Light, origin: Vec3, w: Vec3, sampling: LightSampl
         }
         Light::Sphere(s) => sphere::intersect(&ray, s.centre, s.radius, f32::INFINITY)
             .filter(|h| s.two_sided || h.front),
+        Light::Quadric(q) => q
+            .quadric
+            .intersect(&ray, f32::INFINITY)
+            .filter(|h| q.two_sided || h.front),
         _ => unreachable!(),
     };
     hit.map_or(0.0, |h| light.pdf(origin, w, h.t, sampling) as f64)
@@ -267,6 +272,90 @@ fn area_lights_by_area_and_by_solid_angle() {
                 "{label}: E[1/pdf] = {mean} ± {se}, solid angle {omega}"
             );
         }
+    }
+}
+
+#[test]
+fn disk_and_cylinder_lights_by_area() {
+    let disk = Light::Quadric(QuadricLight {
+        prim: 0,
+        quadric: Quadric::Disk(quadric::Disk {
+            centre: Vec3::new(0.2, 1.5, -0.1),
+            normal: Vec3::new(0.2, -1.0, 0.3).normalize(),
+            radius: 0.7,
+        }),
+        two_sided: false,
+        mean_radiance: Vec3::ONE,
+    });
+    // Directions: the disk is flat, so seen from off its plane the density is bounded.
+    for (name, origin) in [
+        ("disk", Vec3::new(0.0, 0.0, 0.2)),
+        ("disk close", Vec3::new(0.3, 1.2, 0.0)),
+    ] {
+        let mut rng = Pcg32::new(21, name.len() as u64);
+        chi2::sphere(
+            name,
+            N,
+            |_| {
+                Some(
+                    disk.sample(origin, None, LightSampling::Area, u2(&mut rng))?
+                        .wi,
+                )
+            },
+            |w| area_light_density(&disk, origin, w, LightSampling::Area),
+        );
+    }
+    // The cylinder's silhouette gives the direction density a 1/cos singularity, so its
+    // samples are tested on the surface, in its (angle, height) coordinates, where they are
+    // uniform (those on the side facing away fail, as the harness expects: the density
+    // integrates to the share that succeeds); the density the integrator uses
+    // for a direction is then checked against the sample's own.
+    let c = quadric::Cylinder {
+        centre: Vec3::new(0.1, 1.0, 0.2),
+        axis: Vec3::new(1.0, 0.2, -0.1).normalize(),
+        radius: 0.4,
+        half_length: 0.9,
+    };
+    let cylinder = Light::Quadric(QuadricLight {
+        prim: 0,
+        quadric: Quadric::Cylinder(c),
+        two_sided: false,
+        mean_radiance: Vec3::ONE,
+    });
+    let origin = Vec3::new(-0.3, -0.5, 0.6);
+    let mut rng = Pcg32::new(22, 0);
+    let faces = |y: Vec3| c.normal(y).dot(origin - y) > 0.0;
+    let outcome = chi2::test(
+        "cylinder",
+        &chi2::Domain::plane((0.0, 1.0), (0.0, 1.0)),
+        N,
+        |_| {
+            let s = cylinder.sample(origin, None, LightSampling::Area, u2(&mut rng))?;
+            let y = s.target.unwrap();
+            let uv = c.uv(y);
+            Some((uv.x as f64, uv.y as f64))
+        },
+        |u, v| {
+            // The point at (angle u, height v), as the cylinder's sampler places it.
+            let (y, _, _) = c.sample(Vec2::new(v as f32, u as f32));
+            if faces(y) { 1.0 } else { 0.0 }
+        },
+    );
+    chi2::assert_passes("cylinder", &outcome);
+    for _ in 0..10_000 {
+        let Some(s) = cylinder.sample(origin, None, LightSampling::Area, u2(&mut rng)) else {
+            continue;
+        };
+        let hit = c.intersect(&Ray::new(origin, s.wi), f32::INFINITY).unwrap();
+        assert!(hit.front);
+        // Both hold d² / cos: rounding in the hit point weighs 1 / cos, so the grazing
+        // edge (cos < 0.05) is left out of the comparison.
+        let y = s.target.unwrap();
+        if c.normal(y).dot(-s.wi) < 0.05 {
+            continue;
+        }
+        let pdf = cylinder.pdf(origin, s.wi, hit.t, LightSampling::Area);
+        assert!((pdf - s.pdf).abs() <= 1e-3 * s.pdf, "{pdf} vs {}", s.pdf);
     }
 }
 

@@ -229,6 +229,38 @@ fn malformed_scene_files_are_rejected_with_the_element() {
             "cameras[0]",
         ),
         (
+            "disk-normal",
+            Box::new(|m, _| {
+                m["disks"] = json!([{"name": "d", "centre": [0, 1, 0], "normal": [0, 2, 0],
+                    "radius": 0.5, "material": 0}])
+            }),
+            "disks[0]",
+        ),
+        (
+            "cylinder-length",
+            Box::new(|m, _| {
+                m["cylinders"] = json!([{"name": "c", "centre": [0, 1, 0], "axis": [1, 0, 0],
+                    "radius": 0.5, "length": -1.0, "material": 0}])
+            }),
+            "cylinders[0]",
+        ),
+        (
+            "cylinder-material",
+            Box::new(|m, _| {
+                m["cylinders"] = json!([{"name": "c", "centre": [0, 1, 0], "axis": [1, 0, 0],
+                    "radius": 0.5, "length": 1.0, "material": 99}])
+            }),
+            "cylinders[0].material",
+        ),
+        (
+            "sun-angle",
+            Box::new(|m, _| {
+                m["lights"] = json!([{"name": "sun", "kind": {"directional": {
+                    "direction": [0, -1, 0], "irradiance": [1, 1, 1], "angle": 4.0}}}])
+            }),
+            "lights[0]",
+        ),
+        (
             "buffer-outside",
             Box::new(|m, _| m["buffer"] = json!("../box.lucerna.bin")),
             "buffer",

@@ -147,11 +147,16 @@ def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=Non
         if e := emitter(material):
             shape["emitter"] = e
         scene[f"sphere_{i}"] = shape
+    for key in ("disks", "cylinders"):
+        if manifest.get(key):
+            raise Unsupported(f"{key}: analytic disks and cylinders are not exported to Mitsuba")
     for i, light in enumerate(manifest["lights"]):
         (kind, values), = light["kind"].items()
         if kind == "point":
             scene[f"light_{i}"] = {"type": "point", "position": values["position"],
                                    "intensity": {"type": "rgb", "value": values["intensity"]}}
+        elif kind == "directional" and values.get("angle", 0.0) > 0.0:
+            raise Unsupported(f"lights[{i}]: Mitsuba's directional light has no angular size")
         elif kind == "directional":
             scene[f"light_{i}"] = {"type": "directional", "direction": values["direction"],
                                    "irradiance": {"type": "rgb", "value": values["irradiance"]}}

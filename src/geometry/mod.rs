@@ -3,6 +3,7 @@
 
 pub mod frame;
 pub mod instances;
+pub mod quadric;
 pub mod ray;
 pub mod sphere;
 pub mod triangle;
@@ -24,6 +25,8 @@ pub enum Primitive {
     Triangle([Vec3; 3]),
     /// A sphere; its front is the outside.
     Sphere { centre: Vec3, radius: f32 },
+    /// A disk (front towards its normal) or an open cylinder (front outside).
+    Quadric(quadric::Quadric),
 }
 
 impl Primitive {
@@ -32,6 +35,10 @@ impl Primitive {
             Self::Triangle([a, b, c]) => Aabb::new(a.min(b).min(c).into(), a.max(b).max(c).into()),
             Self::Sphere { centre, radius } => {
                 Aabb::new((centre - radius).into(), (centre + radius).into())
+            }
+            Self::Quadric(q) => {
+                let (lo, hi) = q.bounds();
+                Aabb::new(lo.into(), hi.into())
             }
         }
     }
@@ -42,7 +49,7 @@ impl Primitive {
 pub struct PrimitiveHit {
     pub t: f32,
     /// Barycentric weights of triangle vertices 1 and 2 (vertex 0 has `1 - b1 - b2`); 0 for
-    /// spheres.
+    /// the analytic shapes.
     pub b1: f32,
     pub b2: f32,
     /// True when the ray arrives on the primitive's front (a triangle's counter-clockwise
@@ -205,6 +212,7 @@ impl Bvh {
         let hit = match self.prims[leaf] {
             Primitive::Triangle([p0, p1, p2]) => triangle::intersect(shear, p0, p1, p2, tmax)?,
             Primitive::Sphere { centre, radius } => sphere::intersect(ray, centre, radius, tmax)?,
+            Primitive::Quadric(q) => q.intersect(ray, tmax)?,
         };
         let flags = self.flags[leaf];
         if flags != 0 {

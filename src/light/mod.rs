@@ -1,5 +1,5 @@
 //! Lights in render space and their sampling: emissive triangles and spheres (area lights,
-//! sampled by area or by solid angle), point, spot and directional lights, distant lights
+//! sampled by area or by solid angle), disks and cylinders (sampled by area), point, spot and directional lights, distant lights
 //! with an angular size, and the environment. Which light to sample is `selection`'s job.
 
 pub mod environment;
@@ -9,6 +9,7 @@ pub mod tree;
 
 use crate::color::luminance;
 use crate::geometry::frame::Frame;
+use crate::geometry::quadric::Quadric;
 use crate::geometry::ray::offset_ray_origin;
 use crate::integrator::LightSampling;
 use crate::sampling::warp::{
@@ -24,6 +25,7 @@ use std::f32::consts::PI;
 pub enum Light {
     Triangle(TriangleLight),
     Sphere(SphereLight),
+    Quadric(QuadricLight),
     Point {
         position: Vec3,
         intensity: Vec3,
@@ -75,6 +77,18 @@ pub struct SphereLight {
     pub prim: u32,
     pub centre: Vec3,
     pub radius: f32,
+    pub two_sided: bool,
+    /// Mean emitted radiance, for selection by power.
+    pub mean_radiance: Vec3,
+}
+
+/// An emissive disk or open cylinder, sampled uniformly by area (as pbrt-v4 does: neither
+/// has a closed-form solid-angle sampling).
+#[derive(Clone, Debug)]
+pub struct QuadricLight {
+    /// The BVH primitive it is.
+    pub prim: u32,
+    pub quadric: Quadric,
     pub two_sided: bool,
     /// Mean emitted radiance, for selection by power.
     pub mean_radiance: Vec3,
@@ -155,6 +169,10 @@ impl Light {
             Self::Sphere(s) => {
                 let sides = if s.two_sided { 2.0 } else { 1.0 };
                 PI * 4.0 * PI * s.radius * s.radius * sides * luminance(s.mean_radiance)
+            }
+            Self::Quadric(q) => {
+                let sides = if q.two_sided { 2.0 } else { 1.0 };
+                PI * q.quadric.area() * sides * luminance(q.mean_radiance)
             }
             Self::Point { intensity, .. } => 4.0 * PI * luminance(*intensity),
             Self::Spot {
@@ -250,6 +268,12 @@ impl Light {
                     crate::geometry::sphere::uv(n),
                 )?;
                 s.pdf = to_solid_angle / (4.0 * PI * sp.radius * sp.radius);
+                Some(s)
+            }
+            Self::Quadric(q) => {
+                let (y, n, uv) = q.quadric.sample(u);
+                let (mut s, to_solid_angle) = area_sample(p, y, n, q.two_sided, q.prim, uv)?;
+                s.pdf = to_solid_angle / q.quadric.area();
                 Some(s)
             }
             Self::Point {
@@ -358,6 +382,15 @@ impl Light {
                 let cos_light = n.dot(wi).abs();
                 if cos_light > 0.0 {
                     dist * dist / (cos_light * 4.0 * PI * sp.radius * sp.radius)
+                } else {
+                    0.0
+                }
+            }
+            Self::Quadric(q) => {
+                let (_, n) = q.quadric.surface(p + wi * dist);
+                let cos_light = n.dot(wi).abs();
+                if cos_light > 0.0 {
+                    dist * dist / (cos_light * q.quadric.area())
                 } else {
                     0.0
                 }

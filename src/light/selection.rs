@@ -5,6 +5,7 @@
 use super::Light;
 use super::environment::Environment;
 use super::tree::{LightBounds, LightTree};
+use crate::geometry::quadric::Quadric;
 use crate::integrator::LightSelect;
 use crate::sampling::distribution::AliasTable;
 use glam::Vec3;
@@ -64,6 +65,23 @@ fn bounds(l: &Light, environment: Option<&Environment>, radius: f32) -> Option<L
             cos_theta_e: 0.0,
             two_sided: s.two_sided,
         },
+        Light::Quadric(q) => {
+            let (min, max) = q.quadric.bounds();
+            // A disk's normals are its normal; a cylinder's lie at 90 degrees to its axis.
+            let (w, cos_theta_o) = match q.quadric {
+                Quadric::Disk(d) => (d.normal, 1.0),
+                Quadric::Cylinder(c) => (c.axis, 0.0),
+            };
+            LightBounds {
+                min,
+                max,
+                phi,
+                w,
+                cos_theta_o,
+                cos_theta_e: 0.0,
+                two_sided: q.two_sided,
+            }
+        }
         Light::Point { position, .. } => point(*position, Vec3::Y, -1.0, 0.0),
         Light::Spot {
             position,

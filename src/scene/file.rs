@@ -14,7 +14,7 @@
 //! before anything uses the scene.
 
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
-use super::{Instance, Sphere, Texels, Texture, TextureRef, Wrap};
+use super::{Cylinder, Disk, Instance, Sphere, Texels, Texture, TextureRef, Wrap};
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
@@ -41,6 +41,10 @@ struct Manifest {
     meshes: Vec<MeshEntry>,
     instances: Vec<Instance>,
     spheres: Vec<Sphere>,
+    #[serde(default)]
+    disks: Vec<Disk>,
+    #[serde(default)]
+    cylinders: Vec<Cylinder>,
     materials: Vec<Material>,
     textures: Vec<TextureEntry>,
     lights: Vec<Light>,
@@ -196,6 +200,8 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         meshes,
         instances: scene.instances.clone(),
         spheres: scene.spheres.clone(),
+        disks: scene.disks.clone(),
+        cylinders: scene.cylinders.clone(),
         materials: scene.materials.clone(),
         textures,
         lights: scene.lights.clone(),
@@ -333,6 +339,8 @@ pub fn read(path: &Path) -> Result<Scene> {
         meshes,
         instances: manifest.instances,
         spheres: manifest.spheres,
+        disks: manifest.disks,
+        cylinders: manifest.cylinders,
         materials: manifest.materials,
         textures,
         lights: manifest.lights,
@@ -472,6 +480,44 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 format!("spheres[{i}]"),
                 "centre and radius must be finite, radius > 0",
             );
+        }
+    }
+    let shapes = scene
+        .disks
+        .iter()
+        .enumerate()
+        .map(|(i, d)| {
+            let ok = d.centre.is_finite()
+                && (d.normal.length() - 1.0).abs() < 1e-3
+                && d.radius.is_finite()
+                && d.radius > 0.0;
+            (
+                format!("disks[{i}]"),
+                d.material,
+                ok,
+                "centre, unit normal and radius > 0",
+            )
+        })
+        .chain(scene.cylinders.iter().enumerate().map(|(i, c)| {
+            let ok = c.centre.is_finite()
+                && (c.axis.length() - 1.0).abs() < 1e-3
+                && c.radius.is_finite()
+                && c.radius > 0.0
+                && c.length.is_finite()
+                && c.length > 0.0;
+            (
+                format!("cylinders[{i}]"),
+                c.material,
+                ok,
+                "centre, unit axis, radius > 0 and length > 0",
+            )
+        }));
+    for (element, material, ok, needs) in shapes {
+        if material as usize >= materials {
+            return fail(format!("{element}.material"), "material index out of range");
+        }
+        if !ok {
+            return fail(element, &format!("needs a finite {needs}"));
         }
     }
     for (i, m) in scene.materials.iter().enumerate() {

@@ -20,6 +20,10 @@ pub struct Scene {
     pub instances: Vec<Instance>,
     /// Analytic spheres (world space).
     pub spheres: Vec<Sphere>,
+    /// Analytic disks (world space).
+    pub disks: Vec<Disk>,
+    /// Analytic open cylinders (world space).
+    pub cylinders: Vec<Cylinder>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
     pub lights: Vec<Light>,
@@ -64,6 +68,32 @@ pub struct Sphere {
     pub name: String,
     pub centre: DVec3,
     pub radius: f64,
+    pub material: u32,
+}
+
+/// An analytic disk, front towards `normal`: a disk light (UsdLux DiskLight) with an exact
+/// outline and area.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Disk {
+    pub name: String,
+    pub centre: DVec3,
+    /// Unit normal of the front side.
+    pub normal: DVec3,
+    pub radius: f64,
+    pub material: u32,
+}
+
+/// An analytic open cylinder (no caps) around `axis` through `centre`, front outwards: a
+/// cylinder light (UsdLux CylinderLight) with an exact shape and area.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Cylinder {
+    pub name: String,
+    pub centre: DVec3,
+    /// Unit direction of the axis.
+    pub axis: DVec3,
+    pub radius: f64,
+    /// Length along the axis (centred on `centre`).
+    pub length: f64,
     pub material: u32,
 }
 
@@ -205,6 +235,16 @@ impl Scene {
         for s in &self.spheres {
             lo = lo.min(s.centre - s.radius);
             hi = hi.max(s.centre + s.radius);
+        }
+        // Disks and cylinders by their bounding spheres: a little loose, always enclosing.
+        let shapes = self.disks.iter().map(|d| (d.centre, d.radius)).chain(
+            self.cylinders
+                .iter()
+                .map(|c| (c.centre, c.radius.hypot(0.5 * c.length))),
+        );
+        for (centre, radius) in shapes {
+            lo = lo.min(centre - radius);
+            hi = hi.max(centre + radius);
         }
         (lo.x <= hi.x).then_some((lo, hi))
     }

@@ -145,14 +145,16 @@ def _convert(path, output, frame, no_validate, quiet):
         for line in text.splitlines():
             if line.strip():
                 writer.warnings.append(f"usd-core: {line.strip()}")
-    if not writer.instances and not writer.spheres and not writer.lights and writer.environment is None:
+    if not (writer.instances or writer.spheres or writer.disks or writer.cylinders or writer.lights
+            or writer.environment is not None):
         _error(path, "stage", "nothing to render (no meshes, spheres or lights)")
         return EXIT_BAD_INPUT
     writer.write(output)
     if not quiet:
         print(f"lucerna-usd: {path} -> {output}: {len(writer.meshes)} meshes, "
               f"{len(writer.instances)} instances, {len(writer.materials)} materials, "
-              f"{len(writer.lights) + len(writer.spheres)} lights and spheres, "
+              f"{len(writer.spheres)} spheres, {len(writer.disks)} disks, {len(writer.cylinders)} cylinders, "
+              f"{len(writer.lights)} lights, "
               f"{len(writer.cameras)} cameras, {len(writer.warnings)} warnings, "
               f"{clock.monotonic() - started:.2f} s", file=sys.stderr)
     return 0

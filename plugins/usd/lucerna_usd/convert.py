@@ -106,7 +106,7 @@ class Converter:
             elif g.kind == "light":
                 lights.convert(self.writer, g.payload, list(world_usd), self.to_lucerna,
                                self.time, self.warn)
-        if not self.writer.instances and not self.writer.spheres:
+        if not (self.writer.instances or self.writer.spheres or self.writer.disks or self.writer.cylinders):
             self.warn("stage", "no renderable geometry")
         return self.writer
 

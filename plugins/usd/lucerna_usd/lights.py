@@ -8,8 +8,10 @@ surface area in stage units, and a distant light's intensity becomes the irradia
 surface facing it. Lights are visible to the camera, as in Karma and RenderMan.
 
 - RectLight, DiskLight, CylinderLight: emissive surfaces (black, one-sided, emitting along
-  -Z, resp. outwards; no end caps). The disk and the cylinder are polygons of SEGMENTS
-  sides whose radius keeps the true surface area, so their power is exact.
+  -Z, resp. outwards; no end caps). The disk and the cylinder are the renderer's analytic
+  disk and open cylinder; under a shear or an uneven scale that would make them elliptic,
+  polygons of SEGMENTS sides whose radius keeps the true surface area, so their power is
+  exact.
 - SphereLight: an analytic emissive sphere (sampled by solid angle); with treatAsPoint a
   point light of the same radiant intensity L * pi * r^2.
 - DistantLight: a directional light with its angular diameter (a cone of uniform radiance
@@ -101,6 +103,43 @@ def _cylinder(radius, length):
     return positions, triangles, lambda c: c * [0.0, 1.0, 1.0]
 
 
+def _similar(a, b, tolerance=1e-5):
+    """Whether row vectors `a` and `b` are perpendicular and of equal length: the
+    in-plane axes of a transform that keeps circles circular."""
+    la, lb = np.linalg.norm(a), np.linalg.norm(b)
+    return la > 0 and abs(la - lb) <= tolerance * la and abs(a @ b) <= tolerance * la * lb
+
+
+def _analytic_disk(writer, name, material, world, radius):
+    """Adds the disk light's exact disk if `world` keeps it circular; False otherwise."""
+    ex, ey, ez = world[0, :3], world[1, :3], world[2, :3]
+    if not _similar(ex, ey):
+        return False
+    normal = np.cross(ex, ey)
+    normal /= np.linalg.norm(normal)
+    if normal @ -ez < 0:  # mirrored: the light still emits where local -Z goes
+        normal = -normal
+    writer.disks.append({"name": name, "centre": [float(x) for x in world[3, :3]],
+                         "normal": [float(x) for x in normal],
+                         "radius": float(radius * np.linalg.norm(ex)), "material": material})
+    return True
+
+
+def _analytic_cylinder(writer, name, material, world, radius, length):
+    """Adds the cylinder light's exact cylinder if `world` keeps its cross-section circular
+    and its axis perpendicular to it; False otherwise."""
+    ex, ey, ez = world[0, :3], world[1, :3], world[2, :3]
+    lx = np.linalg.norm(ex)
+    if not (_similar(ey, ez) and lx > 0 and abs(ex @ ey) <= 1e-5 * lx * np.linalg.norm(ey)
+            and abs(ex @ ez) <= 1e-5 * lx * np.linalg.norm(ez)):
+        return False
+    writer.cylinders.append({"name": name, "centre": [float(x) for x in world[3, :3]],
+                             "axis": [float(x) for x in ex / lx],
+                             "radius": float(radius * np.linalg.norm(ey)),
+                             "length": float(length * lx), "material": material})
+    return True
+
+
 def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
     """Adds the light `prim` placed by each row-vector matrix of `usd_worlds` (stage
     space); `to_lucerna` maps stage space to lucerna's (Y up, metres)."""
@@ -113,26 +152,39 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
         name = path if len(usd_worlds) == 1 else f"{path}[{k}]"
         world = usd_world @ to_lucerna
         if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight) or prim.IsA(UsdLux.CylinderLight):
+            analytic = None
             if prim.IsA(UsdLux.RectLight):
                 light = UsdLux.RectLight(prim)
                 shape = _rect(light.GetWidthAttr().Get(time), light.GetHeightAttr().Get(time))
                 if light.GetTextureFileAttr().Get(time):
                     warn(path, "texture:file on a RectLight is not supported: uniform emission")
             elif prim.IsA(UsdLux.DiskLight):
-                shape = _disk(UsdLux.DiskLight(prim).GetRadiusAttr().Get(time))
+                radius = float(UsdLux.DiskLight(prim).GetRadiusAttr().Get(time))
+                shape = _disk(radius)
+                analytic = (_analytic_disk, (radius,))
             else:
                 light = UsdLux.CylinderLight(prim)
                 if light.GetTreatAsLineAttr().Get(time):
                     warn(path, "treatAsLine is ignored: the cylinder is rendered")
-                shape = _cylinder(light.GetRadiusAttr().Get(time), light.GetLengthAttr().Get(time))
+                radius, length = float(light.GetRadiusAttr().Get(time)), float(light.GetLengthAttr().Get(time))
+                shape = _cylinder(radius, length)
+                analytic = (_analytic_cylinder, (radius, length))
             positions, triangles, outward = shape
             triangles = _face_outwards(positions, triangles.copy(), outward)
+            # The polygons have exactly the true area, so normalisation divides by it
+            # whichever shape is written.
             area = _world_area(np.asarray(usd_world)[:3, :3], positions, triangles)
             if area <= 0.0:
                 warn(path, "light has no area: skipped")
                 continue
             L = radiance / area if normalize else radiance
             material = _emitter(writer, name, L)
+            if analytic is not None:
+                add, dimensions = analytic
+                if add(writer, name, material, world, *dimensions):
+                    continue
+                warn(name, f"a sheared or unevenly scaled {prim.GetTypeName()} is rendered as a "
+                     f"{SEGMENTS}-sided polygon mesh with the true area")
             mesh = writer.add_mesh(name, material, positions, triangles)
             writer.add_instances(name, mesh, world[None])
         elif prim.IsA(UsdLux.SphereLight):

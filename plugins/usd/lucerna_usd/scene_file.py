@@ -61,6 +61,8 @@ class SceneWriter:
         self.meshes = []
         self.instances = []
         self.spheres = []
+        self.disks = []
+        self.cylinders = []
         self.materials = []
         self.textures = []
         self.lights = []
@@ -137,6 +139,8 @@ class SceneWriter:
             "meshes": self.meshes,
             "instances": self.instances,
             "spheres": self.spheres,
+            "disks": self.disks,
+            "cylinders": self.cylinders,
             "materials": self.materials,
             "textures": self.textures,
             "lights": self.lights,

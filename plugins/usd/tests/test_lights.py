@@ -53,26 +53,60 @@ def test_rect_light_units_and_orientation(stage_file, converted):
     assert emitter(s, s.mesh("/World/Normalized")["material"]) == pytest.approx([3 / 8] * 3)
 
 
-def test_disk_and_cylinder_keep_their_true_area(stage_file, converted):
+def test_disk_and_cylinder_lights_are_analytic_shapes(stage_file, converted):
     s = converted(stage_file(world('''
     def DiskLight "Disk" {
         float inputs:radius = 0.5
+        float inputs:intensity = 2
+        bool inputs:normalize = 1
+        double3 xformOp:translate = (1, 2, 3)
+        double3 xformOp:rotateXYZ = (90, 0, 0)
+        double3 xformOp:scale = (2, 2, 1)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ", "xformOp:scale"]
     }
     def CylinderLight "Tube" {
         float inputs:radius = 0.25
         float inputs:length = 2
         bool inputs:normalize = 1
         float inputs:intensity = 10
+        double3 xformOp:rotateXYZ = (0, 0, 90)
+        double3 xformOp:scale = (3, 1, 1)
+        uniform token[] xformOpOrder = ["xformOp:rotateXYZ", "xformOp:scale"]
     }''')))
+    assert not s["meshes"]
+    (disk,), (tube,) = s["disks"], s["cylinders"]
+    assert disk["centre"] == pytest.approx([1, 2, 3]) and disk["radius"] == pytest.approx(1.0)
+    assert disk["normal"] == pytest.approx([0, 1, 0], abs=1e-9)  # local -Z turned by +90 about X
+    assert emitter(s, disk["material"]) == pytest.approx([2 / math.pi] * 3)  # area pi * 1^2
+    assert tube["axis"] == pytest.approx([0, 1, 0], abs=1e-9)  # local X turned by 90 about Z
+    assert tube["radius"] == pytest.approx(0.25) and tube["length"] == pytest.approx(6.0)
+    assert emitter(s, tube["material"]) == pytest.approx([10 / (2 * math.pi * 0.25 * 6)] * 3)
+
+
+def test_elliptic_disk_and_cylinder_lights_are_polygons_with_their_true_area(stage_file, converted):
+    s = converted(stage_file(world('''
+    def DiskLight "Disk" {
+        float inputs:radius = 0.5
+        double3 xformOp:scale = (1, 1.5, 1)
+        uniform token[] xformOpOrder = ["xformOp:scale"]
+    }
+    def CylinderLight "Tube" {
+        float inputs:radius = 0.25
+        float inputs:length = 2
+        bool inputs:normalize = 1
+        float inputs:intensity = 10
+        double3 xformOp:scale = (1, 1, 2)
+        uniform token[] xformOpOrder = ["xformOp:scale"]
+    }''')))
+    assert not s["disks"] and not s["cylinders"]
+    assert len(s.warnings_about("is rendered as a 64-sided polygon mesh")) == 2
     area, normals, _ = mesh_area_and_normals(s, s.mesh("/World/Disk"))
-    assert area == pytest.approx(math.pi * 0.25, rel=1e-6) and np.allclose(normals, [0, 0, -1])
+    assert area == pytest.approx(math.pi * 0.25, rel=1e-6) and np.allclose(normals, [0, 0, -1])  # object space
     tube = s.mesh("/World/Tube")
-    area, normals, centres = mesh_area_and_normals(s, tube)
-    assert area == pytest.approx(2 * math.pi * 0.25 * 2, rel=1e-3)
+    _, normals, centres = mesh_area_and_normals(s, tube)
+    assert np.abs(normals[:, 0]).max() < 1e-6  # no end caps
     radial = centres * [0, 1, 1]
     assert (np.einsum("ij,ij->i", normals, radial) > 0).all()  # outwards, along the X axis
-    assert np.abs(normals[:, 0]).max() < 1e-6  # no end caps
-    assert emitter(s, tube["material"]) == pytest.approx([10 / (2 * math.pi * 0.25 * 2)] * 3)
 
 
 def test_sphere_light_and_treat_as_point(stage_file, converted):
