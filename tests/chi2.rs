@@ -476,6 +476,24 @@ fn bsdfs() -> Vec<(String, Bsdf)> {
             Bsdf::GltfPbr(GltfPbr::new(base, metallic, roughness, 1.5)),
         ));
     }
+    // Clear coats: rough over diffuse, smooth over rough metal, rough over a smooth metal,
+    // smooth over a smooth dielectric (two coinciding mirrors).
+    for (base, metallic, roughness, coat, coat_roughness) in [
+        (Vec3::new(0.8, 0.3, 0.2), 0.0, 0.6, 1.0, 0.2),
+        (Vec3::new(0.95, 0.64, 0.54), 1.0, 0.4, 0.7, 0.0),
+        (Vec3::new(0.9, 0.9, 0.9), 1.0, 0.0, 1.0, 0.35),
+        (Vec3::new(0.2, 0.4, 0.9), 0.0, 0.0, 0.5, 0.0),
+    ] {
+        all.push((
+            format!(
+                "gltf base={base} metallic={metallic} roughness={roughness} coat={coat} coat_roughness={coat_roughness}"
+            ),
+            Bsdf::GltfPbr(
+                GltfPbr::new(base, metallic, roughness, 1.5)
+                    .with_clearcoat(coat, coat_roughness),
+            ),
+        ));
+    }
     for exponent in [1.0f32, 10.0, 60.0] {
         all.push((
             format!("phong n={exponent}"),

@@ -283,7 +283,9 @@ fn materials_factors_textures_and_extensions() {
         },
         "emissiveFactor": [1.0, 0.5, 0.25],
         "emissiveTexture": {"index": 0},
-        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}, "KHR_materials_ior": {"ior": 1.33}},
+        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 4.0}, "KHR_materials_ior": {"ior": 1.33},
+            "KHR_materials_clearcoat": {"clearcoatFactor": 0.6, "clearcoatRoughnessFactor": 0.2,
+                "clearcoatTexture": {"index": 0}}},
         "alphaMode": "MASK", "alphaCutoff": 0.3, "doubleSided": true
     });
     let srgb_188: &[[u8; 4]] = &[[188, 188, 188, 255]];
@@ -292,6 +294,15 @@ fn materials_factors_textures_and_extensions() {
     let m = &scene.materials[0];
     assert_eq!(m.model, BsdfModel::GltfPbr);
     assert_eq!((m.metallic, m.roughness, m.ior), (0.25, 0.75, 1.33));
+    assert_eq!((m.clearcoat, m.clearcoat_roughness), (0.6, 0.2));
+    assert!(
+        scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("KHR_materials_clearcoat textures are not supported")),
+        "{:?}",
+        scene.warnings
+    );
     assert_eq!(m.emissive, Vec3::new(4.0, 2.0, 1.0));
     assert_eq!(m.alpha_mode, AlphaMode::Mask { cutoff: 0.3 });
     assert!(m.double_sided);
@@ -523,17 +534,17 @@ fn extensions_required_error_used_warning() {
     let prim = b.quad_primitive(None);
     let mesh = b.mesh(json!([prim]));
     b.root(json!({"mesh": mesh}));
-    b.json["extensionsUsed"] = json!(["KHR_materials_clearcoat"]);
+    b.json["extensionsUsed"] = json!(["KHR_materials_sheen"]);
     let scene = load(&b.write_embedded(dir.path(), "used"));
     assert!(
         scene
             .warnings
             .iter()
-            .any(|w| w.contains("KHR_materials_clearcoat")),
+            .any(|w| w.contains("KHR_materials_sheen")),
         "{:?}",
         scene.warnings
     );
-    b.json["extensionsRequired"] = json!(["KHR_materials_clearcoat"]);
+    b.json["extensionsRequired"] = json!(["KHR_materials_sheen"]);
     let err = ingest::load(
         &b.write_embedded(dir.path(), "required"),
         &Default::default(),
@@ -542,7 +553,7 @@ fn extensions_required_error_used_warning() {
     .unwrap();
     assert_eq!(err.exit_code(), 2);
     assert!(
-        err.to_string().contains("KHR_materials_clearcoat")
+        err.to_string().contains("KHR_materials_sheen")
             && err.to_string().contains("not supported"),
         "{err}"
     );

@@ -66,6 +66,8 @@ def bsdf(material, element):
         raise Unsupported(f"{element}: textures are not exported")
     if material["alpha_mode"] != "opaque":
         raise Unsupported(f"{element}: alpha modes other than opaque are not exported")
+    if material.get("clearcoat", 0.0) > 0.0:
+        raise Unsupported(f"{element}: clear coats are not exported")
     base = material["base_color"][:3]
     if material["model"] == "lambert":
         b = {"type": "diffuse", "reflectance": {"type": "rgb", "value": base}}

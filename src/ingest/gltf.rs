@@ -26,6 +26,7 @@ use std::sync::Arc;
 /// used one a warning.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_materials_clearcoat",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",
     "KHR_texture_transform",
@@ -677,6 +678,7 @@ impl<'a> Importer<'a> {
             },
             gltf::material::AlphaMode::Blend => AlphaMode::Blend,
         };
+        let (clearcoat, clearcoat_roughness) = self.clearcoat(m, element)?;
         Ok(Material {
             name: m.name().map_or_else(|| element.to_string(), str::to_string),
             model,
@@ -690,9 +692,48 @@ impl<'a> Importer<'a> {
             emissive: emissive.max(Vec3::ZERO),
             emissive_texture,
             ior: m.ior().unwrap_or(1.5),
+            clearcoat,
+            clearcoat_roughness,
             alpha_mode,
             double_sided: m.double_sided(),
         })
+    }
+
+    /// Clear coat weight and roughness factors from KHR_materials_clearcoat (0, 0 without
+    /// it). Its textures and normal map are not implemented: a warning says so.
+    fn clearcoat(&mut self, m: &gltf::Material, element: &str) -> Result<(f32, f32)> {
+        let Some(ext) = m.extension_value("KHR_materials_clearcoat") else {
+            return Ok((0.0, 0.0));
+        };
+        let factor = |key: &str| match ext.get(key) {
+            None => Ok(0.0),
+            Some(v) => v
+                .as_f64()
+                .map(|x| x as f32)
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    self.err(
+                        element,
+                        format!("KHR_materials_clearcoat.{key} is not a finite number"),
+                    )
+                }),
+        };
+        let weights = (
+            factor("clearcoatFactor")?.clamp(0.0, 1.0),
+            factor("clearcoatRoughnessFactor")?.clamp(0.0, 1.0),
+        );
+        let textures = [
+            "clearcoatTexture",
+            "clearcoatRoughnessTexture",
+            "clearcoatNormalTexture",
+        ];
+        if textures.iter().any(|t| ext.get(*t).is_some()) {
+            self.warn(
+                element,
+                "KHR_materials_clearcoat textures are not supported: the factors apply uniformly",
+            );
+        }
+        Ok(weights)
     }
 
     /// The BSDF model from `extras.lucerna` (default: the glTF BRDF).

@@ -11,8 +11,19 @@
 //! Below [`SMOOTH_ALPHA`] the specular lobe is a perfect mirror (a delta lobe) with the
 //! same Fresnel weights at h = n, so roughness 0 is exact rather than NaN.
 //!
-//! Sampling picks the diffuse lobe (cosine) or the specular lobe (GGX visible normals) with
-//! probabilities proportional to their albedo estimates at `wo`; the density is the mixture.
+//! A clear coat (KHR_materials_clearcoat, UsdPreviewSurface clearcoat) of weight `c` and its
+//! own roughness is layered on top, as a reciprocal, energy-conserving mix:
+//!
+//! ```text
+//! coated = c F_c(v·h) V_c D_c  +  (1 - c F_c(n·wo)) (1 - c F_c(n·wi)) material,  F_c: f0 = 0.04
+//! ```
+//!
+//! (the base is seen through the coat twice, in and out). A smooth coat is a delta lobe,
+//! like a smooth specular layer; when both are smooth their mirror reflections add up.
+//!
+//! Sampling picks the coat, the specular lobe (GGX visible normals) or the diffuse lobe
+//! (cosine) with probabilities proportional to their albedo estimates at `wo`; the density
+//! is the mixture.
 
 use super::microfacet::{Ggx, SMOOTH_ALPHA, reflect, schlick};
 use super::{BsdfSample, Lobe};
@@ -28,7 +39,14 @@ pub struct GltfPbr {
     metallic: f32,
     ggx: Ggx,
     f0: f32,
+    /// Clear coat weight (0: no coat).
+    coat: f32,
+    coat_ggx: Ggx,
 }
+
+/// Reflectance at normal incidence of the clear coat (ior 1.5, as KHR_materials_clearcoat
+/// and UsdPreviewSurface fix it).
+const COAT_F0: f32 = 0.04;
 
 impl GltfPbr {
     /// A BRDF from base colour, metallic, perceptual roughness and dielectric ior.
@@ -44,11 +62,42 @@ impl GltfPbr {
             } else {
                 0.04
             },
+            coat: 0.0,
+            coat_ggx: Ggx { alpha: 0.0 },
+        }
+    }
+
+    /// The same BRDF under a clear coat of `weight` and perceptual `roughness`.
+    pub fn with_clearcoat(self, weight: f32, roughness: f32) -> Self {
+        let r = roughness.clamp(0.0, 1.0);
+        Self {
+            coat: weight.clamp(0.0, 1.0),
+            coat_ggx: Ggx { alpha: r * r },
+            ..self
         }
     }
 
     fn smooth(&self) -> bool {
         self.ggx.alpha < SMOOTH_ALPHA
+    }
+
+    fn coat_smooth(&self) -> bool {
+        self.coat_ggx.alpha < SMOOTH_ALPHA
+    }
+
+    /// Weighted coat reflectance c F_c at `cos`.
+    #[inline]
+    fn coat_fresnel(&self, cos: f32) -> f32 {
+        if self.coat == 0.0 {
+            return 0.0;
+        }
+        self.coat * schlick(Vec3::splat(COAT_F0), cos).x
+    }
+
+    /// Share of the light that crosses the coat in (along `wi`) and out (along `wo`).
+    #[inline]
+    fn coat_transmission(&self, cos_o: f32, cos_i: f32) -> f32 {
+        (1.0 - self.coat_fresnel(cos_o)) * (1.0 - self.coat_fresnel(cos_i))
     }
 
     /// Specular reflectance (dielectric and metal Fresnel, mixed by metallic) at `cos`.
@@ -66,12 +115,19 @@ impl GltfPbr {
         self.base * ((1.0 - self.metallic) * (1.0 - fd))
     }
 
-    /// Probability of sampling the specular lobe from `wo`.
+    /// Probabilities of sampling the coat, the specular and the diffuse lobe from `wo`.
     #[inline]
-    fn specular_probability(&self, wo: Vec3) -> f32 {
-        let s = luminance(self.specular_fresnel(wo.z));
-        let d = luminance(self.diffuse_weight(wo.z));
-        if s + d > 0.0 { s / (s + d) } else { 1.0 }
+    fn lobe_probabilities(&self, wo: Vec3) -> (f32, f32, f32) {
+        let c = self.coat_fresnel(wo.z);
+        let through = 1.0 - c;
+        let s = through * luminance(self.specular_fresnel(wo.z));
+        let d = through * luminance(self.diffuse_weight(wo.z));
+        let total = c + s + d;
+        if total > 0.0 {
+            (c / total, s / total, d / total)
+        } else {
+            (0.0, 1.0, 0.0)
+        }
     }
 
     /// f · cos θi of the non-delta lobes.
@@ -86,6 +142,13 @@ impl GltfPbr {
             let vd = self.ggx.visibility(wi.z, wo.z) * self.ggx.d(h);
             f += self.specular_fresnel(v_h) * vd;
         }
+        if self.coat > 0.0 {
+            f *= self.coat_transmission(wo.z, wi.z);
+            if !self.coat_smooth() {
+                let vd = self.coat_ggx.visibility(wi.z, wo.z) * self.coat_ggx.d(h);
+                f += Vec3::splat(self.coat_fresnel(v_h) * vd);
+            }
+        }
         f * wi.z
     }
 
@@ -94,11 +157,14 @@ impl GltfPbr {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
-        let ps = self.specular_probability(wo);
-        let mut pdf = (1.0 - ps) * cosine_hemisphere_pdf(wi);
+        let (pc, ps, pd) = self.lobe_probabilities(wo);
+        let mut pdf = pd * cosine_hemisphere_pdf(wi);
+        let h = (wo + wi).normalize();
         if !self.smooth() {
-            let h = (wo + wi).normalize();
             pdf += ps * self.ggx.reflection_pdf(wo, h);
+        }
+        if pc > 0.0 && !self.coat_smooth() {
+            pdf += pc * self.coat_ggx.reflection_pdf(wo, h);
         }
         pdf
     }
@@ -108,26 +174,46 @@ impl GltfPbr {
         if wo.z <= 0.0 {
             return None;
         }
-        let ps = self.specular_probability(wo);
-        if u_lobe < ps {
-            if self.smooth() {
-                let wi = Vec3::new(-wo.x, -wo.y, wo.z);
-                return Some(BsdfSample {
-                    wi,
-                    weight: self.specular_fresnel(wo.z) / ps,
-                    pdf: ps,
-                    lobe: Lobe::Specular,
-                });
-            }
-            let h = self.ggx.sample_visible_normal(wo, u);
-            let wi = reflect(wo, h);
-            if wi.z <= 0.0 {
-                return None;
-            }
-            self.finish(wo, wi, Lobe::Glossy)
+        let (pc, ps, _) = self.lobe_probabilities(wo);
+        let (glossy, delta) = if u_lobe < pc {
+            (Some(&self.coat_ggx), self.coat_smooth())
+        } else if u_lobe < pc + ps {
+            (Some(&self.ggx), self.smooth())
         } else {
+            (None, false)
+        };
+        if delta {
+            return Some(self.mirror_sample(wo, pc, ps));
+        }
+        let Some(ggx) = glossy else {
             let wi = square_to_cosine_hemisphere(u);
-            self.finish(wo, wi, Lobe::Diffuse)
+            return self.finish(wo, wi, Lobe::Diffuse);
+        };
+        let h = ggx.sample_visible_normal(wo, u);
+        let wi = reflect(wo, h);
+        if wi.z <= 0.0 {
+            return None;
+        }
+        self.finish(wo, wi, Lobe::Glossy)
+    }
+
+    /// The mirror direction, reached by whichever smooth lobes (coat, specular) there are:
+    /// their reflectances add up and so do their probabilities.
+    fn mirror_sample(&self, wo: Vec3, pc: f32, ps: f32) -> BsdfSample {
+        let (mut reflectance, mut probability) = (Vec3::ZERO, 0.0);
+        if self.coat_smooth() {
+            reflectance += Vec3::splat(self.coat_fresnel(wo.z));
+            probability += pc;
+        }
+        if self.smooth() {
+            reflectance += self.specular_fresnel(wo.z) * self.coat_transmission(wo.z, wo.z);
+            probability += ps;
+        }
+        BsdfSample {
+            wi: Vec3::new(-wo.x, -wo.y, wo.z),
+            weight: reflectance / probability,
+            pdf: probability,
+            lobe: Lobe::Specular,
         }
     }
 
@@ -135,15 +221,17 @@ impl GltfPbr {
         BsdfSample::from_mixture(wi, self.eval(wo, wi), self.pdf(wo, wi), lobe)
     }
 
-    /// True if some lobe is not a delta: false only for a smooth pure metal.
+    /// True if some lobe is not a delta: false only for a smooth pure metal under no coat or
+    /// a smooth one.
     pub fn has_non_delta(&self) -> bool {
-        !self.smooth() || self.metallic < 1.0
+        !self.smooth() || self.metallic < 1.0 || (self.coat > 0.0 && !self.coat_smooth())
     }
 
     /// Directional albedo estimate at `wo` (Fresnel at n·v, no microfacet energy loss):
     /// the denoising albedo.
     pub fn albedo(&self, wo: Vec3) -> Vec3 {
         let c = wo.z.clamp(0.0, 1.0);
-        self.diffuse_weight(c) + self.specular_fresnel(c)
+        let coat = self.coat_fresnel(c);
+        (self.diffuse_weight(c) + self.specular_fresnel(c)) * (1.0 - coat) + Vec3::splat(coat)
     }
 }

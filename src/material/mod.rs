@@ -197,7 +197,10 @@ pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bs
                 roughness *= mr.y;
                 metallic *= mr.z;
             }
-            Bsdf::GltfPbr(GltfPbr::new(base, metallic, roughness, m.ior))
+            Bsdf::GltfPbr(
+                GltfPbr::new(base, metallic, roughness, m.ior)
+                    .with_clearcoat(m.clearcoat, m.clearcoat_roughness),
+            )
         }
     }
 }

@@ -558,6 +558,8 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && m.emissive.min_element() >= 0.0
             && finite(&[m.metallic, m.roughness, m.normal_scale, m.ior])
             && m.ior > 0.0
+            && (0.0..=1.0).contains(&m.clearcoat)
+            && (0.0..=1.0).contains(&m.clearcoat_roughness)
             && phong_ok
             && alpha_ok)
         {

@@ -23,6 +23,12 @@ pub struct Material {
     pub emissive_texture: Option<TextureRef>,
     /// Index of refraction of the dielectric layer (glTF default 1.5).
     pub ior: f32,
+    /// Clear coat weight in [0, 1] (KHR_materials_clearcoat; 0: none).
+    #[serde(default)]
+    pub clearcoat: f32,
+    /// Perceptual roughness of the clear coat.
+    #[serde(default)]
+    pub clearcoat_roughness: f32,
     pub alpha_mode: AlphaMode,
     /// Both sides are visible and shaded; otherwise back faces are invisible to every ray.
     pub double_sided: bool,
@@ -44,6 +50,8 @@ impl Default for Material {
             emissive: Vec3::ZERO,
             emissive_texture: None,
             ior: 1.5,
+            clearcoat: 0.0,
+            clearcoat_roughness: 0.0,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
         }

@@ -8,9 +8,10 @@ roughness in G and metallic in B of one texture, opacity in the base colour's al
 stored as (n + 1) / 2; an 8-bit image used exactly as stored is passed through, anything
 scaled, biased, swizzled or decoded differently is baked to linear float texels.
 
-The material model has no specular-colour workflow and no clearcoat: a specular-workflow
-surface becomes a dielectric whose ior gives the specular colour's luminance at normal
-incidence, and clearcoat is ignored; both with a warning naming the material."""
+clearcoat and clearcoatRoughness become the material's clear coat (ior 1.5, as both
+UsdPreviewSurface and the renderer fix it). The material model has no specular-colour
+workflow: a specular-workflow surface becomes a dielectric whose ior gives the specular colour's luminance at normal
+incidence, with a warning naming the material."""
 
 import math
 
@@ -309,9 +310,13 @@ class MaterialConverter:
             out["metallic"] = 0.0  # also zeroes a metallic texture channel (factor x texel)
             self.warn(name, "specular workflow approximated by a dielectric with ior "
                       f"{out['ior']:.3f} (specularColor luminance {f0:.3f} at normal incidence)")
-        ck, clearcoat = sources["clearcoat"]
-        if ck != "value" or float(clearcoat) > 0.0:
-            self.warn(name, "clearcoat is not supported and is ignored")
+        for key in ("clearcoat", "clearcoatRoughness"):
+            kind, value = sources[key]
+            field = "clearcoat" if key == "clearcoat" else "clearcoat_roughness"
+            if kind == "texture":
+                self.warn(name, f"a texture on {key} is not supported: the fallback is used")
+                value = PREVIEW_DEFAULTS[key]
+            out[field] = min(max(float(value), 0.0), 1.0)
         for key in ("ior", "opacityThreshold"):
             if sources[key][0] == "texture":
                 self.warn(name, f"a texture on {key} is not supported: the fallback is used")

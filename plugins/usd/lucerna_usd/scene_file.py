@@ -44,6 +44,8 @@ def default_material(name, **fields):
         "emissive": [0.0, 0.0, 0.0],
         "emissive_texture": None,
         "ior": 1.5,
+        "clearcoat": 0.0,
+        "clearcoat_roughness": 0.0,
         "alpha_mode": "opaque",
         "double_sided": False,
     }

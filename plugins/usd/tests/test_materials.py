@@ -154,14 +154,18 @@ def test_normal_map_and_uv_transform(stage_file, converted, tmp_path):
     assert uv == pytest.approx([1.0, 0.5])
 
 
-def test_specular_workflow_and_clearcoat_are_reported(stage_file, converted):
+def test_specular_workflow_is_reported_and_clearcoat_converted(stage_file, converted):
     s = converted(stage_file(stage('''
             int inputs:useSpecularWorkflow = 1
             color3f inputs:specularColor = (0.04, 0.04, 0.04)
-            float inputs:clearcoat = 1''')))
-    assert material(s)["ior"] == pytest.approx(1.5, abs=1e-3)  # F0 = 0.04
+            float inputs:clearcoat = 0.75
+            float inputs:clearcoatRoughness = 0.2''')))
+    m = material(s)
+    assert m["ior"] == pytest.approx(1.5, abs=1e-3)  # F0 = 0.04
     assert s.warnings_about("specular workflow approximated")
-    assert s.warnings_about("clearcoat is not supported")
+    assert m["clearcoat"] == pytest.approx(0.75) and m["clearcoat_roughness"] == pytest.approx(0.2)
+    plain = material(converted(stage_file(stage(""), "plain.usda")))
+    assert plain["clearcoat"] == 0.0 and plain["clearcoat_roughness"] == pytest.approx(0.01)
 
 
 def test_unknown_shader_is_a_warning_with_the_defaults(stage_file, converted):
