@@ -494,6 +494,16 @@ fn bsdfs() -> Vec<(String, Bsdf)> {
             ),
         ));
     }
+    // The specular workflow: a tinted reflectance at normal incidence, rough and smooth.
+    for roughness in [0.4f32, 0.0] {
+        all.push((
+            format!("gltf specular workflow roughness={roughness}"),
+            Bsdf::GltfPbr(
+                GltfPbr::new(Vec3::new(0.3, 0.5, 0.2), 0.0, roughness, 1.5)
+                    .with_specular_color(Vec3::new(0.9, 0.5, 0.1)),
+            ),
+        ));
+    }
     for exponent in [1.0f32, 10.0, 60.0] {
         all.push((
             format!("phong n={exponent}"),

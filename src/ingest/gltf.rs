@@ -692,6 +692,7 @@ impl<'a> Importer<'a> {
             emissive: emissive.max(Vec3::ZERO),
             emissive_texture,
             ior: m.ior().unwrap_or(1.5),
+            specular_color: None,
             clearcoat,
             clearcoat_roughness,
             alpha_mode,

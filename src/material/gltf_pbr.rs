@@ -7,7 +7,8 @@
 //! ```
 //!
 //! with GGX D, the height-correlated Smith visibility V and alpha = roughness². `f0` follows
-//! KHR_materials_ior when present ((ior - 1) / (ior + 1))², 0.04 for the default 1.5).
+//! KHR_materials_ior when present ((ior - 1) / (ior + 1))², 0.04 for the default 1.5), or is
+//! the specular colour in UsdPreviewSurface's specular workflow.
 //! Below [`SMOOTH_ALPHA`] the specular lobe is a perfect mirror (a delta lobe) with the
 //! same Fresnel weights at h = n, so roughness 0 is exact rather than NaN.
 //!
@@ -38,7 +39,9 @@ pub struct GltfPbr {
     base: Vec3,
     metallic: f32,
     ggx: Ggx,
-    f0: f32,
+    /// The dielectric's reflectance at normal incidence (per channel for the specular
+    /// workflow).
+    f0: Vec3,
     /// Clear coat weight (0: no coat).
     coat: f32,
     coat_ggx: Ggx,
@@ -57,13 +60,23 @@ impl GltfPbr {
             base: base.clamp(Vec3::ZERO, Vec3::ONE),
             metallic: metallic.clamp(0.0, 1.0),
             ggx: Ggx { alpha: r * r },
-            f0: if f0.is_finite() {
+            f0: Vec3::splat(if f0.is_finite() {
                 f0.clamp(0.0, 1.0)
             } else {
                 0.04
-            },
+            }),
             coat: 0.0,
             coat_ggx: Ggx { alpha: 0.0 },
+        }
+    }
+
+    /// The same BRDF in the specular workflow of UsdPreviewSurface: the dielectric reflects
+    /// `color` at normal incidence (white at grazing, Schlick in between) instead of the
+    /// ior's grey.
+    pub fn with_specular_color(self, color: Vec3) -> Self {
+        Self {
+            f0: color.clamp(Vec3::ZERO, Vec3::ONE),
+            ..self
         }
     }
 
@@ -103,7 +116,7 @@ impl GltfPbr {
     /// Specular reflectance (dielectric and metal Fresnel, mixed by metallic) at `cos`.
     #[inline]
     fn specular_fresnel(&self, cos: f32) -> Vec3 {
-        let fd = schlick(Vec3::splat(self.f0), cos);
+        let fd = schlick(self.f0, cos);
         let fm = schlick(self.base, cos);
         fd * (1.0 - self.metallic) + fm * self.metallic
     }
@@ -111,8 +124,8 @@ impl GltfPbr {
     /// Diffuse weight (1 - metallic)(1 - F_d(cos)) base.
     #[inline]
     fn diffuse_weight(&self, cos: f32) -> Vec3 {
-        let fd = schlick(Vec3::splat(self.f0), cos).x;
-        self.base * ((1.0 - self.metallic) * (1.0 - fd))
+        let fd = schlick(self.f0, cos);
+        self.base * (1.0 - self.metallic) * (Vec3::ONE - fd)
     }
 
     /// Probabilities of sampling the coat, the specular and the diffuse lobe from `wo`.

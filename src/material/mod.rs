@@ -197,10 +197,12 @@ pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bs
                 roughness *= mr.y;
                 metallic *= mr.z;
             }
-            Bsdf::GltfPbr(
-                GltfPbr::new(base, metallic, roughness, m.ior)
-                    .with_clearcoat(m.clearcoat, m.clearcoat_roughness),
-            )
+            let mut pbr = GltfPbr::new(base, metallic, roughness, m.ior)
+                .with_clearcoat(m.clearcoat, m.clearcoat_roughness);
+            if let Some(color) = m.specular_color {
+                pbr = pbr.with_specular_color(color);
+            }
+            Bsdf::GltfPbr(pbr)
         }
     }
 }

@@ -559,6 +559,8 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && finite(&[m.metallic, m.roughness, m.normal_scale, m.ior])
             && m.ior > 0.0
             && (0.0..=1.0).contains(&m.clearcoat)
+            && m.specular_color
+                .is_none_or(|c| c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0)
             && (0.0..=1.0).contains(&m.clearcoat_roughness)
             && phong_ok
             && alpha_ok)

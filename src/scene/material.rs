@@ -23,6 +23,10 @@ pub struct Material {
     pub emissive_texture: Option<TextureRef>,
     /// Index of refraction of the dielectric layer (glTF default 1.5).
     pub ior: f32,
+    /// Reflectance at normal incidence of the dielectric (UsdPreviewSurface's specular
+    /// workflow `specularColor`); replaces the one `ior` gives. `None`: from `ior`.
+    #[serde(default)]
+    pub specular_color: Option<Vec3>,
     /// Clear coat weight in [0, 1] (KHR_materials_clearcoat; 0: none).
     #[serde(default)]
     pub clearcoat: f32,
@@ -50,6 +54,7 @@ impl Default for Material {
             emissive: Vec3::ZERO,
             emissive_texture: None,
             ior: 1.5,
+            specular_color: None,
             clearcoat: 0.0,
             clearcoat_roughness: 0.0,
             alpha_mode: AlphaMode::Opaque,

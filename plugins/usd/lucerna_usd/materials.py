@@ -9,9 +9,8 @@ stored as (n + 1) / 2; an 8-bit image used exactly as stored is passed through, 
 scaled, biased, swizzled or decoded differently is baked to linear float texels.
 
 clearcoat and clearcoatRoughness become the material's clear coat (ior 1.5, as both
-UsdPreviewSurface and the renderer fix it). The material model has no specular-colour
-workflow: a specular-workflow surface becomes a dielectric whose ior gives the specular colour's luminance at normal
-incidence, with a warning naming the material."""
+UsdPreviewSurface and the renderer fix it); useSpecularWorkflow makes specularColor the
+dielectric's reflectance at normal incidence (white at grazing), metallic unused."""
 
 import math
 
@@ -304,12 +303,11 @@ class MaterialConverter:
         out["ior"] = float(ior) if ik == "value" else 1.5
         if sources["useSpecularWorkflow"][0] == "value" and int(sources["useSpecularWorkflow"][1]) == 1:
             sk, spec = sources["specularColor"]
-            f0 = 0.04 if sk != "value" else float(np.dot(spec, (0.2126, 0.7152, 0.0722)))
-            f0 = min(max(f0, 0.0), 0.99)
-            out["ior"] = (1.0 + math.sqrt(f0)) / (1.0 - math.sqrt(f0)) if f0 > 0 else 1.0
+            if sk != "value":
+                self.warn(name, "a texture on specularColor is not supported: the fallback is used")
+                spec = PREVIEW_DEFAULTS["specularColor"]
+            out["specular_color"] = [min(max(float(c), 0.0), 1.0) for c in spec]
             out["metallic"] = 0.0  # also zeroes a metallic texture channel (factor x texel)
-            self.warn(name, "specular workflow approximated by a dielectric with ior "
-                      f"{out['ior']:.3f} (specularColor luminance {f0:.3f} at normal incidence)")
         for key in ("clearcoat", "clearcoatRoughness"):
             kind, value = sources[key]
             field = "clearcoat" if key == "clearcoat" else "clearcoat_roughness"

@@ -154,17 +154,19 @@ def test_normal_map_and_uv_transform(stage_file, converted, tmp_path):
     assert uv == pytest.approx([1.0, 0.5])
 
 
-def test_specular_workflow_is_reported_and_clearcoat_converted(stage_file, converted):
+def test_specular_workflow_and_clearcoat(stage_file, converted):
     s = converted(stage_file(stage('''
             int inputs:useSpecularWorkflow = 1
-            color3f inputs:specularColor = (0.04, 0.04, 0.04)
+            color3f inputs:specularColor = (0.9, 0.5, 0.1)
+            float inputs:metallic = 1
             float inputs:clearcoat = 0.75
             float inputs:clearcoatRoughness = 0.2''')))
     m = material(s)
-    assert m["ior"] == pytest.approx(1.5, abs=1e-3)  # F0 = 0.04
-    assert s.warnings_about("specular workflow approximated")
+    assert m["specular_color"] == pytest.approx([0.9, 0.5, 0.1]) and m["metallic"] == 0.0
+    assert not s.warnings_about("specular")
     assert m["clearcoat"] == pytest.approx(0.75) and m["clearcoat_roughness"] == pytest.approx(0.2)
     plain = material(converted(stage_file(stage(""), "plain.usda")))
+    assert plain.get("specular_color") is None  # the metallic workflow: from ior
     assert plain["clearcoat"] == 0.0 and plain["clearcoat_roughness"] == pytest.approx(0.01)
 
 
