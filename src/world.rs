@@ -484,6 +484,11 @@ fn render_quadrics(scene: &Scene, space: &RenderSpace) -> Vec<RenderQuadric> {
     disks.chain(cylinders).collect()
 }
 
+/// Angular diameter (radians, 0.2 arc seconds) below which a directional light is taken as
+/// parallel: its shadows cannot differ visibly from sharp ones, and far smaller cones would
+/// overflow their radiance in single precision.
+const MIN_SOURCE_ANGLE: f32 = 1e-6;
+
 /// The punctual lights in render space: radiant intensity scales with the square of lengths.
 fn punctual_lights(scene: &Scene, space: &RenderSpace) -> Vec<Light> {
     let s2 = (space.scale * space.scale) as f32;
@@ -515,7 +520,7 @@ fn punctual_lights(scene: &Scene, space: &RenderSpace) -> Vec<Light> {
                 direction,
                 irradiance,
                 angle,
-            } if *angle > 0.0 => {
+            } if *angle > MIN_SOURCE_ANGLE => {
                 // 1 - cos of the half-angle as 2 sin²(angle / 4), free of cancellation.
                 let one_minus_cos = 2.0 * (*angle as f64 / 4.0).sin().powi(2);
                 let sin2 = one_minus_cos * (2.0 - one_minus_cos);

@@ -4,9 +4,8 @@
 
 mod common;
 
-use common::scenes::{icosphere, material, ortho_camera, quad, render, scene};
+use common::scenes::{icosphere, material, ortho_camera, quad, rel_mse, render, scene};
 use glam::{DMat4, DQuat, DVec3, Vec3};
-use lucerna::film::aov::Aov;
 use lucerna::integrator::{LightSelect, Settings};
 use lucerna::scene::{BsdfModel, Instance, Scene};
 use lucerna::world::{PlacedMesh, World};
@@ -47,29 +46,6 @@ fn spheres(placements: usize) -> Scene {
     s
 }
 
-/// `scene` with a mesh of its own for every instance: nothing is shared, all is flattened.
-fn unshared(mut scene: Scene) -> Scene {
-    for i in 0..scene.instances.len() {
-        let mesh = scene.meshes[scene.instances[i].mesh as usize].clone();
-        scene.instances[i].mesh = scene.meshes.len() as u32;
-        scene.meshes.push(mesh);
-    }
-    scene
-}
-
-/// Relative MSE of the beauty of `a` against `b` (the design's metric).
-fn rel_mse(a: &lucerna::film::Film, b: &lucerna::film::Film) -> f64 {
-    let (pa, pb) = (a.planes(Aov::Beauty), b.planes(Aov::Beauty));
-    let mut sum = 0.0;
-    for c in 0..3 {
-        for (x, r) in pa[c].iter().zip(&pb[c]) {
-            let (x, r) = (*x as f64, *r as f64);
-            sum += (x - r).powi(2) / (r * r + 0.01);
-        }
-    }
-    sum / (3 * pa[0].len()) as f64
-}
-
 #[test]
 fn placements_render_like_flattened_copies() {
     let res = (64, 64);
@@ -81,8 +57,8 @@ fn placements_render_like_flattened_copies() {
     assert_eq!(world.surfaces.placements.len(), 9);
     assert_eq!(world.surfaces.shared_meshes.len(), 1);
     let placed = render(spheres(9), res, 16, with_seed(1), 2).0;
-    let flat = render(unshared(spheres(9)), res, 16, with_seed(1), 2).0;
-    let other_seed = render(unshared(spheres(9)), res, 16, with_seed(2), 2).0;
+    let flat = render(spheres(9).unshared(), res, 16, with_seed(1), 2).0;
+    let other_seed = render(spheres(9).unshared(), res, 16, with_seed(2), 2).0;
     // The same samples through the same surfaces: the two differ only where float rounding
     // sends a path elsewhere, far below the noise between two seeds.
     let difference = rel_mse(&placed, &flat);
@@ -103,9 +79,14 @@ fn memory_grows_with_the_shared_mesh_not_with_placements() {
     };
     let (few, many) = (bytes(9), bytes(10_009));
     let per_placement = (many - few) as f64 / 10_000.0;
-    let flattened = World::build(unshared(spheres(9)), None, Some((8, 8)), LightSelect::Power)
-        .unwrap()
-        .bvh_bytes() as f64
+    let flattened = World::build(
+        spheres(9).unshared(),
+        None,
+        Some((8, 8)),
+        LightSelect::Power,
+    )
+    .unwrap()
+    .bvh_bytes() as f64
         / 9.0;
     // Two transforms (tracing, shading) and a share of the top-level nodes, against a copy
     // of the sphere's 320 triangles and their nodes when flattened.

@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::scenes::{look_at, material, render};
+use common::scenes::{look_at, material, rel_mse, render};
 use glam::{DMat4, DVec3, Vec3};
 use lucerna::film::Film;
 use lucerna::film::aov::Aov;
@@ -158,18 +158,6 @@ fn tube_mesh(centre: DVec3, axis: DVec3, radius: f64, length: f64) -> Mesh {
         material: 2,
         ..Default::default()
     }
-}
-
-fn rel_mse(a: &Film, b: &Film) -> f64 {
-    let (pa, pb) = (a.planes(Aov::Beauty), b.planes(Aov::Beauty));
-    let mut sum = 0.0;
-    for c in 0..3 {
-        for (x, r) in pa[c].iter().zip(&pb[c]) {
-            let (x, r) = (*x as f64, *r as f64);
-            sum += (x - r).powi(2) / (r * r + 0.01);
-        }
-    }
-    sum / (3 * pa[0].len()) as f64
 }
 
 /// Mean of the beauty's red channel and its standard error.

@@ -25,7 +25,6 @@ use lucerna::light::Light;
 use lucerna::render::peak_memory_bytes;
 use lucerna::sampling::pcg::Pcg32;
 use lucerna::sampling::warp::square_to_cosine_hemisphere;
-use lucerna::scene::Scene;
 use lucerna::world::World;
 use rayon::prelude::*;
 use std::path::Path;
@@ -34,17 +33,6 @@ use std::time::Instant;
 const SIDE: u32 = 1024;
 const RUNS: usize = 3;
 const CHUNK: usize = 4096;
-
-/// `scene` with a mesh of its own for every instance, so that the world flattens them all
-/// into one BVH instead of sharing meshes placed several times.
-fn unshared(mut scene: Scene) -> Scene {
-    for i in 0..scene.instances.len() {
-        let mesh = scene.meshes[scene.instances[i].mesh as usize].clone();
-        scene.instances[i].mesh = scene.meshes.len() as u32;
-        scene.meshes.push(mesh);
-    }
-    scene
-}
 
 /// The four ray sets of one scene.
 struct RaySets {
@@ -154,7 +142,7 @@ fn main() {
                 Some(p) => ingest::load(p, &Default::default()).expect("scene loads"),
                 None => ingest::default_scene().unwrap(),
             };
-            if flatten { unshared(scene) } else { scene }
+            if flatten { scene.unshared() } else { scene }
         };
         let rss_before = peak_memory_bytes().unwrap_or(0);
         let mut build = [0.0; 2];

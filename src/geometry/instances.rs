@@ -68,16 +68,23 @@ impl InstancedBvh {
             + self.shared.iter().map(Bvh::bytes).sum::<usize>()
     }
 
-    /// `ray` in the object space of leaf `leaf`'s placement; the parameter `t` is the same
-    /// in both spaces because the direction is not renormalised.
+    /// Top-level leaf `leaf`: its placement's index, `ray` in the placement's object space
+    /// (the parameter `t` is the same in both spaces because the direction is not
+    /// renormalised), and the shared BVH to trace it in.
     #[inline]
-    fn object_ray(&self, leaf: usize, ray: &Ray, tmax: f32) -> Ray {
-        let m = &self.placements[leaf].to_object;
-        Ray {
+    fn enter(&self, leaf: usize, ray: &Ray, tmax: f32) -> (u32, Ray, &Bvh) {
+        let placement = &self.placements[leaf];
+        let m = &placement.to_object;
+        let object_ray = Ray {
             origin: m.transform_point3(ray.origin),
             dir: m.transform_vector3(ray.dir),
             tmax,
-        }
+        };
+        (
+            self.order[leaf],
+            object_ray,
+            &self.shared[placement.shared as usize],
+        )
     }
 
     /// Closest hit along `ray` in `(0, ray.tmax)`; [`Hit::instance`] is the placement's index
@@ -101,10 +108,8 @@ impl InstancedBvh {
             state,
             super::intersect_node(node, &node_ray, state.oct_inv4),
             {
-                let leaf = state.primitive_id as usize;
-                let placement = self.order[leaf];
-                let object_ray = self.object_ray(leaf, ray, node_ray.tmax);
-                let shared = &self.shared[self.placements[leaf].shared as usize];
+                let (placement, object_ray, shared) =
+                    self.enter(state.primitive_id as usize, ray, node_ray.tmax);
                 if let Some(mut hit) = shared.intersect(&object_ray, |prim, h| {
                     accept(placement, prim, h, &object_ray)
                 }) {
@@ -137,10 +142,8 @@ impl InstancedBvh {
                 state,
                 super::intersect_node(node, &node_ray, state.oct_inv4),
                 {
-                    let leaf = state.primitive_id as usize;
-                    let placement = self.order[leaf];
-                    let object_ray = self.object_ray(leaf, ray, ray.tmax);
-                    let shared = &self.shared[self.placements[leaf].shared as usize];
+                    let (placement, object_ray, shared) =
+                        self.enter(state.primitive_id as usize, ray, ray.tmax);
                     if shared.occluded(&object_ray, |prim, h| {
                         accept(placement, prim, h, &object_ray)
                     }) {

@@ -249,6 +249,18 @@ impl Scene {
         (lo.x <= hi.x).then_some((lo, hi))
     }
 
+    /// The same scene with a mesh of its own for every instance, so that the renderer
+    /// flattens every placement into one BVH instead of sharing meshes placed several
+    /// times: the reference that benchmarks and tests compare the two-level BVH with.
+    pub fn unshared(mut self) -> Self {
+        for i in 0..self.instances.len() {
+            let mesh = self.meshes[self.instances[i].mesh as usize].clone();
+            self.instances[i].mesh = self.meshes.len() as u32;
+            self.meshes.push(mesh);
+        }
+        self
+    }
+
     /// Finds a camera by name.
     pub fn camera(&self, name: &str) -> Option<&Camera> {
         self.cameras.iter().find(|c| c.name == name)

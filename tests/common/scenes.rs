@@ -188,6 +188,20 @@ pub fn render(
     })
 }
 
+/// Relative MSE of the beauty of `a` against `b`: mean over pixels and channels of
+/// (a - b)² / (b² + 0.01), the design's metric.
+pub fn rel_mse(a: &Film, b: &Film) -> f64 {
+    let (pa, pb) = (a.planes(Aov::Beauty), b.planes(Aov::Beauty));
+    let mut sum = 0.0;
+    for c in 0..3 {
+        for (x, r) in pa[c].iter().zip(&pb[c]) {
+            let (x, r) = (*x as f64, *r as f64);
+            sum += (x - r).powi(2) / (r * r + 0.01);
+        }
+    }
+    sum / (3 * pa[0].len()) as f64
+}
+
 /// Mean of channel `c` of `aov` over the pixels where `keep(pixel)` holds.
 pub fn mean(film: &Film, aov: Aov, c: usize, keep: impl Fn(usize) -> bool) -> f64 {
     let plane = &film.planes(aov)[c];
