@@ -249,3 +249,129 @@ fn tiny_very_bright_light_matches_a_point_light() {
         assert!((a - b).abs() <= 0.1 * b + 1e-6, "pixel {a} vs {b}");
     }
 }
+
+/// Albedo exactly 1 in a closed box: a white Lambertian cube around a black emitter of
+/// radiance 1 is an integrating sphere whose exact solution is radiance 1 everywhere (walls
+/// reflect all they receive, the emitter absorbs what it emits). The throughput never falls,
+/// so only roulette's 0.95 cap ends paths; the image must still be 1 within its noise, with
+/// nothing discarded, in bounded time. (With an emitter of 1/600 of the area the answer
+/// needs hundreds of bounces and the capped roulette's estimate, though unbiased, has a tail
+/// too heavy for any test: 2.5 ± 2.2 at 64 spp.)
+#[test]
+fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
+    use common::scenes::{look_at, material};
+    use glam::Vec3;
+    use lucerna::film::aov::Aov;
+    use lucerna::scene::{
+        BsdfModel, Camera, Instance, Material, Mesh, Projection, Scene as SceneDesc,
+    };
+    let c = |x: f32, y: f32, z: f32| Vec3::new(x, y, z);
+    let faces = [
+        [
+            c(-1., -1., -1.),
+            c(1., -1., -1.),
+            c(1., -1., 1.),
+            c(-1., -1., 1.),
+        ],
+        [
+            c(-1., 1., -1.),
+            c(-1., 1., 1.),
+            c(1., 1., 1.),
+            c(1., 1., -1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., -1., 1.),
+            c(-1., 1., 1.),
+            c(-1., 1., -1.),
+        ],
+        [
+            c(1., -1., -1.),
+            c(1., 1., -1.),
+            c(1., 1., 1.),
+            c(1., -1., 1.),
+        ],
+        [
+            c(-1., -1., -1.),
+            c(-1., 1., -1.),
+            c(1., 1., -1.),
+            c(1., -1., -1.),
+        ],
+        [
+            c(-1., -1., 1.),
+            c(1., -1., 1.),
+            c(1., 1., 1.),
+            c(-1., 1., 1.),
+        ],
+    ];
+    let quads = |quads: &[[Vec3; 4]], material: u32| Mesh {
+        name: "quads".into(),
+        positions: quads.iter().flatten().copied().collect(),
+        triangles: (0..quads.len() as u32)
+            .flat_map(|q| [[4 * q, 4 * q + 1, 4 * q + 2], [4 * q, 4 * q + 2, 4 * q + 3]])
+            .collect(),
+        material,
+        ..Default::default()
+    };
+    // An emitter of 1/24 of the box's area floating above the floor, facing up (its back
+    // is culled: transparent). Near a wall the geometry term of light samples would have a
+    // heavy tail that says nothing about long paths.
+    let h = 0.5f32;
+    let y = -0.5;
+    let emitter = [c(-h, y, -h), c(-h, y, h), c(h, y, h), c(h, y, -h)];
+    let mut scene = SceneDesc {
+        source: "integrating sphere".into(),
+        materials: vec![
+            material(BsdfModel::Lambert, Vec3::ONE, 0.0, 1.0),
+            Material {
+                name: "emitter".into(),
+                emissive: Vec3::ONE,
+                base_color: glam::Vec4::new(0.0, 0.0, 0.0, 1.0),
+                double_sided: false,
+                ..material(BsdfModel::Lambert, Vec3::ZERO, 0.0, 1.0)
+            },
+        ],
+        cameras: vec![Camera {
+            name: "inside".into(),
+            projection: Projection::Perspective {
+                yfov: 1.5,
+                aspect: Some(1.0),
+            },
+            transform: look_at(DVec3::new(0.3, 0.5, 0.2), DVec3::new(0.0, -1.0, 0.0)),
+            aperture_radius: 0.0,
+            focus_distance: 1.0,
+            clip_near: 0.0,
+            clip_far: None,
+        }],
+        ..Default::default()
+    };
+    for (i, mesh) in [quads(&faces, 0), quads(&[emitter], 1)]
+        .into_iter()
+        .enumerate()
+    {
+        scene.meshes.push(mesh);
+        scene.instances.push(Instance {
+            name: format!("mesh{i}"),
+            mesh: i as u32,
+            transform: DMat4::IDENTITY,
+        });
+    }
+    let started = std::time::Instant::now();
+    let (film, stats) = render(scene, (16, 16), 256, Settings::default(), 2);
+    let seconds = started.elapsed().as_secs_f64();
+    assert_eq!(stats.discarded, 0);
+    let beauty = &film.planes(Aov::Beauty)[0];
+    let variance = &film.planes(Aov::Variance)[0];
+    let n = beauty.len() as f64;
+    let mean = beauty.iter().map(|&x| x as f64).sum::<f64>() / n;
+    let se = variance.iter().map(|&v| v as f64).sum::<f64>().sqrt() / n;
+    let rays_per_sample = (stats.rays.closest + stats.rays.shadow) as f64 / stats.samples as f64;
+    eprintln!(
+        "integrating sphere: mean {mean:.4} ± {se:.4}, {rays_per_sample:.0} rays per sample, {seconds:.2} s"
+    );
+    assert!(
+        (mean - 1.0).abs() <= 4.5 * se,
+        "mean {mean} ± {se}, expected 1"
+    );
+    assert!(rays_per_sample > 15.0, "paths are long: {rays_per_sample}");
+}
