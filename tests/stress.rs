@@ -6,9 +6,11 @@
 //!   double precision and scales it by a power of two, so a box 1e7 units away or 1e4 times
 //!   larger only changes float rounding: with the same samples the image is (almost) the
 //!   same, and against another seed its error is the original's own noise.
-//! - Duplicated and zero-area triangles change nothing.
+//! - Duplicated and zero-area triangles, and flipped or unnormalised normals, change nothing.
+//! - A slab 1e-5 thick lets no light through.
 //! - Extreme BSDF parameters stay finite.
 //! - A tiny, very bright light matches the point light it tends to.
+//! - Albedo exactly 1 in a closed box (long paths) gives the integrating sphere's answer.
 
 mod common;
 
@@ -374,4 +376,106 @@ fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
         "mean {mean} ± {se}, expected 1"
     );
     assert!(rays_per_sample > 15.0, "paths are long: {rays_per_sample}");
+}
+
+/// The Cornell box with vertex normals: exact ones, flipped ones (taken as flipped, as the
+/// winding says), and ones scaled by 1e3 and 1e-3 (normalised after interpolation) render
+/// the same image from the same samples.
+#[test]
+fn flipped_and_unnormalised_normals_render_like_exact_ones() {
+    use lucerna::geometry::triangle::geometric_normal;
+    let with_normals = |f: fn(glam::Vec3) -> glam::Vec3| {
+        let mut scene = cornell(0.0, 1.0);
+        for mesh in &mut scene.meshes {
+            let mut normals = vec![glam::Vec3::ZERO; mesh.positions.len()];
+            for t in &mesh.triangles {
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+                let n = geometric_normal(a, b, c);
+                for &i in t {
+                    normals[i as usize] += n;
+                }
+            }
+            mesh.normals = Some(normals.into_iter().map(|n| f(n.normalize())).collect());
+        }
+        render_with_seed(scene, 1)
+    };
+    let exact = with_normals(|n| n);
+    let noise = rel_mse(&render_with_seed(cornell(0.0, 1.0), 2), &exact);
+    for (name, f) in [
+        ("flipped", (|n| -n) as fn(glam::Vec3) -> glam::Vec3),
+        ("scaled 1e3", |n| n * 1e3),
+        ("scaled 1e-3", |n| n * 1e-3),
+    ] {
+        let error = rel_mse(&with_normals(f), &exact);
+        eprintln!("{name} normals: relMSE {error:.3e} against exact ones (noise {noise:.3e})");
+        assert!(error < 0.01 * noise, "{name}: {error:e} (noise {noise:e})");
+    }
+}
+
+/// A slab 1e-5 thick (a closed box) over a floor, lit from above by a point light: no light
+/// leaks through it, so the floor below is exactly black.
+#[test]
+fn thin_slab_does_not_leak_light() {
+    use common::scenes::{material, ortho_camera, quad, scene};
+    use glam::Vec3;
+    use lucerna::film::aov::Aov;
+    use lucerna::scene::{BsdfModel, Instance, Light, LightKind, Mesh};
+    let floor = DMat4::from_rotation_x(-std::f64::consts::FRAC_PI_2);
+    let mut s = scene(
+        vec![(quad(), floor)],
+        material(BsdfModel::Lambert, Vec3::splat(0.8), 0.0, 1.0),
+        Vec3::ZERO,
+        // Between floor and slab, looking down.
+        ortho_camera(DVec3::new(0.0, 0.25, 0.001), 0.9),
+    );
+    let (half, y, thickness) = (20.0f32, 0.5f32, 1e-5f32);
+    let corners = |y: f32| {
+        [
+            Vec3::new(-half, y, -half),
+            Vec3::new(half, y, -half),
+            Vec3::new(half, y, half),
+            Vec3::new(-half, y, half),
+        ]
+    };
+    let (bottom, top) = (corners(y), corners(y + thickness));
+    let mut positions = bottom.to_vec();
+    positions.extend(top);
+    // Six faces of the box between the two layers.
+    let faces: [[u32; 4]; 6] = [
+        [0, 1, 2, 3],
+        [4, 7, 6, 5],
+        [0, 4, 5, 1],
+        [1, 5, 6, 2],
+        [2, 6, 7, 3],
+        [3, 7, 4, 0],
+    ];
+    s.meshes.push(Mesh {
+        name: "slab".into(),
+        positions,
+        triangles: faces
+            .iter()
+            .flat_map(|f| [[f[0], f[1], f[2]], [f[0], f[2], f[3]]])
+            .collect(),
+        material: 0,
+        ..Default::default()
+    });
+    s.instances.push(Instance {
+        name: "slab".into(),
+        mesh: 1,
+        transform: DMat4::IDENTITY,
+    });
+    s.lights.push(Light {
+        name: "above".into(),
+        kind: LightKind::Point {
+            position: DVec3::new(0.1, 0.8, 0.0),
+            intensity: Vec3::splat(100.0),
+        },
+    });
+    let (film, stats) = render(s, (32, 32), 16, Settings::default(), 2);
+    assert_eq!(stats.discarded, 0);
+    let lit = film.planes(Aov::Beauty)[0]
+        .iter()
+        .filter(|&&v| v != 0.0)
+        .count();
+    assert_eq!(lit, 0, "{lit} pixels under the slab receive light");
 }
