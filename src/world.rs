@@ -323,24 +323,18 @@ impl PlacedGeometry {
                 meshes.push(std::mem::take(mesh));
             }
         }
-        let object_bounds: Vec<(Vec3, Vec3)> = meshes
-            .iter()
-            .map(|m| {
-                m.positions
-                    .iter()
-                    .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
-                        (lo.min(*p), hi.max(*p))
-                    })
-            })
-            .collect();
+        let object_bounds: Vec<Option<(Vec3, Vec3)>> = meshes.iter().map(Mesh::bounds).collect();
         let (mut placements, mut bounds) = (Vec::new(), Vec::new());
         for inst in &scene.instances {
             let index = shared_index[inst.mesh as usize];
             if index == NOT_SHARED {
                 continue;
             }
+            // A placement of a mesh without vertices has nothing to hit.
+            let Some((lo, hi)) = object_bounds[index as usize] else {
+                continue;
+            };
             let m = *to_render * inst.transform;
-            let (lo, hi) = object_bounds[index as usize];
             bounds.push(transformed_bounds(
                 lo,
                 hi,
@@ -913,12 +907,11 @@ impl Surfaces {
         let placed = &self.placements[hit.instance as usize];
         let mesh = &self.shared_meshes[placed.mesh as usize];
         let (p, n, ns, attrs, material) = self.triangle_surface(mesh, hit.prim, hit);
-        let to_render = |n: Vec3| (placed.normal_matrix * n).normalize_or_zero();
-        let n = to_render(n);
+        let n = (placed.normal_matrix * n).normalize_or_zero();
         (
             placed.to_render.transform_point3(p),
             n,
-            to_render(ns).try_normalize().unwrap_or(n),
+            (placed.normal_matrix * ns).normalize_or(n),
             attrs,
             material,
         )

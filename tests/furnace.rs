@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::scenes::{icosphere, material, mean, ortho_camera, quad, render, scene};
+use common::scenes::{icosphere, material, mean_and_error, ortho_camera, quad, render, scene};
 use glam::{DMat4, DVec3, Vec3};
 use lucerna::film::Film;
 use lucerna::film::aov::Aov;
@@ -18,16 +18,6 @@ fn settings() -> Settings {
         seed: 7,
         ..Default::default()
     }
-}
-
-/// Mean of the beauty over pixels with `keep`, and the standard error of that mean from the
-/// variance layer.
-fn mean_and_error(film: &Film, c: usize, keep: impl Fn(usize) -> bool + Copy) -> (f64, f64) {
-    let m = mean(film, Aov::Beauty, c, keep);
-    let var = &film.planes(Aov::Variance)[c];
-    let kept: Vec<usize> = (0..var.len()).filter(|&i| keep(i)).collect();
-    let se = kept.iter().map(|&i| var[i] as f64).sum::<f64>().sqrt() / kept.len() as f64;
-    (m, se)
 }
 
 /// The image mean is 1 within 1%.

@@ -14,7 +14,7 @@
 
 mod common;
 
-use common::scenes::{rel_mse, render};
+use common::scenes::{mean_and_error, rel_mse, render};
 use glam::{DMat4, DVec3};
 use lucerna::film::Film;
 use lucerna::ingest;
@@ -52,6 +52,27 @@ fn cornell(offset: f64, scale: f64) -> Scene {
     scene
 }
 
+/// The original box rendered with seeds 1 and 2.
+fn originals() -> (Film, Film) {
+    (
+        render_with_seed(cornell(0.0, 1.0), 1),
+        render_with_seed(cornell(0.0, 1.0), 2),
+    )
+}
+
+/// Renders `case` with seed 2 and compares it with the original rendered with seed 1 (its
+/// error should be the original's own noise) and with seed 2 (the same samples: only
+/// rounding and the few paths it sends elsewhere differ). Returns (relMSE against seed 1,
+/// relMSE against seed 2, seed-to-seed relMSE of the original).
+fn against_original(case: Scene, (seed_1, seed_2): &(Film, Film)) -> (f64, f64, f64) {
+    let case = render_with_seed(case, 2);
+    (
+        rel_mse(&case, seed_1),
+        rel_mse(&case, seed_2),
+        rel_mse(seed_2, seed_1),
+    )
+}
+
 fn render_with_seed(scene: Scene, seed: u32) -> Film {
     let settings = Settings {
         seed,
@@ -59,23 +80,17 @@ fn render_with_seed(scene: Scene, seed: u32) -> Film {
     };
     let (film, stats) = render(scene, RESOLUTION, SPP, settings, 2);
     assert_eq!(stats.discarded, 0, "NaN or Inf contributions");
+    for plane in film.planes(lucerna::film::aov::Aov::Beauty) {
+        assert!(plane.iter().all(|v| v.is_finite()));
+    }
     film
 }
 
 #[test]
 fn cornell_box_far_away_and_at_extreme_scales_renders_like_the_original() {
-    let original = render_with_seed(cornell(0.0, 1.0), 1);
-    let other_seed = render_with_seed(cornell(0.0, 1.0), 2);
-    let noise = rel_mse(&other_seed, &original);
+    let originals = originals();
     for (offset, scale) in [(1e3, 1.0), (1e5, 1.0), (1e7, 1.0), (0.0, 1e-4), (0.0, 1e4)] {
-        let case = render_with_seed(cornell(offset, scale), 2);
-        for plane in case.planes(lucerna::film::aov::Aov::Beauty) {
-            assert!(plane.iter().all(|v| v.is_finite()));
-        }
-        // Against the original with the other seed: only the original's noise.
-        let error = rel_mse(&case, &original);
-        // Against the original with the same seed: the same paths up to rounding.
-        let same_samples = rel_mse(&case, &other_seed);
+        let (error, same_samples, noise) = against_original(cornell(offset, scale), &originals);
         eprintln!(
             "offset {offset:e}, scale {scale:e}: relMSE vs original {error:.3e} (seed-to-seed {noise:.3e}), same seed {same_samples:.3e}"
         );
@@ -103,12 +118,7 @@ fn duplicate_and_zero_area_triangles_change_nothing() {
             mesh.triangles.push([t[0], t[0], t[1]]);
         }
     }
-    let original = render_with_seed(cornell(0.0, 1.0), 1);
-    let other_seed = render_with_seed(cornell(0.0, 1.0), 2);
-    let noise = rel_mse(&other_seed, &original);
-    let case = render_with_seed(scene, 2);
-    let error = rel_mse(&case, &original);
-    let same_samples = rel_mse(&case, &other_seed);
+    let (error, same_samples, noise) = against_original(scene, &originals());
     eprintln!(
         "duplicates and zero-area triangles: relMSE {error:.3e}, seed-to-seed {noise:.3e}, same seed {same_samples:.3e}"
     );
@@ -233,13 +243,12 @@ fn tiny_very_bright_light_matches_a_point_light() {
         film
     };
     let (sphere, point) = (lit(true), lit(false));
-    let beauty = |f: &Film| f.planes(Aov::Beauty)[0].clone();
-    let (s, p) = (beauty(&sphere), beauty(&point));
-    let variance = &sphere.planes(Aov::Variance)[0];
-    let n = s.len() as f64;
-    let mean = |v: &[f32]| v.iter().map(|&x| x as f64).sum::<f64>() / n;
-    let se = variance.iter().map(|&v| v as f64).sum::<f64>().sqrt() / n;
-    let (ms, mp) = (mean(&s), mean(&p));
+    let (ms, se) = mean_and_error(&sphere, 0, |_| true);
+    let (mp, _) = mean_and_error(&point, 0, |_| true);
+    let (s, p) = (
+        &sphere.planes(Aov::Beauty)[0],
+        &point.planes(Aov::Beauty)[0],
+    );
     eprintln!("tiny bright sphere: mean {ms:.6} ± {se:.2e}, point light {mp:.6}");
     assert!(
         (ms - mp).abs() <= 4.5 * se + 1e-4 * mp,
@@ -247,7 +256,7 @@ fn tiny_very_bright_light_matches_a_point_light() {
     );
     // No firefly: every pixel within 10 % of the point light's (the sphere is solid-angle
     // sampled, so its estimate barely varies).
-    for (a, b) in s.iter().zip(&p) {
+    for (a, b) in s.iter().zip(p) {
         assert!((a - b).abs() <= 0.1 * b + 1e-6, "pixel {a} vs {b}");
     }
 }
@@ -263,7 +272,6 @@ fn tiny_very_bright_light_matches_a_point_light() {
 fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
     use common::scenes::{look_at, material};
     use glam::Vec3;
-    use lucerna::film::aov::Aov;
     use lucerna::scene::{
         BsdfModel, Camera, Instance, Material, Mesh, Projection, Scene as SceneDesc,
     };
@@ -362,11 +370,7 @@ fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
     let (film, stats) = render(scene, (16, 16), 256, Settings::default(), 2);
     let seconds = started.elapsed().as_secs_f64();
     assert_eq!(stats.discarded, 0);
-    let beauty = &film.planes(Aov::Beauty)[0];
-    let variance = &film.planes(Aov::Variance)[0];
-    let n = beauty.len() as f64;
-    let mean = beauty.iter().map(|&x| x as f64).sum::<f64>() / n;
-    let se = variance.iter().map(|&v| v as f64).sum::<f64>().sqrt() / n;
+    let (mean, se) = mean_and_error(&film, 0, |_| true);
     let rays_per_sample = (stats.rays.closest + stats.rays.shadow) as f64 / stats.samples as f64;
     eprintln!(
         "integrating sphere: mean {mean:.4} ± {se:.4}, {rays_per_sample:.0} rays per sample, {seconds:.2} s"

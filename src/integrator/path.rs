@@ -284,8 +284,13 @@ impl<'a> PathTracer<'a> {
                     };
                     path.reached_emitter(self, walk, rec, e);
                 }
-                let dir = ray.dir.normalize();
-                for &index in &world.lights.distant_cones {
+                let cones = &world.lights.distant_cones;
+                let dir = if cones.is_empty() {
+                    ray.dir
+                } else {
+                    ray.dir.normalize()
+                };
+                for &index in cones {
                     let le = world.lights.lights[index as usize].radiance_at_infinity(dir);
                     if le != Vec3::ZERO {
                         let e = Emitter {

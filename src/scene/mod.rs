@@ -52,6 +52,19 @@ pub struct Mesh {
     pub material: u32,
 }
 
+impl Mesh {
+    /// Object-space bounds of the vertices, or `None` for a mesh without any.
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        (!self.positions.is_empty()).then(|| {
+            self.positions
+                .iter()
+                .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
+                    (lo.min(*p), hi.max(*p))
+                })
+        })
+    }
+}
+
 /// A placement of a mesh in the world.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Instance {
@@ -199,15 +212,8 @@ impl Scene {
             .iter()
             .zip(&uses)
             .map(|(m, &uses)| {
-                if uses < 2 || m.positions.is_empty() {
-                    return None;
-                }
-                let (a, b) = m
-                    .positions
-                    .iter()
-                    .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(a, b), p| {
-                        (a.min(p.as_dvec3()), b.max(p.as_dvec3()))
-                    });
+                let (a, b) = m.bounds().filter(|_| uses >= 2)?;
+                let (a, b) = (a.as_dvec3(), b.as_dvec3());
                 Some(std::array::from_fn(|c| {
                     DVec3::new(
                         if c & 1 == 0 { a.x } else { b.x },

@@ -188,6 +188,16 @@ pub fn render(
     })
 }
 
+/// Mean of the beauty's channel `c` over the pixels where `keep(pixel)` holds, and the
+/// standard error of that mean from the variance layer.
+pub fn mean_and_error(film: &Film, c: usize, keep: impl Fn(usize) -> bool + Copy) -> (f64, f64) {
+    let m = mean(film, Aov::Beauty, c, keep);
+    let var = &film.planes(Aov::Variance)[c];
+    let kept: Vec<usize> = (0..var.len()).filter(|&i| keep(i)).collect();
+    let se = kept.iter().map(|&i| var[i] as f64).sum::<f64>().sqrt() / kept.len() as f64;
+    (m, se)
+}
+
 /// Relative MSE of the beauty of `a` against `b`: mean over pixels and channels of
 /// (a - b)² / (b² + 0.01), the design's metric.
 pub fn rel_mse(a: &Film, b: &Film) -> f64 {
