@@ -18,6 +18,7 @@ pub mod ingest;
 pub mod integrator;
 pub mod light;
 pub mod material;
+pub mod memory;
 pub mod render;
 pub mod sampling;
 pub mod scene;

@@ -3,11 +3,12 @@
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use lucerna::error::{Error, Result};
+use lucerna::film::aov::AovSet;
 use lucerna::film::exr::{Attribute, Header};
 use lucerna::render::{self, RenderOptions};
 use lucerna::scene::{LightKind, Scene};
 use lucerna::world::World;
-use lucerna::{film, ingest};
+use lucerna::{film, ingest, memory};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -140,6 +141,11 @@ struct RenderArgs {
     /// Pixel filter: box, blackman-harris (width 1.5, default) or blackman-harris:WIDTH.
     #[arg(long)]
     filter: Option<String>,
+    /// Largest memory the render may need, e.g. 8G or 512M (binary units), or `off`; a scene
+    /// estimated to need more fails before loading into the renderer (default: 80 % of the
+    /// physical memory or of the cgroup's limit).
+    #[arg(long, value_parser = lucerna::memory::parse_limit)]
+    max_memory: Option<u64>,
     /// No progress bar.
     #[arg(long, short)]
     quiet: bool,
@@ -254,6 +260,14 @@ fn render_command(args: RenderArgs) -> Result<()> {
     if let Some(path) = &args.env_map {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
+    let limit = args.max_memory.or_else(memory::default_limit);
+    memory_estimate(
+        &scene,
+        args.camera.as_deref(),
+        args.resolution,
+        &options.aovs,
+    )
+    .check(limit, &scene.source)?;
     let source = scene.source.clone();
     let build_start = std::time::Instant::now();
     let world = pool.install(|| {
@@ -328,6 +342,23 @@ fn render_command(args: RenderArgs) -> Result<()> {
         stats.summary()
     );
     Ok(())
+}
+
+/// What rendering `scene` through `camera` at `resolution` with `aovs` will need.
+fn memory_estimate(
+    scene: &Scene,
+    camera: Option<&str>,
+    resolution: Option<(u32, u32)>,
+    aovs: &AovSet,
+) -> memory::MemoryEstimate {
+    let camera = camera
+        .and_then(|name| scene.camera(name))
+        .or(scene.cameras.first());
+    let (width, height) = lucerna::camera::resolve_resolution(resolution, camera);
+    memory::MemoryEstimate {
+        film: film::Film::estimated_bytes(width, height, aovs),
+        ..lucerna::world::estimate_memory(scene)
+    }
 }
 
 fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<()> {
@@ -419,6 +450,11 @@ fn inspect_command(path: &Path, load: &LoadArgs) -> Result<()> {
         } else {
             names.join(", ")
         }
+    );
+    let estimate = memory_estimate(&scene, None, None, &AovSet::default());
+    println!(
+        "  memory (default resolution and AOVs): about {} ({estimate})",
+        memory::Bytes(estimate.total())
     );
     Ok(())
 }

@@ -277,6 +277,23 @@ impl Film {
         }
     }
 
+    /// Bytes a film of `width` × `height` pixels for `aovs` holds once written: its tiles'
+    /// accumulators and, while the EXR is written, one f32 plane per output channel.
+    pub fn estimated_bytes(width: u32, height: u32, aovs: &AovSet) -> u64 {
+        let slots = Router::new(aovs).slots.len() as u64;
+        let vec3 = std::mem::size_of::<Vec3>() as u64;
+        let mut per_pixel = slots * vec3 + 4 + 4; // light slots, coverage, sample count
+        if aovs.contains(Aov::Variance) {
+            per_pixel += 2 * std::mem::size_of::<DVec3>() as u64;
+        }
+        for aov in [Aov::Albedo, Aov::Normal, Aov::Position] {
+            per_pixel += if aovs.contains(aov) { vec3 } else { 0 };
+        }
+        per_pixel += if aovs.contains(Aov::Depth) { 4 } else { 0 };
+        let channels: u64 = aovs.iter().map(|aov| aov.channels().len() as u64).sum();
+        width as u64 * height as u64 * (per_pixel + 4 * channels)
+    }
+
     /// Contributions dropped as NaN or infinite, over the whole image.
     pub fn discarded(&self) -> u64 {
         self.tiles.iter().map(|t| t.discarded).sum()

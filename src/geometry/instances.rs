@@ -5,12 +5,11 @@
 //! and Cycles' instancing, instead of with every placed triangle.
 
 use super::ray::Ray;
-use super::{Bvh, Hit, PrimitiveHit};
-use glam::{Affine3A, UVec2, Vec3, Vec3A};
+use super::{Bvh, Hit, PrimitiveHit, Traversal, build_wide_bvh};
+use glam::{Affine3A, UVec2, Vec3};
 use obvhs::{
-    BvhBuildParams,
     aabb::Aabb,
-    cwbvh::{CwBvh, builder::build_cwbvh, node::CwBvhNode},
+    cwbvh::{CwBvh, node::CwBvhNode},
     traverse,
 };
 
@@ -45,11 +44,7 @@ impl InstancedBvh {
         let mut top = if aabbs.is_empty() {
             CwBvh::default()
         } else {
-            build_cwbvh(
-                &aabbs,
-                BvhBuildParams::medium_build(),
-                &mut std::time::Duration::default(),
-            )
+            build_wide_bvh(&aabbs)
         };
         let order = std::mem::take(&mut top.primitive_indices);
         Self {
@@ -100,7 +95,7 @@ impl InstancedBvh {
         }
         let mut node_ray = super::NodeRay::new(ray);
         let mut best: Option<Hit> = None;
-        let mut state = self.top.new_traversal(Vec3A::from(ray.dir));
+        let mut state = Traversal::new(&self.top, ray.dir);
         let mut node;
         traverse!(
             self.top,
@@ -132,7 +127,7 @@ impl InstancedBvh {
             return false;
         }
         let node_ray = super::NodeRay::new(ray);
-        let mut state = self.top.new_traversal(Vec3A::from(ray.dir));
+        let mut state = Traversal::new(&self.top, ray.dir);
         let mut node;
         let mut occluded = false;
         'search: {

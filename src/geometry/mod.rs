@@ -13,6 +13,7 @@ use obvhs::{
     BvhBuildParams,
     aabb::Aabb,
     cwbvh::{CwBvh, builder::build_cwbvh, node::CwBvhNode},
+    faststack::FastStack,
     traverse,
 };
 use ray::Ray;
@@ -162,6 +163,103 @@ fn intersect_node(node: &CwBvhNode, ray: &NodeRay, oct_inv4: u32) -> u32 {
     hit_mask
 }
 
+/// Builds obvhs's wide BVH over `aabbs` (not empty).
+fn build_wide_bvh(aabbs: &[Aabb]) -> CwBvh {
+    build_cwbvh(
+        aabbs,
+        BvhBuildParams::medium_build(),
+        &mut std::time::Duration::default(),
+    )
+}
+
+/// Node groups the traversal stack keeps inline: a BVH8 of any sensible scene is far
+/// shallower.
+const INLINE_STACK: usize = 32;
+
+/// The traversal stack. obvhs's own holds 32 node groups and, when full, overwrites its top
+/// one, losing geometry; a BVH can be deeper than that (PLOC chains thousands of coincident
+/// instances, corrupt vertex data spans every float exponent). This one spills into a heap
+/// vector past its inline entries, which only such BVHs ever allocate.
+struct TraversalStack {
+    inline: [UVec2; INLINE_STACK],
+    len: usize,
+    spill: Vec<UVec2>,
+}
+
+impl FastStack<UVec2> for TraversalStack {
+    #[inline(always)]
+    fn push(&mut self, v: UVec2) {
+        if self.len < INLINE_STACK {
+            self.inline[self.len] = v;
+            self.len += 1;
+        } else {
+            #[cfg(test)]
+            SPILLED.store(true, std::sync::atomic::Ordering::Relaxed);
+            self.spill.push(v);
+        }
+    }
+    #[inline(always)]
+    fn pop_fast(&mut self) -> UVec2 {
+        self.pop().unwrap_or_default()
+    }
+    #[inline(always)]
+    fn pop(&mut self) -> Option<UVec2> {
+        if let Some(v) = self.spill.pop() {
+            return Some(v);
+        }
+        self.len = self.len.checked_sub(1)?;
+        Some(self.inline[self.len])
+    }
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.len + self.spill.len()
+    }
+    #[inline(always)]
+    fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    #[inline(always)]
+    fn clear(&mut self) {
+        self.len = 0;
+        self.spill.clear();
+    }
+}
+
+/// Set when a traversal stack spills (tests check that deep cases reach the spill).
+#[cfg(test)]
+static SPILLED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Traversal state with the fields obvhs's `traverse!` macro uses, over a
+/// [`TraversalStack`].
+struct Traversal {
+    stack: TraversalStack,
+    current_group: UVec2,
+    primitive_group: UVec2,
+    oct_inv4: u32,
+    primitive_id: u32,
+    hitmask: u32,
+}
+
+impl Traversal {
+    /// The state at the root of `bvh` for rays along `dir`.
+    #[inline(always)]
+    fn new(bvh: &CwBvh, dir: Vec3) -> Self {
+        let start = bvh.new_traversal(Vec3A::from(dir));
+        Self {
+            stack: TraversalStack {
+                inline: [UVec2::ZERO; INLINE_STACK],
+                len: 0,
+                spill: Vec::new(),
+            },
+            current_group: start.current_group,
+            primitive_group: start.primitive_group,
+            oct_inv4: start.oct_inv4,
+            primitive_id: 0,
+            hitmask: 0,
+        }
+    }
+}
+
 impl Bvh {
     /// Builds the BVH over `prims` (render space) with their intersection `flags`. Runs on
     /// the current rayon pool.
@@ -176,11 +274,7 @@ impl Bvh {
             };
         }
         let aabbs: Vec<Aabb> = prims.iter().map(Primitive::aabb).collect();
-        let mut bvh = build_cwbvh(
-            &aabbs,
-            BvhBuildParams::medium_build(),
-            &mut std::time::Duration::default(),
-        );
+        let mut bvh = build_wide_bvh(&aabbs);
         drop(aabbs);
         // Leaves index `prims` directly; the BVH's own copy of the order is not needed.
         let order = std::mem::take(&mut bvh.primitive_indices);
@@ -239,7 +333,7 @@ impl Bvh {
         let shear = RayShear::new(ray);
         let mut node_ray = NodeRay::new(ray);
         let mut best: Option<(usize, PrimitiveHit)> = None;
-        let mut state = self.bvh.new_traversal(Vec3A::from(ray.dir));
+        let mut state = Traversal::new(&self.bvh, ray.dir);
         let mut node;
         traverse!(
             self.bvh,
@@ -271,7 +365,7 @@ impl Bvh {
         }
         let shear = RayShear::new(ray);
         let node_ray = NodeRay::new(ray);
-        let mut state = self.bvh.new_traversal(Vec3A::from(ray.dir));
+        let mut state = Traversal::new(&self.bvh, ray.dir);
         let mut node;
         let mut occluded = false;
         'search: {
@@ -371,6 +465,79 @@ mod tests {
                 .map(|h| h.t)
                 .fold(f32::INFINITY, f32::min);
             assert_eq!(hit.t, best);
+        }
+    }
+
+    /// Geometry nested over every float exponent (clusters of 64 triangles at 2^-120 ..
+    /// 2^119 along a line) needs more than the inline stack when a ray runs along it: the
+    /// traversal descends into the small end first, pushing the larger clusters. With only
+    /// clusters from scale 2^`first` on accepted (as alpha testing would), the closest
+    /// accepted hit lies in those pushed groups; the spill keeps them all, so the BVH finds
+    /// what brute force finds.
+    #[test]
+    fn deep_traversals_lose_nothing() {
+        const PER_SCALE: u32 = 64;
+        let mut tris = Vec::new();
+        for k in -120..120 {
+            let x = 2f32.powi(k);
+            for j in 0..PER_SCALE {
+                let s = x * 0.1 * (1.0 + j as f32 * 0.01);
+                let c = Vec3::new(x * (1.0 + j as f32 * 0.001), 0.0, 0.0);
+                tris.push([
+                    c - Vec3::new(0.0, s, s),
+                    c + Vec3::new(0.0, s, -s),
+                    c + Vec3::Z * s,
+                ]);
+            }
+        }
+        let bvh = Bvh::build(&prims(&tris), &vec![ALPHA_TESTED; tris.len()]);
+        SPILLED.store(false, std::sync::atomic::Ordering::Relaxed);
+        let ray = Ray::new(Vec3::new(-1.0, 0.0, 0.0), Vec3::X);
+        let shear = RayShear::new(&ray);
+        let mut found = 0;
+        for first in -120..120 {
+            let accepted = |prim: u32| prim / PER_SCALE >= (first + 120) as u32;
+            let best = (0..tris.len() as u32)
+                .filter(|&p| accepted(p))
+                .filter_map(|p| {
+                    let t = tris[p as usize];
+                    triangle::intersect(&shear, t[0], t[1], t[2], f32::INFINITY)
+                })
+                .map(|h| h.t)
+                .fold(f32::INFINITY, f32::min);
+            let hit = bvh.intersect(&ray, |p, _| accepted(p));
+            assert_eq!(hit.map_or(f32::INFINITY, |h| h.t), best, "from 2^{first}");
+            let short = Ray {
+                tmax: best * 1.0001,
+                ..ray
+            };
+            assert_eq!(
+                bvh.occluded(&short, |p, _| accepted(p)),
+                best.is_finite(),
+                "from 2^{first}"
+            );
+            found += best.is_finite() as u32;
+        }
+        assert!(found > 100, "only {found} rays hit");
+        assert!(
+            SPILLED.load(std::sync::atomic::Ordering::Relaxed),
+            "never spilled"
+        );
+    }
+
+    /// The stack stays last-in first-out past its inline entries.
+    #[test]
+    fn traversal_stack_spills_in_order() {
+        let mut stack = Traversal::new(&CwBvh::default(), Vec3::X).stack;
+        for round in 0..2 {
+            for i in 0..3 * INLINE_STACK as u32 {
+                stack.push(UVec2::new(i, round));
+            }
+            assert_eq!(stack.len(), 3 * INLINE_STACK);
+            for i in (0..3 * INLINE_STACK as u32).rev() {
+                assert_eq!(stack.pop(), Some(UVec2::new(i, round)));
+            }
+            assert!(stack.is_empty() && stack.pop().is_none());
         }
     }
 

@@ -87,6 +87,14 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
                 ),
             ));
         }
+        // The gltf crate subtracts the header's size from the declared length unchecked.
+        if declared < 12 {
+            return Err(Error::bad_input(
+                source,
+                "GLB container",
+                format!("the header declares {declared} bytes, less than the 12-byte header"),
+            ));
+        }
     }
     let gltf =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error(source, e))?;

@@ -218,10 +218,21 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
 /// Reads a scene file written by [`write`] (or by any program following the format),
 /// rejecting anything malformed with an error naming the element.
 pub fn read(path: &Path) -> Result<Scene> {
+    let text = std::fs::read(path).map_err(|e| Error::bad_input(path, "file", e.to_string()))?;
+    parse(path, &text, |buffer| std::fs::read(buffer))
+}
+
+/// Decodes the manifest bytes `text` of the scene file at `path`, reading its buffer with
+/// `read_buffer` (given the buffer's path beside the manifest). [`read`] reads both from
+/// disk; the fuzz targets (tools/fuzz) feed them from memory.
+pub fn parse(
+    path: &Path,
+    text: &[u8],
+    read_buffer: impl FnOnce(&Path) -> std::io::Result<Vec<u8>>,
+) -> Result<Scene> {
     let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
-    let text = std::fs::read(path).map_err(|e| bad("file", e.to_string()))?;
     let manifest: Manifest =
-        serde_json::from_slice(&text).map_err(|e| bad("manifest", e.to_string()))?;
+        serde_json::from_slice(text).map_err(|e| bad("manifest", e.to_string()))?;
     if manifest.format != FORMAT {
         return Err(bad("format", format!("expected \"{FORMAT}\"")));
     }
@@ -244,7 +255,7 @@ pub fn read(path: &Path) -> Result<Scene> {
             "must be a file name beside the manifest".into(),
         ));
     }
-    let bytes = std::fs::read(&buffer_path)
+    let bytes = read_buffer(&buffer_path)
         .map_err(|e| bad("buffer", format!("{}: {e}", buffer_path.display())))?;
     if bytes.len() as u64 != manifest.buffer_bytes {
         return Err(bad(

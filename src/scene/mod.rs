@@ -9,6 +9,7 @@ pub mod texture;
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 pub use material::{AlphaMode, BsdfModel, Material, TextureRef, UvTransform};
 use serde::{Deserialize, Serialize};
+use std::sync::Arc;
 pub use texture::{Texels, Texture, Wrap};
 
 /// A scene ready for [`crate::world::World::build`].
@@ -53,6 +54,20 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Bytes of its vertex and triangle data.
+    pub fn data_bytes(&self) -> u64 {
+        fn bytes<T>(v: &Option<Vec<T>>) -> usize {
+            v.as_ref()
+                .map_or(0, |v| std::mem::size_of_val(v.as_slice()))
+        }
+        (std::mem::size_of_val(self.positions.as_slice())
+            + bytes(&self.normals)
+            + bytes(&self.tangents)
+            + self.uvs.iter().map(bytes).sum::<usize>()
+            + bytes(&self.colors)
+            + std::mem::size_of_val(self.triangles.as_slice())) as u64
+    }
+
     /// Object-space bounds of the vertices, or `None` for a mesh without any.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         (!self.positions.is_empty()).then(|| {
@@ -194,6 +209,24 @@ impl Scene {
             .iter()
             .map(|i| self.meshes[i.mesh as usize].triangles.len())
             .sum()
+    }
+
+    /// Bytes of its bulk data: meshes, texels (shared texels once), instances and shapes.
+    pub fn data_bytes(&self) -> u64 {
+        use std::mem::size_of;
+        let mut seen = std::collections::HashSet::new();
+        let texel_bytes: u64 = self
+            .textures
+            .iter()
+            .filter(|t| seen.insert(Arc::as_ptr(&t.texels)))
+            .map(|t| t.memory_bytes() as u64)
+            .sum();
+        self.meshes.iter().map(Mesh::data_bytes).sum::<u64>()
+            + texel_bytes
+            + (self.instances.len() * size_of::<Instance>()
+                + self.spheres.len() * size_of::<Sphere>()
+                + self.disks.len() * size_of::<Disk>()
+                + self.cylinders.len() * size_of::<Cylinder>()) as u64
     }
 
     /// World-space bounds of all instanced geometry and spheres, or `None` when there is

@@ -1,0 +1,187 @@
+//! Memory budget. Before anything large is allocated, a render estimates what it will hold
+//! (the scene, the render-space geometry, the BVH build, the lights, the film and the EXR's
+//! planes) and compares it with a limit: `--max-memory`, by default 80 % of the physical
+//! memory (or of the cgroup's limit, on a farm node or in a container). A scene that cannot
+//! fit fails at once with an error that says where the memory goes, instead of swapping or
+//! being killed by the kernel hours into a batch.
+
+use crate::error::{Error, Result};
+use std::fmt;
+
+/// Share of the machine's memory a render may use by default: the rest is left to the
+/// system and to other jobs.
+pub const DEFAULT_SHARE: f64 = 0.8;
+
+/// Estimated peak bytes of a render, by what holds them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MemoryEstimate {
+    /// The loaded scene: vertex data, triangles, texels.
+    pub scene: u64,
+    /// Render-space copies of the flattened meshes and the shared meshes' data.
+    pub geometry: u64,
+    /// The BVHs at their build peak: primitives, bounds, obvhs's build nodes and the result.
+    pub bvh: u64,
+    /// Area lights and their selection structures.
+    pub lights: u64,
+    /// The film's accumulators and the EXR's output planes.
+    pub film: u64,
+}
+
+impl MemoryEstimate {
+    /// The sum of the parts.
+    pub fn total(&self) -> u64 {
+        self.scene + self.geometry + self.bvh + self.lights + self.film
+    }
+
+    /// Fails with a bad-input error naming `source` when the estimate exceeds `limit`.
+    pub fn check(&self, limit: Option<u64>, source: &str) -> Result<()> {
+        match limit {
+            Some(limit) if self.total() > limit => Err(Error::bad_input(
+                source,
+                "memory",
+                format!(
+                    "rendering needs about {} ({self}), more than the limit of {} (--max-memory)",
+                    Bytes(self.total()),
+                    Bytes(limit)
+                ),
+            )),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl fmt::Display for MemoryEstimate {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "scene {}, geometry {}, BVH build {}, lights {}, film {}",
+            Bytes(self.scene),
+            Bytes(self.geometry),
+            Bytes(self.bvh),
+            Bytes(self.lights),
+            Bytes(self.film)
+        )
+    }
+}
+
+/// A byte count printed with a binary unit, e.g. `1.5 GiB`.
+#[derive(Clone, Copy, Debug)]
+pub struct Bytes(pub u64);
+
+impl fmt::Display for Bytes {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+        let mut value = self.0 as f64;
+        let mut unit = 0;
+        while value >= 1024.0 && unit + 1 < UNITS.len() {
+            value /= 1024.0;
+            unit += 1;
+        }
+        if unit == 0 {
+            write!(f, "{} B", self.0)
+        } else {
+            write!(f, "{value:.1} {}", UNITS[unit])
+        }
+    }
+}
+
+/// Parses a `--max-memory` value: bytes with an optional binary suffix (`K`, `M`, `G`, `T`,
+/// optionally followed by `iB` or `B`), e.g. `512M`, `1.5G`, `16GiB`; or `off`, no limit
+/// (`u64::MAX`).
+pub fn parse_limit(text: &str) -> std::result::Result<u64, String> {
+    let t = text.trim();
+    if t.eq_ignore_ascii_case("off") {
+        return Ok(u64::MAX);
+    }
+    let digits = t
+        .find(|c: char| !(c.is_ascii_digit() || c == '.'))
+        .unwrap_or(t.len());
+    let (number, unit) = t.split_at(digits);
+    let number: f64 = number
+        .parse()
+        .map_err(|_| format!("{text:?}: expected a size such as 512M, 16G or off"))?;
+    let shift = match unit.trim().to_ascii_uppercase().as_str() {
+        "" | "B" => 0,
+        "K" | "KB" | "KIB" => 10,
+        "M" | "MB" | "MIB" => 20,
+        "G" | "GB" | "GIB" => 30,
+        "T" | "TB" | "TIB" => 40,
+        other => return Err(format!("{text:?}: unknown unit {other:?} (K, M, G or T)")),
+    };
+    let bytes = number * (1u64 << shift) as f64;
+    if !(bytes >= 1.0 && bytes < u64::MAX as f64) {
+        return Err(format!("{text:?}: must be at least one byte"));
+    }
+    Ok(bytes as u64)
+}
+
+/// The default limit: [`DEFAULT_SHARE`] of the smaller of the physical memory and the
+/// cgroup's memory limit, or `None` where neither can be read (no limit then).
+pub fn default_limit() -> Option<u64> {
+    let physical = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|text| meminfo_total(&text));
+    let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
+        .ok()
+        .and_then(|text| text.trim().parse::<u64>().ok());
+    let available = match (physical, cgroup) {
+        (Some(p), Some(c)) => p.min(c),
+        (p, c) => p.or(c)?,
+    };
+    Some((available as f64 * DEFAULT_SHARE) as u64)
+}
+
+/// `MemTotal` of /proc/meminfo in bytes.
+fn meminfo_total(meminfo: &str) -> Option<u64> {
+    let line = meminfo.lines().find(|l| l.starts_with("MemTotal:"))?;
+    let kib: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn limits_parse_with_binary_units() {
+        assert_eq!(parse_limit("off"), Ok(u64::MAX));
+        assert_eq!(parse_limit("4096"), Ok(4096));
+        assert_eq!(parse_limit("512M"), Ok(512 << 20));
+        assert_eq!(parse_limit("1.5G"), Ok(3 << 29));
+        assert_eq!(parse_limit("16GiB"), Ok(16 << 30));
+        assert_eq!(parse_limit("2 tb"), Ok(2 << 40));
+        for bad in ["", "G", "-1G", "0", "12X", "1e3M", "NaN"] {
+            assert!(parse_limit(bad).is_err(), "{bad:?} accepted");
+        }
+    }
+
+    #[test]
+    fn physical_memory_reads_from_meminfo() {
+        let text = "MemTotal:       24576000 kB\nMemFree:  100 kB\n";
+        assert_eq!(meminfo_total(text), Some(24_576_000 * 1024));
+        assert_eq!(meminfo_total("nothing"), None);
+    }
+
+    #[test]
+    fn an_estimate_over_the_limit_names_the_parts() {
+        let estimate = MemoryEstimate {
+            scene: 1 << 30,
+            geometry: 2 << 30,
+            bvh: 3 << 30,
+            lights: 0,
+            film: 512 << 20,
+        };
+        assert!(estimate.check(Some(7 << 30), "s.glb").is_ok());
+        assert!(estimate.check(None, "s.glb").is_ok());
+        let message = estimate
+            .check(Some(6 << 30), "s.glb")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            message.contains("6.5 GiB")
+                && message.contains("BVH build 3.0 GiB")
+                && message.contains("limit of 6.0 GiB"),
+            "{message}"
+        );
+    }
+}
