@@ -8,9 +8,17 @@ use lucerna::render::{self, RenderOptions};
 use lucerna::scene::Scene;
 use lucerna::world::World;
 
+/// Memory a fuzzed scene may need, as `render --max-memory` would allow it (libFuzzer's own
+/// limit, 2 GiB, would report a larger one as a crash).
+const MAX_MEMORY: u64 = 1 << 30;
+
 /// Builds the world for `scene` at 4x4 and renders one sample per pixel, panicking (a
-/// finding) if a pixel is not finite.
+/// finding) if a pixel is not finite. Scenes the memory estimate refuses are skipped, as the
+/// command line refuses them.
 pub fn render_a_few_pixels(scene: Scene) {
+    if lucerna::world::estimate_memory(&scene).total() > MAX_MEMORY {
+        return;
+    }
     let Ok(world) = World::build(scene, None, Some((4, 4)), LightSelect::Power) else {
         return;
     };
