@@ -470,10 +470,12 @@ mod tests {
 
     /// Geometry nested over every float exponent (clusters of 64 triangles at 2^-120 ..
     /// 2^119 along a line) needs more than the inline stack when a ray runs along it: the
-    /// traversal descends into the small end first, pushing the larger clusters. With only
-    /// clusters from scale 2^`first` on accepted (as alpha testing would), the closest
-    /// accepted hit lies in those pushed groups; the spill keeps them all, so the BVH finds
-    /// what brute force finds.
+    /// traversal descends into the small end first, pushing the larger clusters (45 groups
+    /// deep). With only clusters from scale 2^`first` on accepted (as alpha testing would),
+    /// the closest accepted hit lies in pushed groups. The stack spills, and the BVH finds
+    /// what brute force finds. (obvhs's overwriting stack happens to pass this too: the
+    /// groups it drops here hold no accepted hit; `traversal_stack_spills_in_order` checks
+    /// the spill itself.)
     #[test]
     fn deep_traversals_lose_nothing() {
         const PER_SCALE: u32 = 64;
