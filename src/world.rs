@@ -342,9 +342,16 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
             shared_prims += mesh.triangles.len() as u64;
         }
     }
-    let shapes = (scene.spheres.len() + scene.disks.len() + scene.cylinders.len()) as u64;
-    flat_prims += shapes;
-    emitters += shapes + scene.lights.len() as u64;
+    let shape_materials: Vec<u32> = (scene.spheres.iter().map(|s| s.material))
+        .chain(scene.disks.iter().map(|d| d.material))
+        .chain(scene.cylinders.iter().map(|c| c.material))
+        .collect();
+    flat_prims += shape_materials.len() as u64;
+    emitters += shape_materials
+        .iter()
+        .filter(|&&m| scene.materials[m as usize].is_emissive())
+        .count() as u64
+        + scene.lights.len() as u64;
     // Per flattened primitive: what it refers to and its light.
     geometry += flat_prims * (size_of::<PrimRef>() + size_of::<u32>()) as u64;
     // The primitives and their flags as given to the build, its own state, and the result's

@@ -95,3 +95,25 @@ fn memory_grows_with_the_shared_mesh_not_with_placements() {
         "{per_placement} bytes per placement; {flattened} per flattened copy"
     );
 }
+
+/// The memory estimate follows sharing: 1,000 placements of a shared sphere cost a small
+/// fraction of the same spheres flattened, and each estimate covers the BVH that is built.
+#[test]
+fn memory_estimate_follows_sharing() {
+    use lucerna::world::estimate_memory;
+    let placed = estimate_memory(&spheres(1000));
+    let flat = estimate_memory(&spheres(1000).unshared());
+    assert!(
+        flat.bvh > 100 * placed.bvh && flat.geometry > 20 * placed.geometry,
+        "placed {placed}; flattened {flat}"
+    );
+    for (scene, estimate) in [(spheres(1000), placed), (spheres(1000).unshared(), flat)] {
+        let world = World::build(scene, None, Some((8, 8)), LightSelect::Power).unwrap();
+        assert!(
+            (world.bvh_bytes() as u64) < estimate.bvh,
+            "{} BVH bytes built, {} estimated",
+            world.bvh_bytes(),
+            estimate.bvh
+        );
+    }
+}

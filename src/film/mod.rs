@@ -403,3 +403,48 @@ where
     }
     result
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The memory estimate of a film is what its tiles allocate, plus a f32 plane per output
+    /// channel.
+    #[test]
+    fn estimated_bytes_match_the_allocation() {
+        use std::mem::size_of_val;
+        for aovs in [
+            AovSet::default(),
+            AovSet::parse("").unwrap(),
+            AovSet::parse("variance,depth").unwrap(),
+        ] {
+            let film = Film::new(37, 23, aovs.clone());
+            let tiles: usize = film
+                .tiles
+                .iter()
+                .map(|t| {
+                    size_of_val(t.light.as_slice())
+                        + size_of_val(t.beauty_sum.as_slice())
+                        + size_of_val(t.beauty_squares.as_slice())
+                        + size_of_val(t.coverage.as_slice())
+                        + size_of_val(t.albedo.as_slice())
+                        + size_of_val(t.normal.as_slice())
+                        + size_of_val(t.position.as_slice())
+                        + size_of_val(t.depth.as_slice())
+                        + size_of_val(t.samples.as_slice())
+                })
+                .sum();
+            let planes: usize = aovs
+                .iter()
+                .flat_map(|aov| film.planes(aov))
+                .map(|p| size_of_val(p.as_slice()))
+                .sum();
+            assert_eq!(
+                Film::estimated_bytes(37, 23, &aovs),
+                (tiles + planes) as u64,
+                "{}",
+                aovs.describe()
+            );
+        }
+    }
+}
