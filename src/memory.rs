@@ -17,7 +17,8 @@ pub const DEFAULT_SHARE: f64 = 0.8;
 pub struct MemoryEstimate {
     /// The loaded scene: vertex data, triangles, texels.
     pub scene: u64,
-    /// Render-space copies of the flattened meshes and the shared meshes' data.
+    /// Render-space copies of the flattened meshes, what each primitive refers to, and the
+    /// placements of shared meshes (those meshes themselves move out of the scene).
     pub geometry: u64,
     /// The BVHs at their build peak: primitives, bounds, obvhs's build nodes and the result.
     pub bvh: u64,

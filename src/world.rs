@@ -336,9 +336,9 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
             placements += 1;
         }
     }
+    // Shared meshes are moved out of the scene, not copied: only their primitives count.
     for (mesh, &index) in scene.meshes.iter().zip(&shared) {
         if index != NOT_SHARED {
-            geometry += mesh.data_bytes();
             shared_prims += mesh.triangles.len() as u64;
         }
     }

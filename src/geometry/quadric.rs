@@ -63,6 +63,7 @@ impl Quadric {
         }
     }
 
+    /// Surface area (one side).
     pub fn area(&self) -> f32 {
         match self {
             Self::Disk(d) => d.area(),
@@ -82,6 +83,7 @@ impl Quadric {
         }
     }
 
+    /// Render-space bounding box.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         match self {
             Self::Disk(d) => d.bounds(),
@@ -127,17 +129,23 @@ impl Disk {
         )
     }
 
+    /// Surface area (one side).
     pub fn area(&self) -> f32 {
         PI * self.radius * self.radius
     }
 
-    /// A point uniform by area and its texture coordinates.
+    /// A point uniform by area and its texture coordinates (those of [`Disk::uv`], from
+    /// the sample's own disk coordinates in the same frame).
     #[inline]
     pub fn sample(&self, u: Vec2) -> (Vec3, Vec2) {
         let d = square_to_uniform_disk(u) * self.radius;
         let frame = Frame::from_normal(self.normal);
         let p = self.centre + frame.s * d.x + frame.t * d.y;
-        (p, self.uv(p))
+        let uv = Vec2::new(
+            (d.length() / self.radius).min(1.0),
+            (d.y.atan2(d.x) / (2.0 * PI)).rem_euclid(1.0),
+        );
+        (p, uv)
     }
 
     /// Render-space bounds: the disk's extent along each axis is radius · sin(angle between
@@ -211,6 +219,7 @@ impl Cylinder {
         )
     }
 
+    /// Surface area of the side (one side of it).
     pub fn area(&self) -> f32 {
         2.0 * PI * self.radius * 2.0 * self.half_length
     }

@@ -1,6 +1,7 @@
 //! Lights in render space and their sampling: emissive triangles and spheres (area lights,
-//! sampled by area or by solid angle), disks and cylinders (sampled by area), point, spot and directional lights, distant lights
-//! with an angular size, and the environment. Which light to sample is `selection`'s job.
+//! sampled by area or by solid angle), disks and cylinders (sampled by area), point, spot
+//! and directional lights, distant lights with an angular size, and the environment. Which
+//! light to sample is `selection`'s job.
 
 pub mod environment;
 pub mod selection;

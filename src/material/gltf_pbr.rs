@@ -172,11 +172,15 @@ impl GltfPbr {
         }
         let (pc, ps, pd) = self.lobe_probabilities(wo);
         let mut pdf = pd * cosine_hemisphere_pdf(wi);
+        let glossy_coat = pc > 0.0 && !self.coat_smooth();
+        if self.smooth() && !glossy_coat {
+            return pdf;
+        }
         let h = (wo + wi).normalize();
         if !self.smooth() {
             pdf += ps * self.ggx.reflection_pdf(wo, h);
         }
-        if pc > 0.0 && !self.coat_smooth() {
+        if glossy_coat {
             pdf += pc * self.coat_ggx.reflection_pdf(wo, h);
         }
         pdf
