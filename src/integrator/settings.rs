@@ -32,7 +32,7 @@ pub const ROULETTE_CAP: f32 = 0.95;
 /// How a light is chosen for next-event estimation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LightSelect {
-    /// Every light equally likely.
+    /// Every light that emits equally likely.
     Uniform,
     /// In proportion to emitted power.
     Power,
@@ -355,7 +355,9 @@ pub fn write_settings_toml(pairs: &[(String, String)]) -> String {
     let mut table = toml::Table::new();
     for (key, value) in pairs {
         let v = match value.parse::<i64>() {
-            Ok(i) if key == "seed" || key == "spp" || key == "max-depth" => toml::Value::Integer(i),
+            Ok(i) if ["seed", "spp", "min-spp", "max-depth"].contains(&key.as_str()) => {
+                toml::Value::Integer(i)
+            }
             _ => toml::Value::String(value.clone()),
         };
         table.insert(key.clone(), v);

@@ -13,7 +13,11 @@ use glam::Vec3;
 /// How lights are chosen.
 #[derive(Clone, Debug)]
 enum Selector {
-    Uniform,
+    /// Every light of positive power equally likely (`selectable[i]`: light i is one).
+    Uniform {
+        lights: Vec<u32>,
+        selectable: Vec<bool>,
+    },
     Power(AliasTable),
     Contribution {
         tree: LightTree,
@@ -31,6 +35,8 @@ pub struct LightSet {
     pub environment_index: Option<u32>,
     /// Indices of the distant lights with an angular size, which escaping rays can reach.
     pub distant_cones: Vec<u32>,
+    /// Lights that emit nothing (no selection strategy ever picks them).
+    pub zero_power: usize,
     selector: Option<Selector>,
 }
 
@@ -117,7 +123,12 @@ impl LightSet {
             .collect();
         let selector = match strategy {
             _ if !powers.iter().any(|&p| p > 0.0) => None,
-            LightSelect::Uniform => Some(Selector::Uniform),
+            LightSelect::Uniform => Some(Selector::Uniform {
+                lights: (0..lights.len() as u32)
+                    .filter(|&i| powers[i as usize] > 0.0)
+                    .collect(),
+                selectable: powers.iter().map(|&p| p > 0.0).collect(),
+            }),
             LightSelect::Power => AliasTable::new(&powers).map(Selector::Power),
             LightSelect::Contribution => {
                 let mut bounded = Vec::new();
@@ -143,6 +154,7 @@ impl LightSet {
             environment,
             environment_index,
             distant_cones,
+            zero_power: powers.iter().filter(|&&p| !(p > 0.0)).count(),
             selector,
         }
     }
@@ -151,10 +163,10 @@ impl LightSet {
     #[inline]
     pub fn select(&self, u: f32, p: Vec3, n: Vec3) -> Option<(usize, f32)> {
         match self.selector.as_ref()? {
-            Selector::Uniform => {
-                let count = self.lights.len();
+            Selector::Uniform { lights, .. } => {
+                let count = lights.len();
                 Some((
-                    ((u * count as f32) as usize).min(count - 1),
+                    lights[((u * count as f32) as usize).min(count - 1)] as usize,
                     1.0 / count as f32,
                 ))
             }
@@ -180,7 +192,10 @@ impl LightSet {
     pub fn selection_probability(&self, i: usize, p: Vec3, n: Vec3) -> f32 {
         match self.selector.as_ref() {
             None => 0.0,
-            Some(Selector::Uniform) => 1.0 / self.lights.len() as f32,
+            Some(Selector::Uniform { lights, selectable }) if selectable[i] => {
+                1.0 / lights.len() as f32
+            }
+            Some(Selector::Uniform { .. }) => 0.0,
             Some(Selector::Power(table)) => table.pmf(i),
             Some(Selector::Contribution { tree, infinite }) => {
                 let groups = (infinite.len() + usize::from(!tree.is_empty())) as f32;
@@ -196,5 +211,41 @@ impl LightSet {
     /// True if there is nothing to sample.
     pub fn is_empty(&self) -> bool {
         self.selector.is_none()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(intensity: f32) -> Light {
+        Light::Point {
+            position: Vec3::ZERO,
+            intensity: Vec3::splat(intensity),
+        }
+    }
+
+    /// Uniform selection never picks a light that emits nothing, and its probabilities
+    /// still sum to 1 over the lights it picks.
+    #[test]
+    fn uniform_selection_skips_lights_of_zero_power() {
+        let set = LightSet::new(
+            vec![point(0.0), point(1.0), point(0.0), point(2.0)],
+            None,
+            1.0,
+            LightSelect::Uniform,
+        );
+        assert_eq!(set.zero_power, 2);
+        let p = Vec3::ONE;
+        for k in 0..100 {
+            let (i, pmf) = set.select((k as f32 + 0.5) / 100.0, p, Vec3::Y).unwrap();
+            assert!(i == 1 || i == 3, "picked light {i}");
+            assert_eq!(pmf, 0.5);
+        }
+        let total: f32 = (0..4)
+            .map(|i| set.selection_probability(i, p, Vec3::Y))
+            .sum();
+        assert_eq!(total, 1.0);
+        assert_eq!(set.selection_probability(0, p, Vec3::Y), 0.0);
     }
 }
