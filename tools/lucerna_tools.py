@@ -4,6 +4,7 @@ read EXRs with OpenImageIO, error metrics, cached references, labelled image gri
 Error metric (../shared/design.md): relMSE = mean over pixels and channels of
 (x - ref)^2 / (ref^2 + 0.01); efficiency = 1 / (seconds x relMSE).
 """
+import copy
 import hashlib
 import json
 import os
@@ -86,6 +87,78 @@ def reference(scene, resolution, spp, **settings):
         meta.write_text(json.dumps(info, indent=1))
     channels, _ = read_exr(exr)
     return rgb(channels), json.loads(meta.read_text())
+
+
+# Mesh attributes of a scene file: (key, floats or words per element, numpy type).
+ATTRIBUTES = [("positions", 3, "<f4"), ("normals", 3, "<f4"), ("tangents", 4, "<f4"),
+              ("uvs0", 2, "<f4"), ("uvs1", 2, "<f4"), ("colors", 4, "<f4"),
+              ("triangles", 3, "<u4")]
+
+
+class SceneFile:
+    """A lucerna scene file in memory: the manifest, and each mesh's arrays decoded from
+    the buffer (None where absent)."""
+
+    def __init__(self, path):
+        path = Path(path)
+        self.manifest = json.loads(path.read_text())
+        buffer = (path.parent / self.manifest["buffer"]).read_bytes()
+        self.arrays = []
+        for mesh in self.manifest["meshes"]:
+            arrays = {}
+            for key, width, dtype in ATTRIBUTES:
+                view = self._view(mesh, key)
+                arrays[key] = None if view is None else np.frombuffer(
+                    buffer, dtype, view["count"] * width, view["offset"]).reshape(-1, width).copy()
+            self.arrays.append(arrays)
+
+    @staticmethod
+    def _view(mesh, key):
+        if key.startswith("uvs"):
+            return mesh["uvs"][int(key[3])]
+        return mesh[key]
+
+    def write(self, path):
+        path = Path(path)
+        blob = bytearray()
+        manifest = copy.deepcopy(self.manifest)
+        for mesh, arrays in zip(manifest["meshes"], self.arrays):
+            mesh["uvs"] = [None, None]
+            for key, width, dtype in ATTRIBUTES:
+                a = arrays.get(key)
+                view = None
+                if a is not None:
+                    data = np.ascontiguousarray(a, dtype=dtype).tobytes()
+                    view = {"offset": len(blob), "count": len(a)}
+                    blob += data
+                if key.startswith("uvs"):
+                    mesh["uvs"][int(key[3])] = view
+                else:
+                    mesh[key] = view
+        manifest["buffer"] = path.name + ".bin"
+        manifest["buffer_bytes"] = len(blob)
+        (path.parent / manifest["buffer"]).write_bytes(bytes(blob))
+        path.write_text(json.dumps(manifest))
+        return path
+
+    def add_mesh(self, name, positions, triangles, material, normals=None):
+        self.manifest["meshes"].append({"name": name, "material": material})
+        self.arrays.append({"positions": np.asarray(positions, "<f4").reshape(-1, 3),
+                            "triangles": np.asarray(triangles, "<u4").reshape(-1, 3),
+                            "normals": None if normals is None else np.asarray(normals, "<f4").reshape(-1, 3)})
+        mesh = len(self.arrays) - 1
+        self.manifest["instances"].append({"name": name, "mesh": mesh, "transform": identity()})
+        return mesh
+
+    def add_material(self, name, **fields):
+        material = dict(self.manifest["materials"][0])
+        material.update(name=name, **fields)
+        self.manifest["materials"].append(material)
+        return len(self.manifest["materials"]) - 1
+
+
+def identity():
+    return [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
 
 
 def tonemap(image):

@@ -20,8 +20,6 @@ from the Cornell box that `lucerna convert` writes, or as glTF for the input-val
 --quick runs the subset the test suite runs (tests/python/test_stress.py).
 """
 import argparse
-import copy
-import json
 import math
 import platform
 import subprocess
@@ -46,78 +44,6 @@ TIMEOUT = 120
 NOISE_RATIO = 1.35
 Z_MAX = 4.5
 
-# Mesh attributes of a scene file: (key, floats or words per element, numpy type).
-ATTRIBUTES = [("positions", 3, "<f4"), ("normals", 3, "<f4"), ("tangents", 4, "<f4"),
-              ("uvs0", 2, "<f4"), ("uvs1", 2, "<f4"), ("colors", 4, "<f4"),
-              ("triangles", 3, "<u4")]
-
-
-class SceneFile:
-    """A lucerna scene file in memory: the manifest, and each mesh's arrays decoded from
-    the buffer (None where absent)."""
-
-    def __init__(self, path):
-        path = Path(path)
-        self.manifest = json.loads(path.read_text())
-        buffer = (path.parent / self.manifest["buffer"]).read_bytes()
-        self.arrays = []
-        for mesh in self.manifest["meshes"]:
-            arrays = {}
-            for key, width, dtype in ATTRIBUTES:
-                view = self._view(mesh, key)
-                arrays[key] = None if view is None else np.frombuffer(
-                    buffer, dtype, view["count"] * width, view["offset"]).reshape(-1, width).copy()
-            self.arrays.append(arrays)
-
-    @staticmethod
-    def _view(mesh, key):
-        if key.startswith("uvs"):
-            return mesh["uvs"][int(key[3])]
-        return mesh[key]
-
-    def write(self, path):
-        path = Path(path)
-        blob = bytearray()
-        manifest = copy.deepcopy(self.manifest)
-        for mesh, arrays in zip(manifest["meshes"], self.arrays):
-            mesh["uvs"] = [None, None]
-            for key, width, dtype in ATTRIBUTES:
-                a = arrays.get(key)
-                view = None
-                if a is not None:
-                    data = np.ascontiguousarray(a, dtype=dtype).tobytes()
-                    view = {"offset": len(blob), "count": len(a)}
-                    blob += data
-                if key.startswith("uvs"):
-                    mesh["uvs"][int(key[3])] = view
-                else:
-                    mesh[key] = view
-        manifest["buffer"] = path.name + ".bin"
-        manifest["buffer_bytes"] = len(blob)
-        (path.parent / manifest["buffer"]).write_bytes(bytes(blob))
-        path.write_text(json.dumps(manifest))
-        return path
-
-    def add_mesh(self, name, positions, triangles, material, normals=None):
-        self.manifest["meshes"].append({"name": name, "material": material})
-        self.arrays.append({"positions": np.asarray(positions, "<f4").reshape(-1, 3),
-                            "triangles": np.asarray(triangles, "<u4").reshape(-1, 3),
-                            "normals": None if normals is None else np.asarray(normals, "<f4").reshape(-1, 3)})
-        mesh = len(self.arrays) - 1
-        self.manifest["instances"].append({"name": name, "mesh": mesh, "transform": identity()})
-        return mesh
-
-    def add_material(self, name, **fields):
-        material = dict(self.manifest["materials"][0])
-        material.update(name=name, **fields)
-        self.manifest["materials"].append(material)
-        return len(self.manifest["materials"]) - 1
-
-
-def identity():
-    return [1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0, 0, 0, 0, 0, 1.0]
-
-
 def affine(m, scale, offset):
     """Column-major 4x4 `m` after scaling by `scale` and moving by `offset` (f64)."""
     m = np.array(m, dtype=np.float64).reshape(4, 4).T
@@ -135,7 +61,7 @@ class Stress:
         self.rendered = {}
 
     def cornell(self):
-        return SceneFile(self.cornell_path)
+        return lt.SceneFile(self.cornell_path)
 
     def render(self, scene, seed=1, spp=SPP, args=(), resolution=RESOLUTION):
         """Renders `scene` (a path) with all AOVs; returns (channels, header, figures) after
