@@ -3,8 +3,8 @@
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use lucerna::error::{Error, Result};
-use lucerna::film::aov::AovSet;
 use lucerna::film::exr::{Attribute, Header};
+use lucerna::plan::{self, PlanMode, RenderPlan, SceneFeatures};
 use lucerna::render::{self, RenderOptions};
 use lucerna::scene::{LightKind, Scene};
 use lucerna::world::World;
@@ -33,6 +33,12 @@ enum Command {
         scene: PathBuf,
         #[command(flatten)]
         load: LoadArgs,
+        /// AOVs of the request the plan is made for (as `render --aov`; default all).
+        #[arg(long)]
+        aov: Option<String>,
+        /// auto or general, as `render --plan`.
+        #[arg(long)]
+        plan: Option<String>,
     },
     /// Write a scene as a lucerna scene file (a JSON manifest and a binary buffer beside it),
     /// exactly as the renderer sees it.
@@ -141,6 +147,18 @@ struct RenderArgs {
     /// Pixel filter: box, blackman-harris (width 1.5, default) or blackman-harris:WIDTH.
     #[arg(long)]
     filter: Option<String>,
+    /// Adaptive sampling: the relative noise (square root of the predicted relMSE) at which
+    /// sampling stops, e.g. 0.02. Pixels get samples where they lower the error most per
+    /// ray; `--spp` caps a pixel (default 65536) and `--time` the whole render.
+    #[arg(long)]
+    noise_threshold: Option<String>,
+    /// Samples every pixel takes before adaptive sampling decides (default 16).
+    #[arg(long)]
+    min_spp: Option<String>,
+    /// auto (default): the integrator leaves out what the scene and the AOVs do not use;
+    /// general: every feature on (for benchmarks and comparisons).
+    #[arg(long)]
+    plan: Option<String>,
     /// Largest memory the render may need, e.g. 8G or 512M (binary units), or `off`; a scene
     /// estimated to need more fails before loading into the renderer (default: 80 % of the
     /// physical memory or of the cgroup's limit).
@@ -178,6 +196,9 @@ impl RenderArgs {
             ("light-sampling", &self.light_sampling),
             ("split", &self.split),
             ("filter", &self.filter),
+            ("noise-threshold", &self.noise_threshold),
+            ("min-spp", &self.min_spp),
+            ("plan", &self.plan),
         ];
         for (name, value) in flags {
             if let Some(v) = value {
@@ -260,14 +281,12 @@ fn render_command(args: RenderArgs) -> Result<()> {
     if let Some(path) = &args.env_map {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
+    if options.plan == PlanMode::Auto {
+        plan::strip_unused_attributes(&mut scene);
+    }
     let limit = args.max_memory.or_else(memory::default_limit);
-    memory_estimate(
-        &scene,
-        args.camera.as_deref(),
-        args.resolution,
-        &options.aovs,
-    )
-    .check(limit, &scene.source)?;
+    memory_estimate(&scene, args.camera.as_deref(), args.resolution, &options)
+        .check(limit, &scene.source)?;
     let source = scene.source.clone();
     let build_start = std::time::Instant::now();
     let world = pool.install(|| {
@@ -349,14 +368,19 @@ fn memory_estimate(
     scene: &Scene,
     camera: Option<&str>,
     resolution: Option<(u32, u32)>,
-    aovs: &AovSet,
+    options: &RenderOptions,
 ) -> memory::MemoryEstimate {
     let camera = camera
         .and_then(|name| scene.camera(name))
         .or(scene.cameras.first());
     let (width, height) = lucerna::camera::resolve_resolution(resolution, camera);
     memory::MemoryEstimate {
-        film: film::Film::estimated_bytes(width, height, aovs),
+        film: film::Film::estimated_bytes(
+            width,
+            height,
+            &options.aovs,
+            options.noise_threshold.is_some(),
+        ),
         ..lucerna::world::estimate_memory(scene)
     }
 }
@@ -374,8 +398,24 @@ fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<()> {
     Ok(())
 }
 
-fn inspect_command(path: &Path, load: &LoadArgs) -> Result<()> {
-    let scene = load_scene(Some(path), load)?;
+fn inspect_command(
+    path: &Path,
+    load: &LoadArgs,
+    aov: Option<&str>,
+    plan_mode: Option<&str>,
+) -> Result<()> {
+    let mut options = RenderOptions::default();
+    for (name, value) in [("aov", aov), ("plan", plan_mode)] {
+        if let Some(v) = value {
+            options
+                .set(name, v)
+                .map_err(|e| Error::bad_input("", format!("--{name}"), e))?;
+        }
+    }
+    let mut scene = load_scene(Some(path), load)?;
+    if options.plan == PlanMode::Auto {
+        plan::strip_unused_attributes(&mut scene);
+    }
     let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();
     let vertices: usize = scene.meshes.iter().map(|m| m.positions.len()).sum();
     println!("scene: {}", scene.source);
@@ -451,11 +491,19 @@ fn inspect_command(path: &Path, load: &LoadArgs) -> Result<()> {
             names.join(", ")
         }
     );
-    let estimate = memory_estimate(&scene, None, None, &AovSet::default());
+    let estimate = memory_estimate(&scene, None, None, &options);
     println!(
-        "  memory (default resolution and AOVs): about {} ({estimate})",
+        "  memory (default resolution, AOVs {}): about {} ({estimate})",
+        options.aovs.describe(),
         memory::Bytes(estimate.total())
     );
+    let plan = RenderPlan::new(
+        &SceneFeatures::of(&scene),
+        &options.aovs,
+        options.plan,
+        false,
+    );
+    println!("{plan}");
     Ok(())
 }
 
@@ -463,7 +511,12 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render_command(*args),
-        Command::Inspect { scene, load } => inspect_command(&scene, &load),
+        Command::Inspect {
+            scene,
+            load,
+            aov,
+            plan,
+        } => inspect_command(&scene, &load, aov.as_deref(), plan.as_deref()),
         Command::Convert {
             scene,
             output,

@@ -8,6 +8,7 @@ use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
 use crate::integrator::{RussianRoulette, Settings};
+use crate::plan::{PlanMode, RenderPlan};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
 use glam::Vec2;
@@ -22,14 +23,25 @@ const PASS_SAMPLES: u32 = 16;
 pub const DEFAULT_SPP: u32 = 64;
 /// Most samples per pixel a time budget may take.
 const MAX_SPP: u32 = 1 << 24;
+/// Most samples per pixel adaptive sampling takes when no sample count is given.
+pub const ADAPTIVE_MAX_SPP: u32 = 1 << 16;
+/// Samples every pixel takes before adaptive sampling decides (`min-spp`).
+pub const DEFAULT_MIN_SPP: u32 = 16;
 
-/// What to render: samples or time, integrator settings, AOVs, pixel filter.
+/// What to render: samples or time, integrator settings, AOVs, pixel filter, plan.
 #[derive(Clone, Debug)]
 pub struct RenderOptions {
-    /// Samples per pixel; with a time budget, the most to take.
+    /// Samples per pixel; with a time budget or a noise threshold, the most to take.
     pub spp: Option<u32>,
     /// Time budget in seconds: passes continue until it is spent.
     pub time: Option<f64>,
+    /// Adaptive sampling's target: the relative noise (square root of the predicted
+    /// relMSE) at which sampling stops; `None` samples every pixel alike.
+    pub noise_threshold: Option<f32>,
+    /// Samples every pixel takes before adaptive sampling decides.
+    pub min_spp: u32,
+    /// Specialise the integrator to the scene and request, or force every feature on.
+    pub plan: PlanMode,
     pub settings: Settings,
     pub aovs: AovSet,
     pub filter: PixelFilter,
@@ -42,6 +54,9 @@ impl Default for RenderOptions {
         Self {
             spp: None,
             time: None,
+            noise_threshold: None,
+            min_spp: DEFAULT_MIN_SPP,
+            plan: PlanMode::Auto,
             settings: Settings::default(),
             aovs: AovSet::default(),
             filter: PixelFilter::blackman_harris(1.5),
@@ -49,9 +64,6 @@ impl Default for RenderOptions {
         }
     }
 }
-
-/// Names of the render-level settings (besides the integrator's).
-const RENDER_NAMES: [&str; 4] = ["spp", "time", "filter", "aov"];
 
 impl RenderOptions {
     /// Sets `name` (a render or integrator setting) from its textual value: the one path
@@ -75,6 +87,24 @@ impl RenderOptions {
                         format!("time: a positive number of seconds, got {value:?}")
                     })?);
             }
+            "noise-threshold" => {
+                let t = value
+                    .parse::<f32>()
+                    .ok()
+                    .filter(|t| t.is_finite() && *t > 0.0);
+                self.noise_threshold = Some(t.ok_or_else(|| {
+                    format!(
+                        "noise-threshold: a positive relative noise level, e.g. 0.01, got {value:?}"
+                    )
+                })?);
+            }
+            "min-spp" => {
+                let n = value.parse().ok().filter(|s| (2..=MAX_SPP).contains(s));
+                self.min_spp = n.ok_or_else(|| {
+                    format!("min-spp: an integer in 2..={MAX_SPP}, got {value:?}")
+                })?;
+            }
+            "plan" => self.plan = PlanMode::parse(value)?,
             "filter" => {
                 self.filter = PixelFilter::parse(value).ok_or_else(|| {
                     format!(
@@ -104,29 +134,40 @@ impl RenderOptions {
         if let Some(t) = self.time {
             pairs.push(("time".into(), t.to_string()));
         }
+        if let Some(t) = self.noise_threshold {
+            pairs.push(("noise-threshold".into(), t.to_string()));
+            pairs.push(("min-spp".into(), self.min_spp.to_string()));
+        }
         pairs.push(("filter".into(), self.filter.describe()));
         pairs.push(("aov".into(), self.aovs.describe()));
+        pairs.push(("plan".into(), self.plan.name().into()));
         for name in SETTING_NAMES {
             pairs.push((
                 name.into(),
                 self.settings.get(name).expect("listed settings exist"),
             ));
         }
-        debug_assert!(
-            RENDER_NAMES
-                .iter()
-                .all(|n| pairs.iter().any(|(k, _)| k == n))
-        );
         write_settings_toml(&pairs)
     }
 
-    /// The sample count when no time budget limits it.
+    /// The sample count when no time budget or noise threshold stops earlier.
     fn target_spp(&self) -> u32 {
-        match (self.spp, self.time) {
-            (Some(s), _) => s,
-            (None, Some(_)) => MAX_SPP,
-            (None, None) => DEFAULT_SPP,
+        match (self.spp, self.time, self.noise_threshold) {
+            (Some(s), _, _) => s,
+            (None, Some(_), _) => MAX_SPP,
+            (None, None, Some(_)) => ADAPTIVE_MAX_SPP,
+            (None, None, None) => DEFAULT_SPP,
         }
+    }
+
+    /// The render plan for `world` with these options.
+    pub fn render_plan(&self, world: &World) -> RenderPlan {
+        RenderPlan::new(
+            &world.features,
+            &self.aovs,
+            self.plan,
+            self.noise_threshold.is_some(),
+        )
     }
 }
 
@@ -134,7 +175,7 @@ impl RenderOptions {
 #[derive(Clone, Copy, Debug)]
 pub struct RenderStats {
     pub seconds: f64,
-    /// Samples per pixel taken.
+    /// Samples per pixel taken (the most any pixel took, with adaptive sampling).
     pub spp: u32,
     pub samples: u64,
     pub rays: RayCounts,
@@ -190,12 +231,126 @@ fn next_pass(done: u32, target: u32, budget: Option<f64>, elapsed: f64) -> u32 {
     (fit.min(slice) as u32).clamp(1, left)
 }
 
+/// Samples each pixel takes in one pass.
+enum PassSamples {
+    /// The same number everywhere.
+    Uniform(u32),
+    /// Per pixel, row-major over the image (adaptive sampling).
+    PerPixel(Vec<u32>),
+}
+
+impl PassSamples {
+    #[inline]
+    fn at(&self, pixel: usize) -> u32 {
+        match self {
+            Self::Uniform(n) => *n,
+            Self::PerPixel(counts) => counts[pixel],
+        }
+    }
+}
+
+/// Adaptive sampling's next pass: the samples each pixel still needs, or all zero when
+/// every pixel has stopped.
+///
+/// The allocation that minimises the image's relMSE for the time spent gives pixel p a
+/// sample count n_p = K·sqrt(v_p / c_p) (v_p: per-sample relative variance, c_p: rays per
+/// sample); K is set so that the predicted relMSE, mean of v_p / n_p, equals the threshold
+/// squared. Equivalently, a pixel stops once one more sample would lower the error per ray
+/// by less than an image-wide amount: it stops on its own variance estimate, against a
+/// threshold derived from the noise target. v_p and c_p come from the pixel's eight
+/// neighbours, not from its own samples, so that the decision to stop a pixel does not
+/// depend directly on the values averaged into it; what remains (its share of K, and its
+/// neighbours' sample counts) is second order, and `tests/plan.rs` measures the bias.
+/// A pixel at most doubles its count in a pass, so that later passes decide on better
+/// estimates, and deficits under a sixteenth of its count wait for a later pass.
+fn adaptive_pass(film: &Film, threshold: f64, most: u32) -> Vec<u32> {
+    let (w, h) = (film.width as usize, film.height as usize);
+    let mut variance = vec![0.0f64; w * h];
+    let mut cost = vec![1.0f64; w * h];
+    let mut samples = vec![0u32; w * h];
+    for tile in &film.tiles {
+        for ty in 0..tile.height {
+            for tx in 0..tile.width {
+                let p = (ty * tile.width + tx) as usize;
+                let out = (tile.y0 + ty) as usize * w + (tile.x0 + tx) as usize;
+                samples[out] = tile.samples_at(p);
+                if let Some((v, c)) = tile.pixel_statistics(p) {
+                    variance[out] = v;
+                    cost[out] = c.max(1.0);
+                }
+            }
+        }
+    }
+    // Leave-one-out neighbourhood means (the pixel itself when it has no neighbour).
+    let neighbourhood = |values: &[f64], x: usize, y: usize| {
+        let (mut sum, mut n) = (0.0, 0u32);
+        for ny in y.saturating_sub(1)..(y + 2).min(h) {
+            for nx in x.saturating_sub(1)..(x + 2).min(w) {
+                if (nx, ny) != (x, y) {
+                    sum += values[ny * w + nx];
+                    n += 1;
+                }
+            }
+        }
+        if n == 0 {
+            values[y * w + x]
+        } else {
+            sum / n as f64
+        }
+    };
+    let estimates: Vec<(f64, f64)> = (0..w * h)
+        .map(|i| {
+            let (x, y) = (i % w, i / w);
+            (neighbourhood(&variance, x, y), neighbourhood(&cost, x, y))
+        })
+        .collect();
+    let k = estimates.iter().map(|(v, c)| (v * c).sqrt()).sum::<f64>()
+        / ((w * h) as f64 * threshold * threshold);
+    estimates
+        .iter()
+        .zip(&samples)
+        .map(|(&(v, c), &n)| {
+            let wanted = (k * (v / c).sqrt()).ceil().min(most as f64) as u32;
+            let deficit = wanted.saturating_sub(n);
+            if deficit == 0 || deficit < n / 16 {
+                0
+            } else {
+                deficit.min(n.max(1))
+            }
+        })
+        .collect()
+}
+
+/// Scales a pass down to `allowed` samples in all (a time budget's share).
+fn fit_pass(counts: &mut [u32], allowed: f64) {
+    let total: u64 = counts.iter().map(|&c| c as u64).sum();
+    if (total as f64) <= allowed {
+        return;
+    }
+    let scale = allowed / total as f64;
+    for c in counts {
+        *c = (*c as f64 * scale).floor() as u32;
+    }
+}
+
 /// Renders `world` on the current rayon pool. Without a time budget every pixel's value
 /// depends only on the scene, the options and the seed, not on the number of threads.
 pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
+    let plan = options.render_plan(world);
     let camera = &world.camera;
-    let mut film = Film::new(camera.width(), camera.height(), options.aovs.clone());
+    let adaptive = options.noise_threshold.is_some();
+    let mut film = Film::new(
+        camera.width(),
+        camera.height(),
+        options.aovs.clone(),
+        adaptive,
+    );
     let target = options.target_spp();
+    let uniform_spp = if adaptive {
+        options.min_spp.min(target)
+    } else {
+        target
+    };
     let mut ears = match options.settings.rr {
         RussianRoulette::Efficiency(max_split) => {
             Some(Ears::new(film.width, film.height, max_split))
@@ -204,12 +359,16 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     };
     let pixels = film.width as u64 * film.height as u64;
     let bar = (options.progress && std::io::stderr().is_terminal()).then(|| {
-        let (length, template) = match options.time {
-            Some(t) => (
+        let (length, template) = match (options.time, adaptive) {
+            (Some(t), _) => (
                 (t * 1000.0) as u64,
                 "{elapsed_precise} [{wide_bar}] {percent:>3}% of the time budget",
             ),
-            None => (
+            (None, true) => (
+                pixels,
+                "{elapsed_precise} [{wide_bar}] {pos}/{len} pixels reached the noise threshold",
+            ),
+            (None, false) => (
                 pixels * target as u64,
                 "{elapsed_precise} [{wide_bar}] {percent:>3}% eta {eta}",
             ),
@@ -223,73 +382,59 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
     let mut done = 0;
-    while done < target {
-        let mut n = next_pass(done, target, options.time, start.elapsed().as_secs_f64());
-        // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
-        // deciding with everything learned before it.
-        let learning = ears.is_some() && done < LEARNING_SAMPLES;
-        if learning {
-            n = n.min(done.max(1));
-        }
-        if n == 0 {
+    loop {
+        let elapsed = start.elapsed().as_secs_f64();
+        let (pass, learning) = if done < uniform_spp {
+            let mut n = next_pass(done, uniform_spp, options.time, elapsed);
+            // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
+            // deciding with everything learned before it.
+            let learning = ears.is_some() && done < LEARNING_SAMPLES;
+            if learning {
+                n = n.min(done.max(1));
+            }
+            if n == 0 {
+                break;
+            }
+            (PassSamples::Uniform(n), learning)
+        } else if let Some(threshold) = options.noise_threshold {
+            let mut counts = adaptive_pass(&film, threshold as f64, target);
+            if let Some(budget) = options.time {
+                let per_sample = elapsed / film.total_samples().max(1) as f64;
+                fit_pass(
+                    &mut counts,
+                    (budget - elapsed).min(budget / 20.0) / per_sample,
+                );
+            }
+            if let Some(bar) = bar.as_ref().filter(|_| options.time.is_none()) {
+                bar.set_position(counts.iter().filter(|&&c| c == 0).count() as u64);
+            }
+            if counts.iter().all(|&c| c == 0) {
+                break;
+            }
+            (PassSamples::PerPixel(counts), false)
+        } else {
             break;
-        }
-        let pass = done..done + n;
-        let router = &film.router;
-        let tracer = PathTracer::new(world, &options.settings, ears.as_ref());
-        let width = film.width;
-        let learned: Vec<Option<Learning>> = film
-            .tiles
-            .par_iter_mut()
-            .map(|tile| {
-                let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
-                let mut record = SampleRecord::new(router);
-                let mut pixel = PixelAccumulator::new(router.slots.len());
-                let mut rays = RayCounts::default();
-                let mut tile_learning = learning.then(Learning::default);
-                for ty in 0..tile.height {
-                    for tx in 0..tile.width {
-                        let (x, y) = (tile.x0 + tx, tile.y0 + ty);
-                        let index_in_image = (y * width + x) as usize;
-                        pixel.clear();
-                        for index in pass.clone() {
-                            sampler.start(x, y, index);
-                            let cs = sampler.camera();
-                            let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-                            let ray = camera
-                                .generate_ray(centre + options.filter.sample(cs.film), cs.lens);
-                            record.clear();
-                            let before = rays.closest + rays.shadow;
-                            tracer.trace(
-                                ray,
-                                index_in_image,
-                                &mut sampler,
-                                &mut record,
-                                &mut rays,
-                                tile_learning.as_mut(),
-                            );
-                            if let Some(l) = tile_learning.as_mut() {
-                                l.pixel_sample(
-                                    index_in_image as u32,
-                                    record.value(0),
-                                    rays.closest + rays.shadow - before,
-                                );
-                            }
-                            pixel.add(&mut record);
-                        }
-                        tile.add((ty * tile.width + tx) as usize, &pixel);
-                    }
-                }
-                counts
-                    .lock()
-                    .expect("no thread panicked holding the lock")
-                    .add(&rays);
-                if let (Some(bar), None) = (&bar, options.time) {
-                    bar.inc(tile.pixel_count() as u64 * pass.len() as u64);
-                }
-                tile_learning
-            })
-            .collect();
+        };
+        let tracer_args = PassArgs {
+            world,
+            options,
+            ears: ears.as_ref(),
+            samples: &pass,
+            learning,
+            rays: &counts,
+            bar: bar.as_ref().filter(|_| options.time.is_none() && !adaptive),
+        };
+        let k = plan.kernel;
+        let learned = match (k.routing, k.emitter_hits, k.first_hit_data) {
+            (false, false, false) => run_pass::<false, false, false>(&mut film, &tracer_args),
+            (false, false, true) => run_pass::<false, false, true>(&mut film, &tracer_args),
+            (false, true, false) => run_pass::<false, true, false>(&mut film, &tracer_args),
+            (false, true, true) => run_pass::<false, true, true>(&mut film, &tracer_args),
+            (true, false, false) => run_pass::<true, false, false>(&mut film, &tracer_args),
+            (true, false, true) => run_pass::<true, false, true>(&mut film, &tracer_args),
+            (true, true, false) => run_pass::<true, true, false>(&mut film, &tracer_args),
+            (true, true, true) => run_pass::<true, true, true>(&mut film, &tracer_args),
+        };
         // In tile order, whatever the thread count: the next pass decides the same way.
         if let (Some(e), true) = (ears.as_mut(), learning) {
             for l in learned.iter().flatten() {
@@ -297,7 +442,9 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
             }
             e.refresh();
         }
-        done = pass.end;
+        if let PassSamples::Uniform(n) = pass {
+            done += n;
+        }
         if let (Some(bar), Some(_)) = (&bar, options.time) {
             bar.set_position(start.elapsed().as_millis() as u64);
         }
@@ -307,7 +454,7 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     }
     let stats = RenderStats {
         seconds: start.elapsed().as_secs_f64(),
-        spp: done,
+        spp: film.max_samples(),
         samples: film.total_samples(),
         rays: *counts.lock().expect("no thread panicked holding the lock"),
         discarded: film.discarded(),
@@ -315,9 +462,131 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
     (film, stats)
 }
 
+/// What every tile of a pass shares.
+struct PassArgs<'a> {
+    world: &'a World,
+    options: &'a RenderOptions,
+    ears: Option<&'a Ears>,
+    samples: &'a PassSamples,
+    /// Whether efficiency-aware roulette learns in this pass.
+    learning: bool,
+    rays: &'a Mutex<RayCounts>,
+    /// Advanced by samples taken (fixed sample counts only).
+    bar: Option<&'a indicatif::ProgressBar>,
+}
+
+/// Renders one pass over every tile with the kernel variant `<ROUTED, EMITTERS, DATA>`
+/// (see `plan::Kernel`); returns what each tile learned for efficiency-aware roulette.
+fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
+    film: &mut Film,
+    args: &PassArgs,
+) -> Vec<Option<Learning>> {
+    let PassArgs {
+        world,
+        options,
+        ears,
+        samples,
+        learning,
+        rays: counts,
+        bar,
+    } = *args;
+    let router = &film.router;
+    let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears);
+    let width = film.width;
+    let camera = &world.camera;
+    film.tiles
+        .par_iter_mut()
+        .map(|tile| {
+            let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
+            let mut record = SampleRecord::<ROUTED>::new(router);
+            let mut pixel = PixelAccumulator::new(router.slots.len());
+            let mut rays = RayCounts::default();
+            let mut tile_learning = learning.then(Learning::default);
+            let mut taken = 0u64;
+            for ty in 0..tile.height {
+                for tx in 0..tile.width {
+                    let (x, y) = (tile.x0 + tx, tile.y0 + ty);
+                    let index_in_image = (y * width + x) as usize;
+                    let in_tile = (ty * tile.width + tx) as usize;
+                    let n = samples.at(index_in_image);
+                    if n == 0 {
+                        continue;
+                    }
+                    let first = tile.samples_at(in_tile);
+                    pixel.clear();
+                    let pixel_rays = rays.closest + rays.shadow;
+                    for index in first..first + n {
+                        sampler.start(x, y, index);
+                        let cs = sampler.camera();
+                        let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                        let ray =
+                            camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
+                        record.clear();
+                        let before = rays.closest + rays.shadow;
+                        tracer.trace(
+                            ray,
+                            index_in_image,
+                            &mut sampler,
+                            &mut record,
+                            &mut rays,
+                            tile_learning.as_mut(),
+                        );
+                        if let Some(l) = tile_learning.as_mut() {
+                            l.pixel_sample(
+                                index_in_image as u32,
+                                record.value(0),
+                                rays.closest + rays.shadow - before,
+                            );
+                        }
+                        pixel.add(&mut record);
+                    }
+                    pixel.rays = rays.closest + rays.shadow - pixel_rays;
+                    tile.add(in_tile, &pixel);
+                    taken += n as u64;
+                }
+            }
+            counts
+                .lock()
+                .expect("no thread panicked holding the lock")
+                .add(&rays);
+            if let Some(bar) = bar {
+                bar.inc(taken);
+            }
+            tile_learning
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every render setting a header records reads back to the same options.
+    #[test]
+    fn settings_round_trip_through_the_header() {
+        let mut options = RenderOptions::default();
+        for (name, value) in [
+            ("time", "2.5"),
+            ("noise-threshold", "0.02"),
+            ("min-spp", "8"),
+            ("plan", "general"),
+            ("filter", "box"),
+            ("aov", "albedo,spp"),
+            ("mis", "balance"),
+        ] {
+            options.set(name, value).unwrap();
+        }
+        let mut read = RenderOptions::default();
+        read.load_settings(&options.to_toml(40)).unwrap();
+        assert_eq!(read.spp, Some(40));
+        assert_eq!(read.time, options.time);
+        assert_eq!(read.noise_threshold, options.noise_threshold);
+        assert_eq!(read.min_spp, 8);
+        assert_eq!(read.plan, PlanMode::General);
+        assert_eq!(read.aovs, options.aovs);
+        assert_eq!(read.filter.describe(), "box");
+        assert_eq!(read.settings, options.settings);
+    }
 
     #[test]
     fn passes_fit_the_budget() {

@@ -22,6 +22,7 @@ use crate::light::environment::{Environment, EnvironmentMap};
 use crate::light::{Light, LightSet, QuadricLight, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
 use crate::memory::MemoryEstimate;
+use crate::plan::SceneFeatures;
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
 use glam::{Affine3A, DMat3, DMat4, DVec3, Mat3A, Vec2, Vec3, Vec4};
@@ -153,6 +154,8 @@ pub struct World {
     pub radius: f32,
     /// Seconds spent building the BVH.
     pub bvh_seconds: f64,
+    /// What the scene contains that costs work (the scene half of the render plan).
+    pub features: SceneFeatures,
 }
 
 fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
@@ -630,6 +633,7 @@ impl World {
                 "geometry is not finite",
             ));
         }
+        let features = SceneFeatures::of(&scene);
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
         let shared_index = shared_mesh_indices(&scene);
@@ -725,6 +729,7 @@ impl World {
             space,
             radius,
             bvh_seconds,
+            features,
         })
     }
 

@@ -10,7 +10,7 @@ use lucerna::ingest;
 use lucerna::integrator::Settings;
 use lucerna::integrator::path::{Contribution, FirstHit, PathTracer, RayCounts, Recorder, Source};
 use lucerna::sampling::sampler::{Sampler, SamplerKind};
-use lucerna::scene::{BsdfModel, Light, LightKind, Scene};
+use lucerna::scene::{Light, LightKind, Scene};
 use lucerna::world::World;
 
 /// The Cornell box with a point light, a spot light and a perfect mirror on the tall block,
@@ -34,20 +34,7 @@ fn cornell_with_delta_paths() -> Scene {
             outer_cone: 0.6,
         },
     });
-    // A new material for the tall block: a smooth white metal (a mirror).
-    let tall = scene
-        .instances
-        .iter()
-        .find(|i| i.name == "tall_block")
-        .unwrap()
-        .mesh as usize;
-    let mut mirror = scene.materials[0].clone();
-    mirror.model = BsdfModel::GltfPbr;
-    mirror.base_color = glam::Vec4::ONE;
-    mirror.metallic = 1.0;
-    mirror.roughness = 0.0;
-    scene.materials.push(mirror);
-    scene.meshes[tall].material = (scene.materials.len() - 1) as u32;
+    common::scenes::make_tall_block_a_mirror(&mut scene);
     scene
 }
 
@@ -185,7 +172,7 @@ impl Recorder for DirectStats {
             self.sample[2] += single[1];
         }
     }
-    fn first_hit(&mut self, _: FirstHit) {}
+    fn first_hit(&mut self, _: Option<FirstHit>) {}
 }
 
 impl DirectStats {
@@ -218,7 +205,7 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
             sampler: SamplerKind::Independent,
             ..Default::default()
         };
-        let tracer = PathTracer::new(&world, &settings, None);
+        let tracer = PathTracer::<true, false>::new(&world, &settings, None);
         let mut sampler = Sampler::new(settings.sampler, 3);
         let mut stats = DirectStats::default();
         let mut rays = RayCounts::default();

@@ -153,8 +153,60 @@ fn preview_png_and_inspect() {
         "materials: 4 (lambert)",
         "2 emissive triangles",
         "cameras: camera",
+        "render plan (auto):",
+        "lobes: diffuse yes, glossy no, specular no, transmission no",
+        "emitter lookups and MIS at BSDF hits on, first-hit data on, AOV routing on",
     ] {
         assert!(text.contains(line), "{line} missing from:\n{text}");
+    }
+    let run = lucerna(&["inspect", scene.to_str().unwrap(), "--aov", "beauty"]);
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        text.contains("first-hit data off, AOV routing off"),
+        "beauty only:\n{text}"
+    );
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// Adaptive sampling from the command line: per-pixel counts in the `spp` layer, the
+/// threshold in the header's settings, bad values refused.
+#[test]
+fn noise_threshold_samples_pixels_unevenly() {
+    let dir = temp_dir("adaptive");
+    let out = dir.join("a.exr");
+    lucerna_ok(&[
+        "render",
+        "--resolution",
+        "32x32",
+        "--noise-threshold",
+        "0.1",
+        "--min-spp",
+        "8",
+        "--aov",
+        "spp",
+        "-q",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let settings = header_settings(&out);
+    assert_eq!(settings["noise-threshold"].as_str(), Some("0.1"));
+    assert_eq!(settings["min-spp"].as_integer(), Some(8));
+    let image = exr::prelude::read_first_flat_layer_from_file(&out).unwrap();
+    let spp = image
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "spp.Y")
+        .unwrap();
+    let counts: Vec<f32> = spp.sample_data.values_as_f32().collect();
+    let (lo, hi) = counts
+        .iter()
+        .fold((f32::MAX, 0.0f32), |(lo, hi), &c| (lo.min(c), hi.max(c)));
+    assert!(lo >= 8.0 && hi > lo, "samples per pixel {lo}..{hi}");
+    for bad in ["0", "-1", "nan", "x"] {
+        let run = lucerna(&["render", "--noise-threshold", bad, "-o", "x.exr"]);
+        assert_eq!(run.status.code(), Some(2), "--noise-threshold {bad}");
     }
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -16,20 +16,24 @@ pub const TILE_SIZE: u32 = 16;
 /// Depth written where the camera saw nothing (as Cycles does).
 pub const BACKGROUND_DEPTH: f32 = 1e10;
 
-/// What one camera sample produced, routed into light-AOV slots as it arrives.
-pub struct SampleRecord<'r> {
+/// What one camera sample produced, routed into light-AOV slots as it arrives. Without
+/// `ROUTED` (the beauty is the only light layer) every contribution goes to slot 0 and the
+/// routing table is never read.
+pub struct SampleRecord<'r, const ROUTED: bool> {
     router: &'r Router,
     values: Vec<Vec3>,
+    covered: bool,
     hit: Option<FirstHit>,
     discarded: u64,
 }
 
-impl<'r> SampleRecord<'r> {
+impl<'r, const ROUTED: bool> SampleRecord<'r, ROUTED> {
     /// An empty record for `router`'s slots.
     pub fn new(router: &'r Router) -> Self {
         Self {
             router,
             values: vec![Vec3::ZERO; router.slots.len()],
+            covered: false,
             hit: None,
             discarded: 0,
         }
@@ -39,6 +43,7 @@ impl<'r> SampleRecord<'r> {
     #[inline]
     pub fn clear(&mut self) {
         self.values.fill(Vec3::ZERO);
+        self.covered = false;
         self.hit = None;
     }
 
@@ -48,10 +53,10 @@ impl<'r> SampleRecord<'r> {
     }
 }
 
-impl Recorder for SampleRecord<'_> {
+impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
     #[inline]
     fn wants_single_technique(&self) -> bool {
-        self.router.single_technique.iter().any(Option::is_some)
+        ROUTED && self.router.single_technique.iter().any(Option::is_some)
     }
 
     #[inline]
@@ -62,6 +67,10 @@ impl Recorder for SampleRecord<'_> {
                 .is_none_or(|s| s[0].is_finite() && s[1].is_finite());
         if !finite {
             self.discarded += 1;
+            return;
+        }
+        if !ROUTED {
+            self.values[0] += c.value;
             return;
         }
         for &slot in self.router.route(&c) {
@@ -77,12 +86,17 @@ impl Recorder for SampleRecord<'_> {
     }
 
     #[inline]
-    fn first_hit(&mut self, hit: FirstHit) {
+    fn first_hit(&mut self, hit: Option<FirstHit>) {
+        let Some(hit) = hit else {
+            self.covered = true;
+            return;
+        };
         let finite = hit.albedo.is_finite()
             && hit.normal.is_finite()
             && hit.position.is_finite()
             && hit.depth.is_finite();
         if finite {
+            self.covered = true;
             self.hit = Some(hit);
         } else {
             self.discarded += 1;
@@ -100,6 +114,8 @@ pub struct PixelAccumulator {
     position: DVec3,
     depth: f32,
     samples: u32,
+    /// Rays the samples traced (the pixel's cost, for adaptive sampling).
+    pub rays: u64,
     discarded: u64,
 }
 
@@ -115,6 +131,7 @@ impl PixelAccumulator {
             position: DVec3::ZERO,
             depth: f32::INFINITY,
             samples: 0,
+            rays: 0,
             discarded: 0,
         }
     }
@@ -129,19 +146,22 @@ impl PixelAccumulator {
         self.position = DVec3::ZERO;
         self.depth = f32::INFINITY;
         self.samples = 0;
+        self.rays = 0;
         self.discarded = 0;
     }
 
     /// Adds one sample and takes its discarded-contribution count.
     #[inline]
-    pub fn add(&mut self, rec: &mut SampleRecord) {
+    pub fn add<const ROUTED: bool>(&mut self, rec: &mut SampleRecord<ROUTED>) {
         for (acc, v) in self.light.iter_mut().zip(&rec.values) {
             *acc += v.as_dvec3();
         }
         let b = rec.values[0].as_dvec3();
         self.beauty_squares += b * b;
-        if let Some(h) = &rec.hit {
+        if rec.covered {
             self.coverage += 1.0;
+        }
+        if let Some(h) = &rec.hit {
             self.albedo += h.albedo.as_dvec3();
             self.normal += h.normal.as_dvec3();
             self.position += h.position.as_dvec3();
@@ -161,9 +181,11 @@ pub struct Tile {
     pub height: u32,
     /// Light slots, slot-major (`slot * pixels + pixel`).
     light: Vec<Vec3>,
-    /// Beauty sums and sums of squares in f64, for the variance AOV.
+    /// Beauty sums and sums of squares in f64, for the variance AOV and adaptive sampling.
     beauty_sum: Vec<DVec3>,
     beauty_squares: Vec<DVec3>,
+    /// Rays traced per pixel (adaptive sampling only).
+    rays: Vec<u64>,
     coverage: Vec<f32>,
     albedo: Vec<Vec3>,
     normal: Vec<Vec3>,
@@ -175,7 +197,15 @@ pub struct Tile {
 }
 
 impl Tile {
-    fn new(x0: u32, y0: u32, width: u32, height: u32, slots: usize, aovs: &AovSet) -> Self {
+    fn new(
+        x0: u32,
+        y0: u32,
+        width: u32,
+        height: u32,
+        slots: usize,
+        aovs: &AovSet,
+        adaptive: bool,
+    ) -> Self {
         let n = (width * height) as usize;
         let vec3s = |aov: Aov| {
             if aovs.contains(aov) {
@@ -184,7 +214,7 @@ impl Tile {
                 Vec::new()
             }
         };
-        let with_variance = aovs.contains(Aov::Variance);
+        let with_variance = aovs.contains(Aov::Variance) || adaptive;
         Self {
             x0,
             y0,
@@ -201,6 +231,7 @@ impl Tile {
             } else {
                 Vec::new()
             },
+            rays: if adaptive { vec![0; n] } else { Vec::new() },
             coverage: vec![0.0; n],
             albedo: vec3s(Aov::Albedo),
             normal: vec3s(Aov::Normal),
@@ -230,6 +261,9 @@ impl Tile {
             self.beauty_sum[pixel] += acc.light[0];
             self.beauty_squares[pixel] += acc.beauty_squares;
         }
+        if !self.rays.is_empty() {
+            self.rays[pixel] += acc.rays;
+        }
         self.coverage[pixel] += acc.coverage as f32;
         if !self.albedo.is_empty() {
             self.albedo[pixel] += acc.albedo.as_vec3();
@@ -246,7 +280,31 @@ impl Tile {
         self.samples[pixel] += acc.samples;
         self.discarded += acc.discarded;
     }
+
+    /// Samples taken so far at `pixel` (row-major in the tile): the index of its next one.
+    pub fn samples_at(&self, pixel: usize) -> u32 {
+        self.samples[pixel]
+    }
+
+    /// What adaptive sampling knows of `pixel`: its per-sample variance of the beauty,
+    /// relative as relMSE weighs it (mean over channels of s² / (mean² + 0.01)), and its
+    /// rays per sample. `None` before two samples, or without the sums of squares.
+    pub fn pixel_statistics(&self, pixel: usize) -> Option<(f64, f64)> {
+        let n = self.samples[pixel] as f64;
+        if n < 2.0 || self.beauty_sum.is_empty() || self.rays.is_empty() {
+            return None;
+        }
+        let s = self.beauty_sum[pixel];
+        let mean = s / n;
+        let var = ((self.beauty_squares[pixel] - s * mean) / (n - 1.0)).max(DVec3::ZERO);
+        let relative = var / (mean * mean + DVec3::splat(RELATIVE_ERROR_FLOOR));
+        Some((relative.element_sum() / 3.0, self.rays[pixel] as f64 / n))
+    }
 }
+
+/// The constant relMSE adds to the squared reference in its denominator, so that dark
+/// pixels do not dominate (`../shared/design.md`, "Accuracy and speed").
+pub const RELATIVE_ERROR_FLOOR: f64 = 0.01;
 
 /// All tiles of an image plus the AOV set and routing.
 pub struct Film {
@@ -258,14 +316,15 @@ pub struct Film {
 }
 
 impl Film {
-    /// An empty film of `width` × `height` pixels for `aovs`.
-    pub fn new(width: u32, height: u32, aovs: AovSet) -> Self {
+    /// An empty film of `width` × `height` pixels for `aovs`; `adaptive` also keeps what
+    /// adaptive sampling decides from (sums of squares, rays per pixel).
+    pub fn new(width: u32, height: u32, aovs: AovSet, adaptive: bool) -> Self {
         let router = Router::new(&aovs);
         let mut tiles = Vec::new();
         for y0 in (0..height).step_by(TILE_SIZE as usize) {
             for x0 in (0..width).step_by(TILE_SIZE as usize) {
                 let (w, h) = (TILE_SIZE.min(width - x0), TILE_SIZE.min(height - y0));
-                tiles.push(Tile::new(x0, y0, w, h, router.slots.len(), &aovs));
+                tiles.push(Tile::new(x0, y0, w, h, router.slots.len(), &aovs, adaptive));
             }
         }
         Self {
@@ -279,12 +338,15 @@ impl Film {
 
     /// Bytes a film of `width` × `height` pixels for `aovs` holds once written: its tiles'
     /// accumulators and, while the EXR is written, one f32 plane per output channel.
-    pub fn estimated_bytes(width: u32, height: u32, aovs: &AovSet) -> u64 {
+    pub fn estimated_bytes(width: u32, height: u32, aovs: &AovSet, adaptive: bool) -> u64 {
         let slots = Router::new(aovs).slots.len() as u64;
         let vec3 = std::mem::size_of::<Vec3>() as u64;
         let mut per_pixel = slots * vec3 + 4 + 4; // light slots, coverage, sample count
-        if aovs.contains(Aov::Variance) {
+        if aovs.contains(Aov::Variance) || adaptive {
             per_pixel += 2 * std::mem::size_of::<DVec3>() as u64;
+        }
+        if adaptive {
+            per_pixel += 8; // rays
         }
         for aov in [Aov::Albedo, Aov::Normal, Aov::Position] {
             per_pixel += if aovs.contains(aov) { vec3 } else { 0 };
@@ -297,6 +359,16 @@ impl Film {
     /// Contributions dropped as NaN or infinite, over the whole image.
     pub fn discarded(&self) -> u64 {
         self.tiles.iter().map(|t| t.discarded).sum()
+    }
+
+    /// The most samples any pixel took.
+    pub fn max_samples(&self) -> u32 {
+        self.tiles
+            .iter()
+            .flat_map(|t| &t.samples)
+            .copied()
+            .max()
+            .unwrap_or(0)
     }
 
     /// Total samples taken.
@@ -413,12 +485,13 @@ mod tests {
     #[test]
     fn estimated_bytes_match_the_allocation() {
         use std::mem::size_of_val;
-        for aovs in [
-            AovSet::default(),
-            AovSet::parse("").unwrap(),
-            AovSet::parse("variance,depth").unwrap(),
+        for (aovs, adaptive) in [
+            (AovSet::default(), false),
+            (AovSet::parse("").unwrap(), false),
+            (AovSet::parse("").unwrap(), true),
+            (AovSet::parse("variance,depth").unwrap(), false),
         ] {
-            let film = Film::new(37, 23, aovs.clone());
+            let film = Film::new(37, 23, aovs.clone(), adaptive);
             let tiles: usize = film
                 .tiles
                 .iter()
@@ -426,6 +499,7 @@ mod tests {
                     size_of_val(t.light.as_slice())
                         + size_of_val(t.beauty_sum.as_slice())
                         + size_of_val(t.beauty_squares.as_slice())
+                        + size_of_val(t.rays.as_slice())
                         + size_of_val(t.coverage.as_slice())
                         + size_of_val(t.albedo.as_slice())
                         + size_of_val(t.normal.as_slice())
@@ -440,7 +514,7 @@ mod tests {
                 .map(|p| size_of_val(p.as_slice()))
                 .sum();
             assert_eq!(
-                Film::estimated_bytes(37, 23, &aovs),
+                Film::estimated_bytes(37, 23, &aovs, adaptive),
                 (tiles + planes) as u64,
                 "{}",
                 aovs.describe()

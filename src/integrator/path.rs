@@ -64,7 +64,8 @@ pub trait Recorder {
     /// Whether to compute [`Contribution::single_technique`] for direct light.
     fn wants_single_technique(&self) -> bool;
     fn contribution(&mut self, c: Contribution);
-    fn first_hit(&mut self, hit: FirstHit);
+    /// The camera ray hit a surface (coverage); with its data when the kernel computes it.
+    fn first_hit(&mut self, hit: Option<FirstHit>);
 }
 
 /// Ray counts of one or more paths.
@@ -140,8 +141,10 @@ struct Continuation {
     roulette: bool,
 }
 
-/// The path tracer over a world with given settings.
-pub struct PathTracer<'a> {
+/// The path tracer over a world with given settings, in the variant a render plan chose
+/// (see `plan::Kernel`): `EMITTERS` looks up and MIS-weighs emitters that BSDF-sampled rays
+/// hit; `DATA` computes the first hit's data AOVs.
+pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     world: &'a World,
     settings: &'a Settings,
     /// Learned statistics for efficiency-aware roulette (rr=efficiency only).
@@ -153,9 +156,9 @@ impl PathState {
     /// sampling and weighted against light sampling's density there (unless a delta lobe
     /// led here, which light sampling cannot follow).
     #[inline]
-    fn reached_emitter<R: Recorder>(
+    fn reached_emitter<R: Recorder, const EMITTERS: bool, const DATA: bool>(
         &self,
-        tracer: &PathTracer,
+        tracer: &PathTracer<EMITTERS, DATA>,
         walk: &mut Walk,
         rec: &mut R,
         e: Emitter,
@@ -200,7 +203,7 @@ impl PathState {
     }
 }
 
-impl<'a> PathTracer<'a> {
+impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> {
     /// A path tracer for `world`; `ears` holds the statistics of efficiency-aware roulette.
     pub fn new(world: &'a World, settings: &'a Settings, ears: Option<&'a Ears>) -> Self {
         Self {
@@ -273,6 +276,9 @@ impl<'a> PathTracer<'a> {
         loop {
             rays.closest += 1;
             let Some(hit) = world.intersect(&ray) else {
+                if !EMITTERS {
+                    return;
+                }
                 if let (Some(env), Some(index)) =
                     (&world.lights.environment, world.lights.environment_index)
                 {
@@ -305,17 +311,19 @@ impl<'a> PathTracer<'a> {
                 return;
             };
             let it = world.interaction(&ray, &hit);
-            let le = world.surfaces.emitted(&it);
-            if le != Vec3::ZERO
-                && let Some(index) = world.light_index(&it)
-            {
-                let e = Emitter {
-                    le,
-                    light: index,
-                    dir: ray.dir,
-                    dist: hit.t * ray.dir.length(),
-                };
-                path.reached_emitter(self, walk, rec, e);
+            if EMITTERS {
+                let le = world.surfaces.emitted(&it);
+                if le != Vec3::ZERO
+                    && let Some(index) = world.light_index(&it)
+                {
+                    let e = Emitter {
+                        le,
+                        light: index,
+                        dir: ray.dir,
+                        dist: hit.t * ray.dir.length(),
+                    };
+                    path.reached_emitter(self, walk, rec, e);
+                }
             }
             if path.depth >= max_depth {
                 return;
@@ -328,12 +336,12 @@ impl<'a> PathTracer<'a> {
             );
             let wo = it.frame.to_local(-ray.dir);
             if path.depth == 0 && path.branch == 0 {
-                rec.first_hit(FirstHit {
+                rec.first_hit(DATA.then(|| FirstHit {
                     albedo: bsdf.albedo(wo),
                     normal: it.frame.n,
                     depth: world.camera.depth(it.p),
                     position: world.space.to_world(it.p).as_vec3(),
-                });
+                }));
             }
             // The region efficiency-aware roulette keeps statistics for (only in that mode).
             let cell = self.ears.map(|_| ears::cell(it.p, it.ng));
@@ -569,8 +577,13 @@ impl<'a> PathTracer<'a> {
             return 1;
         }
         let p_light = p_select * ls.pdf;
-        // BSDF sampling cannot reach a delta light: its density there is 0.
-        let p_bsdf = if ls.delta { 0.0 } else { bsdf.pdf(wo, wi) };
+        // BSDF sampling cannot reach a delta light (nor any light, in a kernel without
+        // emitter lookups): its density there is 0, and the light sample's weight 1.
+        let p_bsdf = if ls.delta || !EMITTERS {
+            0.0
+        } else {
+            bsdf.pdf(wo, wi)
+        };
         let value = path.beta * f * radiance / (p_light * n_nee as f32);
         record(
             rec,

@@ -221,3 +221,21 @@ pub fn mean(film: &Film, aov: Aov, c: usize, keep: impl Fn(usize) -> bool) -> f6
         .collect();
     values.iter().sum::<f64>() / values.len() as f64
 }
+
+/// Gives the Cornell box's tall block a material of its own: a smooth white metal (a
+/// mirror, a delta lobe).
+pub fn make_tall_block_a_mirror(scene: &mut Scene) {
+    let tall = scene
+        .instances
+        .iter()
+        .find(|i| i.name == "tall_block")
+        .expect("the Cornell box has a tall block")
+        .mesh as usize;
+    let mut mirror = scene.materials[0].clone();
+    mirror.model = lucerna::scene::BsdfModel::GltfPbr;
+    mirror.base_color = glam::Vec4::ONE;
+    mirror.metallic = 1.0;
+    mirror.roughness = 0.0;
+    scene.materials.push(mirror);
+    scene.meshes[tall].material = (scene.materials.len() - 1) as u32;
+}
