@@ -19,6 +19,7 @@ pub mod integrator;
 pub mod light;
 pub mod material;
 pub mod memory;
+pub mod merge;
 pub mod plan;
 pub mod render;
 pub mod sampling;

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use lucerna::error::{Error, Result};
+use lucerna::film::aov::Aov;
 use lucerna::film::exr::{Attribute, Header};
 use lucerna::plan::{self, PlanMode, RenderPlan, SceneFeatures};
 use lucerna::render::{self, RenderOptions};
@@ -11,6 +12,8 @@ use lucerna::world::World;
 use lucerna::{film, ingest, memory};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 #[derive(Parser)]
 #[command(
@@ -39,6 +42,16 @@ enum Command {
         /// auto or general, as `render --plan`.
         #[arg(long)]
         plan: Option<String>,
+    },
+    /// Combine the EXRs of a split render (sample passes and crop windows, in any mix) into
+    /// one: sample-weighted means, pooled variance, summed sample counts.
+    Merge {
+        /// Partial renders (each with an `spp` layer where parts overlap).
+        #[arg(required = true)]
+        inputs: Vec<PathBuf>,
+        /// The merged EXR to write.
+        #[arg(short, long)]
+        output: PathBuf,
     },
     /// Write a scene as a lucerna scene file (a JSON manifest and a binary buffer beside it),
     /// exactly as the renderer sees it.
@@ -155,6 +168,18 @@ struct RenderArgs {
     /// Samples every pixel takes before adaptive sampling decides (default 16).
     #[arg(long)]
     min_spp: Option<String>,
+    /// Render only pixels X0..X1 × Y0..Y1 of the image, e.g. 0,0,320,240 (ends excluded);
+    /// the EXR's data window is the crop, its display window the whole image.
+    #[arg(long)]
+    crop: Option<String>,
+    /// Take pass K of N (e.g. 2/4): the K-th of N disjoint ranges of every pixel's samples
+    /// (needs --spp); `lucerna merge` of the N passes is the render with all the samples.
+    #[arg(long)]
+    pass: Option<String>,
+    /// Continue the render in the output file (a checkpoint written on SIGINT or SIGTERM,
+    /// or a finished render, to take more samples); without the file, start afresh.
+    #[arg(long)]
+    resume: bool,
     /// auto (default): the integrator leaves out what the scene and the AOVs do not use;
     /// general: every feature on (for benchmarks and comparisons).
     #[arg(long)]
@@ -199,6 +224,8 @@ impl RenderArgs {
             ("noise-threshold", &self.noise_threshold),
             ("min-spp", &self.min_spp),
             ("plan", &self.plan),
+            ("crop", &self.crop),
+            ("pass", &self.pass),
         ];
         for (name, value) in flags {
             if let Some(v) = value {
@@ -209,6 +236,9 @@ impl RenderArgs {
         }
         options
             .settings
+            .validate()
+            .map_err(|e| Error::bad_input("", "settings", e))?;
+        options
             .validate()
             .map_err(|e| Error::bad_input("", "settings", e))?;
         Ok(options)
@@ -271,8 +301,103 @@ fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
         .map_err(|e| Error::other("", "threads", e.to_string()))
 }
 
-fn render_command(args: RenderArgs) -> Result<()> {
-    let options = args.options()?;
+/// Stops renders on SIGINT or SIGTERM so that they write what they have; a second signal
+/// ends the process at once. Returns the stop flag and the number of the signal received.
+fn watch_signals() -> Result<(Arc<AtomicBool>, Arc<AtomicUsize>)> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let stop = Arc::new(AtomicBool::new(false));
+    let received = Arc::new(AtomicUsize::new(0));
+    for signal in [SIGINT, SIGTERM] {
+        let register = || -> std::io::Result<()> {
+            signal_hook::flag::register_conditional_shutdown(signal, 128 + signal, stop.clone())?;
+            signal_hook::flag::register_usize(signal, received.clone(), signal as usize)?;
+            signal_hook::flag::register(signal, stop.clone())?;
+            Ok(())
+        };
+        register().map_err(|e| Error::other("", "signals", e.to_string()))?;
+    }
+    Ok((stop, received))
+}
+
+/// What a checkpoint being resumed already holds.
+struct Resumed {
+    planes: film::exr::Planes,
+    discarded: u64,
+    seconds: f64,
+}
+
+/// Reads the render to continue from `path`, checking that it is this render's (same
+/// scene, settings, AOVs, window and pass); `None` if there is no file yet.
+fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result<Option<Resumed>> {
+    if !path.exists() {
+        eprintln!(
+            "lucerna: {} does not exist yet; rendering from the start",
+            path.display()
+        );
+        return Ok(None);
+    }
+    let (planes, header) = film::exr::read(path)?;
+    let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
+    if header.text("lucerna/scene") != Some(source) {
+        return Err(bad(
+            "lucerna/scene",
+            format!(
+                "a render of {:?}, not of {source:?}",
+                header.text("lucerna/scene").unwrap_or("an unknown scene")
+            ),
+        ));
+    }
+    let mut earlier = RenderOptions::default();
+    earlier
+        .load_settings(header.text("lucerna/settings").unwrap_or_default())
+        .map_err(|e| bad("lucerna/settings", e))?;
+    let differs = [
+        ("integrator settings", earlier.settings != options.settings),
+        ("AOVs", earlier.aovs != options.aovs),
+        (
+            "pixel filter",
+            earlier.filter.describe() != options.filter.describe(),
+        ),
+        ("crop", earlier.crop != options.crop),
+        ("pass", earlier.pass != options.pass),
+    ];
+    if let Some((what, _)) = differs.iter().find(|(_, d)| *d) {
+        return Err(bad(
+            "lucerna/settings",
+            format!(
+                "its {what} differ from this render's: it cannot be continued with these options"
+            ),
+        ));
+    }
+    if options.pass.is_some() && earlier.spp != options.spp {
+        return Err(bad(
+            "lucerna/settings",
+            "a pass keeps its total sample count (--spp) when it is continued".into(),
+        ));
+    }
+    Ok(Some(Resumed {
+        planes,
+        discarded: header.number("lucerna/nan_inf_discarded").unwrap_or(0.0) as u64,
+        seconds: header.number("lucerna/render_seconds").unwrap_or(0.0),
+    }))
+}
+
+fn render_command(args: RenderArgs) -> Result<ExitCode> {
+    let mut options = args.options()?;
+    let (stop, received) = watch_signals()?;
+    options.interrupt = Some(stop);
+    let stateful = options.noise_threshold.is_some()
+        || matches!(
+            options.settings.rr,
+            lucerna::integrator::RussianRoulette::Efficiency(_)
+        );
+    if args.resume && stateful {
+        return Err(Error::bad_input(
+            "",
+            "--resume",
+            "adaptive sampling and rr = efficiency keep state an EXR does not hold; they cannot be resumed",
+        ));
+    }
     let pool = thread_pool(args.threads)?;
     let mut scene = load_scene(args.scene.as_deref(), &args.load)?;
     if let Some(radiance) = args.env {
@@ -298,7 +423,34 @@ fn render_command(args: RenderArgs) -> Result<()> {
         )
     })?;
     let build_seconds = build_start.elapsed().as_secs_f64();
-    let (film, stats) = pool.install(|| render::render(&world, &options));
+    let (width, height) = (world.camera.width(), world.camera.height());
+    if let Some(crop) = options.crop.filter(|c| !c.fits(width, height)) {
+        return Err(Error::bad_input(
+            "",
+            "--crop",
+            format!(
+                "{} lies outside the {width}x{height} image",
+                crop.describe()
+            ),
+        ));
+    }
+    let mut film = options.film(&world);
+    let resumed = if args.resume {
+        read_checkpoint(&args.output, &source, &options)?
+    } else {
+        None
+    };
+    if let Some(r) = &resumed {
+        film.restore(&r.planes, r.discarded)
+            .map_err(|e| Error::bad_input(&args.output, "checkpoint", e))?;
+        eprintln!(
+            "lucerna: continuing {} from {} samples per pixel",
+            args.output.display(),
+            film.min_samples()
+        );
+    }
+    let (film, mut stats) = pool.install(|| render::render_into(&world, &options, film));
+    stats.seconds += resumed.as_ref().map_or(0.0, |r| r.seconds);
 
     // glam's column-major listing of a column-vector matrix is the row-major listing of
     // its transpose: exactly Imath's row-vector convention.
@@ -333,9 +485,28 @@ fn render_command(args: RenderArgs) -> Result<()> {
                 "lucerna/nan_inf_discarded".into(),
                 Attribute::Double(stats.discarded as f64),
             ),
+            (
+                "lucerna/complete".into(),
+                Attribute::Int(!stats.interrupted as i32),
+            ),
         ],
     };
-    film::exr::write(&args.output, &film, &header)?;
+    // Whatever can be continued or merged carries its per-pixel sample counts.
+    let extra: &[Aov] = if stats.interrupted || options.pass.is_some() {
+        &[Aov::Spp]
+    } else {
+        &[]
+    };
+    film::exr::write(&args.output, &film, &header, extra)?;
+    if stats.interrupted {
+        let signal = received.load(Ordering::Relaxed);
+        eprintln!(
+            "lucerna: interrupted (signal {signal}): wrote the {} samples taken so far to {}; continue with --resume",
+            stats.samples,
+            args.output.display()
+        );
+        return Ok(ExitCode::from((128 + signal.min(127)) as u8));
+    }
     if let Some(png) = &args.preview {
         film::preview::write(png, &film)?;
     }
@@ -360,7 +531,32 @@ fn render_command(args: RenderArgs) -> Result<()> {
         world.bvh_seconds,
         stats.summary()
     );
-    Ok(())
+    Ok(ExitCode::SUCCESS)
+}
+
+fn merge_command(inputs: &[PathBuf], output: &Path) -> Result<ExitCode> {
+    let parts = inputs
+        .iter()
+        .map(|path| {
+            let (planes, header) = film::exr::read(path)?;
+            Ok(lucerna::merge::Part {
+                path: path.clone(),
+                planes,
+                header,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let (planes, header) = lucerna::merge::merge(&parts)?;
+    film::exr::write_planes(output, &planes, &header)?;
+    eprintln!(
+        "lucerna: merged {} parts into {} (pixels {} of {}x{})",
+        parts.len(),
+        output.display(),
+        planes.window.describe(),
+        planes.display.0,
+        planes.display.1
+    );
+    Ok(ExitCode::SUCCESS)
 }
 
 /// What rendering `scene` through `camera` at `resolution` with `aovs` will need.
@@ -385,7 +581,7 @@ fn memory_estimate(
     }
 }
 
-fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<()> {
+fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<ExitCode> {
     let scene = load_scene(Some(path), load)?;
     lucerna::scene::file::write(&scene, output)?;
     eprintln!(
@@ -395,7 +591,7 @@ fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<()> {
         scene.materials.len(),
         scene.textures.len()
     );
-    Ok(())
+    Ok(ExitCode::SUCCESS)
 }
 
 fn inspect_command(
@@ -403,7 +599,7 @@ fn inspect_command(
     load: &LoadArgs,
     aov: Option<&str>,
     plan_mode: Option<&str>,
-) -> Result<()> {
+) -> Result<ExitCode> {
     let mut options = RenderOptions::default();
     for (name, value) in [("aov", aov), ("plan", plan_mode)] {
         if let Some(v) = value {
@@ -504,7 +700,7 @@ fn inspect_command(
         false,
     );
     println!("{plan}");
-    Ok(())
+    Ok(ExitCode::SUCCESS)
 }
 
 fn main() -> ExitCode {
@@ -522,9 +718,10 @@ fn main() -> ExitCode {
             output,
             load,
         } => convert_command(&scene, &output, &load),
+        Command::Merge { inputs, output } => merge_command(&inputs, &output),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(code) => code,
         Err(e) => {
             eprintln!("error: {e}");
             ExitCode::from(e.exit_code() as u8)

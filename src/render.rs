@@ -3,7 +3,7 @@
 
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
-use crate::film::{Film, PixelAccumulator, SampleRecord};
+use crate::film::{Film, PixelAccumulator, SampleRecord, Window};
 use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
@@ -15,6 +15,7 @@ use glam::Vec2;
 use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 /// Samples per pixel of a pass without a time budget.
@@ -45,8 +46,15 @@ pub struct RenderOptions {
     pub settings: Settings,
     pub aovs: AovSet,
     pub filter: PixelFilter,
+    /// Render only these pixels of the image (a tile of a split render).
+    pub crop: Option<Window>,
+    /// Take only pass K of N (1-based): the K-th of N disjoint ranges of each pixel's sample
+    /// sequence, so that merging the N renders gives the render with all the samples.
+    pub pass: Option<(u32, u32)>,
     /// Show a progress bar (only drawn when stderr is a terminal).
     pub progress: bool,
+    /// Set (by a signal handler) to stop the render early: what has accumulated is kept.
+    pub interrupt: Option<std::sync::Arc<AtomicBool>>,
 }
 
 impl Default for RenderOptions {
@@ -60,7 +68,10 @@ impl Default for RenderOptions {
             settings: Settings::default(),
             aovs: AovSet::default(),
             filter: PixelFilter::blackman_harris(1.5),
+            crop: None,
+            pass: None,
             progress: false,
+            interrupt: None,
         }
     }
 }
@@ -113,6 +124,16 @@ impl RenderOptions {
                 })?
             }
             "aov" => self.aovs = AovSet::parse(value)?,
+            "crop" => self.crop = Some(Window::parse(value)?),
+            "pass" => {
+                let pass = value
+                    .split_once('/')
+                    .and_then(|(k, n)| Some((k.trim().parse().ok()?, n.trim().parse().ok()?)))
+                    .filter(|&(k, n): &(u32, u32)| (1..=n).contains(&k));
+                self.pass = Some(pass.ok_or_else(|| {
+                    format!("pass: K/N with 1 <= K <= N, e.g. 2/4, got {value:?}")
+                })?);
+            }
             _ => self.settings.set(name, value)?,
         }
         Ok(())
@@ -127,10 +148,16 @@ impl RenderOptions {
         Ok(())
     }
 
-    /// Every setting as TOML, with `spp` the samples actually taken: the header's record
-    /// of how an image was made, readable back as a settings file.
+    /// Every setting as TOML, with `spp` the samples actually taken (a pass's total): the
+    /// header's record of how an image was made, readable back as a settings file.
     pub fn to_toml(&self, spp_taken: u32) -> String {
-        let mut pairs: Vec<(String, String)> = vec![("spp".into(), spp_taken.to_string())];
+        // A pass is recorded by its total and its index, which fix its range of samples.
+        let spp = if self.pass.is_some() {
+            self.target_spp()
+        } else {
+            spp_taken
+        };
+        let mut pairs: Vec<(String, String)> = vec![("spp".into(), spp.to_string())];
         if let Some(t) = self.time {
             pairs.push(("time".into(), t.to_string()));
         }
@@ -141,6 +168,12 @@ impl RenderOptions {
         pairs.push(("filter".into(), self.filter.describe()));
         pairs.push(("aov".into(), self.aovs.describe()));
         pairs.push(("plan".into(), self.plan.name().into()));
+        if let Some(window) = self.crop {
+            pairs.push(("crop".into(), window.describe()));
+        }
+        if let Some((k, n)) = self.pass {
+            pairs.push(("pass".into(), format!("{k}/{n}")));
+        }
         for name in SETTING_NAMES {
             pairs.push((
                 name.into(),
@@ -150,7 +183,8 @@ impl RenderOptions {
         write_settings_toml(&pairs)
     }
 
-    /// The sample count when no time budget or noise threshold stops earlier.
+    /// The sample count when no time budget or noise threshold stops earlier (of all
+    /// passes, with `pass`).
     fn target_spp(&self) -> u32 {
         match (self.spp, self.time, self.noise_threshold) {
             (Some(s), _, _) => s,
@@ -158,6 +192,54 @@ impl RenderOptions {
             (None, None, Some(_)) => ADAPTIVE_MAX_SPP,
             (None, None, None) => DEFAULT_SPP,
         }
+    }
+
+    /// The range of each pixel's sample sequence this render takes: all of it, or pass
+    /// K of N's share, samples ⌊(K−1)·S/N⌋ up to ⌊K·S/N⌋.
+    pub fn sample_range(&self) -> std::ops::Range<u32> {
+        let total = self.target_spp();
+        match self.pass {
+            None => 0..total,
+            Some((k, n)) => {
+                let at = |i: u32| (i as u64 * total as u64 / n as u64) as u32;
+                at(k - 1)..at(k)
+            }
+        }
+    }
+
+    /// Rejects combinations a split render cannot honour: a pass must be a fixed range of
+    /// samples, and a window must render exactly the pixels of the whole image (adaptive
+    /// sampling and learned roulette decide from the whole image).
+    pub fn validate(&self) -> Result<(), String> {
+        if let Some((_, n)) = self.pass {
+            if self.time.is_some() || self.noise_threshold.is_some() {
+                return Err("pass: a pass is a fixed range of samples; it takes --spp, not --time or --noise-threshold".into());
+            }
+            if self.target_spp() < n {
+                return Err(format!(
+                    "pass: {} samples per pixel cannot be split into {n} passes",
+                    self.target_spp()
+                ));
+            }
+        }
+        let learned = matches!(self.settings.rr, RussianRoulette::Efficiency(_));
+        if (self.pass.is_some() || self.crop.is_some())
+            && (learned || self.noise_threshold.is_some())
+        {
+            return Err("crop and pass: adaptive sampling and rr = efficiency decide from the whole image and all its samples, so a split render would differ from the whole one".into());
+        }
+        Ok(())
+    }
+
+    /// The empty film this request renders into, for `world`'s camera.
+    pub fn film(&self, world: &World) -> Film {
+        let display = (world.camera.width(), world.camera.height());
+        Film::cropped(
+            display,
+            self.crop.unwrap_or(Window::full(display.0, display.1)),
+            self.aovs.clone(),
+            self.noise_threshold.is_some(),
+        )
     }
 
     /// The render plan for `world` with these options.
@@ -181,6 +263,8 @@ pub struct RenderStats {
     pub rays: RayCounts,
     /// Contributions dropped for being NaN or infinite.
     pub discarded: u64,
+    /// Stopped early by [`RenderOptions::interrupt`].
+    pub interrupted: bool,
 }
 
 impl RenderStats {
@@ -233,17 +317,19 @@ fn next_pass(done: u32, target: u32, budget: Option<f64>, elapsed: f64) -> u32 {
 
 /// Samples each pixel takes in one pass.
 enum PassSamples {
-    /// The same number everywhere.
-    Uniform(u32),
-    /// Per pixel, row-major over the image (adaptive sampling).
+    /// Up to this many in all, everywhere (a pixel behind, after an interrupted pass or a
+    /// resumed one, catches up).
+    UpTo(u32),
+    /// Per pixel, row-major over the film (adaptive sampling).
     PerPixel(Vec<u32>),
 }
 
 impl PassSamples {
+    /// Samples to take at film pixel `pixel`, which has taken `taken`.
     #[inline]
-    fn at(&self, pixel: usize) -> u32 {
+    fn at(&self, pixel: usize, taken: u32) -> u32 {
         match self {
-            Self::Uniform(n) => *n,
+            Self::UpTo(total) => total.saturating_sub(taken),
             Self::PerPixel(counts) => counts[pixel],
         }
     }
@@ -272,7 +358,7 @@ fn adaptive_pass(film: &Film, threshold: f64, most: u32) -> Vec<u32> {
         for ty in 0..tile.height {
             for tx in 0..tile.width {
                 let p = (ty * tile.width + tx) as usize;
-                let out = (tile.y0 + ty) as usize * w + (tile.x0 + tx) as usize;
+                let out = film.index(tile.x0 + tx, tile.y0 + ty);
                 samples[out] = tile.samples_at(p);
                 if let Some((v, c)) = tile.pixel_statistics(p) {
                     variance[out] = v;
@@ -336,16 +422,23 @@ fn fit_pass(counts: &mut [u32], allowed: f64) {
 /// Renders `world` on the current rayon pool. Without a time budget every pixel's value
 /// depends only on the scene, the options and the seed, not on the number of threads.
 pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
+    render_into(world, options, options.film(world))
+}
+
+/// Renders into `film`: empty (from [`RenderOptions::film`]) or restored from a
+/// checkpoint, whose pixels continue their sample sequences where they stopped, so that
+/// the result is the image an uninterrupted render gives (up to float rounding).
+pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (Film, RenderStats) {
     let plan = options.render_plan(world);
-    let camera = &world.camera;
     let adaptive = options.noise_threshold.is_some();
-    let mut film = Film::new(
-        camera.width(),
-        camera.height(),
-        options.aovs.clone(),
-        adaptive,
-    );
-    let target = options.target_spp();
+    let range = options.sample_range();
+    let target = range.end - range.start;
+    let interrupted = || {
+        options
+            .interrupt
+            .as_ref()
+            .is_some_and(|flag| flag.load(Ordering::Relaxed))
+    };
     let uniform_spp = if adaptive {
         options.min_spp.min(target)
     } else {
@@ -379,13 +472,17 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
         );
         bar
     });
+    if let Some(bar) = &bar {
+        bar.set_position(film.total_samples());
+    }
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
-    let mut done = 0;
-    loop {
+    let resumed = film.min_samples().min(uniform_spp);
+    let mut done = resumed;
+    while !interrupted() {
         let elapsed = start.elapsed().as_secs_f64();
         let (pass, learning) = if done < uniform_spp {
-            let mut n = next_pass(done, uniform_spp, options.time, elapsed);
+            let mut n = next_pass(done - resumed, uniform_spp - resumed, options.time, elapsed);
             // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
             // deciding with everything learned before it.
             let learning = ears.is_some() && done < LEARNING_SAMPLES;
@@ -395,7 +492,7 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
             if n == 0 {
                 break;
             }
-            (PassSamples::Uniform(n), learning)
+            (PassSamples::UpTo(done + n), learning)
         } else if let Some(threshold) = options.noise_threshold {
             let mut counts = adaptive_pass(&film, threshold as f64, target);
             if let Some(budget) = options.time {
@@ -420,6 +517,7 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
             options,
             ears: ears.as_ref(),
             samples: &pass,
+            first_sample: range.start,
             learning,
             rays: &counts,
             bar: bar.as_ref().filter(|_| options.time.is_none() && !adaptive),
@@ -442,8 +540,8 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
             }
             e.refresh();
         }
-        if let PassSamples::Uniform(n) = pass {
-            done += n;
+        if let PassSamples::UpTo(total) = pass {
+            done = total;
         }
         if let (Some(bar), Some(_)) = (&bar, options.time) {
             bar.set_position(start.elapsed().as_millis() as u64);
@@ -458,6 +556,7 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
         samples: film.total_samples(),
         rays: *counts.lock().expect("no thread panicked holding the lock"),
         discarded: film.discarded(),
+        interrupted: interrupted(),
     };
     (film, stats)
 }
@@ -468,6 +567,9 @@ struct PassArgs<'a> {
     options: &'a RenderOptions,
     ears: Option<&'a Ears>,
     samples: &'a PassSamples,
+    /// Index in each pixel's sample sequence of the render's first sample (a pass's
+    /// share starts there).
+    first_sample: u32,
     /// Whether efficiency-aware roulette learns in this pass.
     learning: bool,
     rays: &'a Mutex<RayCounts>,
@@ -486,14 +588,16 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
         options,
         ears,
         samples,
+        first_sample,
         learning,
         rays: counts,
         bar,
     } = *args;
     let router = &film.router;
     let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears);
-    let width = film.width;
+    let window = film.window;
     let camera = &world.camera;
+    let interrupt = options.interrupt.as_deref();
     film.tiles
         .par_iter_mut()
         .map(|tile| {
@@ -506,13 +610,14 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
             for ty in 0..tile.height {
                 for tx in 0..tile.width {
                     let (x, y) = (tile.x0 + tx, tile.y0 + ty);
-                    let index_in_image = (y * width + x) as usize;
+                    let index_in_image = window.index(x, y);
                     let in_tile = (ty * tile.width + tx) as usize;
-                    let n = samples.at(index_in_image);
-                    if n == 0 {
+                    let taken_here = tile.samples_at(in_tile);
+                    let n = samples.at(index_in_image, taken_here);
+                    if n == 0 || interrupt.is_some_and(|f| f.load(Ordering::Relaxed)) {
                         continue;
                     }
-                    let first = tile.samples_at(in_tile);
+                    let first = first_sample + taken_here;
                     pixel.clear();
                     let pixel_rays = rays.closest + rays.shadow;
                     for index in first..first + n {

@@ -1,7 +1,8 @@
 //! Writes a film as ONE single-part, multi-layer, 32-bit float OpenEXR file (channels
 //! `layer.C`, the beauty unprefixed), with lucerna's metadata and Nuke's camera matrices.
 
-use super::Film;
+use super::aov::Aov;
+use super::{Film, Window};
 use crate::error::{Error, Result};
 use exr::prelude::*;
 use std::path::Path;
@@ -37,19 +38,95 @@ fn text(s: &str) -> Text {
     })
 }
 
-/// Writes `film` to `path` atomically (a temporary file in the same directory, renamed
-/// into place), with `header` in the header.
-pub fn write(path: &Path, film: &Film, header: &Header) -> Result<()> {
-    let mut channels = SmallVec::<[AnyChannel<FlatSamples>; 4]>::new();
-    for aov in film.aovs.iter() {
-        for (name, plane) in aov.channel_names().into_iter().zip(film.planes(aov)) {
-            channels.push(AnyChannel::new(text(&name), FlatSamples::F32(plane)));
+/// An EXR image's pixels as lucerna reads and writes them: named 32-bit float planes over
+/// a data window of the whole image (the display window, whose origin is 0, 0).
+#[derive(Clone, Debug)]
+pub struct Planes {
+    /// Size of the whole image.
+    pub display: (u32, u32),
+    /// The pixels present (all of the image but for crop renders).
+    pub window: Window,
+    /// Channel name (`layer.C`, the beauty unprefixed) and its row-major plane over the
+    /// window.
+    pub channels: Vec<(String, Vec<f32>)>,
+}
+
+impl Planes {
+    /// The plane of channel `name`, if the image has it.
+    pub fn channel(&self, name: &str) -> Option<&[f32]> {
+        self.channels
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, p)| p.as_slice())
+    }
+}
+
+impl Header {
+    /// The value of attribute `name`, if present.
+    pub fn get(&self, name: &str) -> Option<&Attribute> {
+        self.attributes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v)
+    }
+
+    /// Text attribute `name`, if present.
+    pub fn text(&self, name: &str) -> Option<&str> {
+        match self.get(name) {
+            Some(Attribute::Text(t)) => Some(t),
+            _ => None,
         }
     }
+
+    /// Numeric attribute `name` as f64, if present.
+    pub fn number(&self, name: &str) -> Option<f64> {
+        match self.get(name)? {
+            Attribute::Int(i) => Some(*i as f64),
+            Attribute::Float(f) => Some(*f as f64),
+            Attribute::Double(f) => Some(*f),
+            Attribute::Text(_) => None,
+        }
+    }
+
+    /// Sets attribute `name`, replacing any previous value.
+    pub fn set(&mut self, name: &str, value: Attribute) {
+        match self.attributes.iter_mut().find(|(n, _)| n == name) {
+            Some((_, v)) => *v = value,
+            None => self.attributes.push((name.into(), value)),
+        }
+    }
+}
+
+/// Writes `film` to `path` atomically (a temporary file in the same directory, renamed
+/// into place), with `header` in the header; `extra` AOVs (data layers the film can always
+/// produce, such as `spp`) are written too even if the film's AOV set lacks them.
+pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result<()> {
+    let mut channels = Vec::new();
+    let mut aovs: Vec<Aov> = film.aovs.iter().collect();
+    aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
+    for aov in aovs {
+        channels.extend(aov.channel_names().into_iter().zip(film.planes(aov)));
+    }
+    let planes = Planes {
+        display: film.display,
+        window: film.window,
+        channels,
+    };
+    write_planes(path, &planes, header)
+}
+
+/// Writes `planes` to `path` atomically, with `header` in the header.
+pub fn write_planes(path: &Path, planes: &Planes, header: &Header) -> Result<()> {
+    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = planes
+        .channels
+        .iter()
+        .map(|(name, plane)| AnyChannel::new(text(name), FlatSamples::F32(plane.clone())))
+        .collect();
     let mut layer_attributes = LayerAttributes {
         software_name: Some(text(crate::RENDERER)),
         world_to_camera: header.world_to_camera,
         world_to_normalized_device: header.world_to_ndc,
+        layer_position: Vec2(planes.window.x as i32, planes.window.y as i32),
         ..Default::default()
     };
     for (name, value) in &header.attributes {
@@ -62,16 +139,106 @@ pub fn write(path: &Path, film: &Film, header: &Header) -> Result<()> {
         layer_attributes.other.insert(text(name), value);
     }
     let layer = Layer::new(
-        (film.width as usize, film.height as usize),
+        (planes.window.width as usize, planes.window.height as usize),
         layer_attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
-    let image = Image::from_layer(layer);
+    let display = IntegerBounds::new(
+        (0, 0),
+        (planes.display.0 as usize, planes.display.1 as usize),
+    );
+    let image = Image::new(ImageAttributes::new(display), layer);
     super::write_atomically(path, |file| {
         image
             .write()
             .to_buffered(file)
             .map_err(|e| Error::other(path, "EXR", e.to_string()))
     })
+}
+
+/// Reads an EXR's first layer: every channel as f32 planes, its windows, and the header
+/// attributes lucerna writes (text and numbers; others are skipped).
+pub fn read(path: &Path) -> Result<(Planes, Header)> {
+    let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_file(path)
+        .map_err(|e| bad("EXR", e.to_string()))?;
+    let display_window = image.attributes.display_window;
+    if display_window.position != Vec2(0, 0) {
+        return Err(bad(
+            "displayWindow",
+            format!(
+                "starts at {:?}; lucerna reads images whose display window starts at 0, 0",
+                display_window.position
+            ),
+        ));
+    }
+    let layer = image.layer_data;
+    let (x, y) = (
+        layer.attributes.layer_position.x(),
+        layer.attributes.layer_position.y(),
+    );
+    let window = Window {
+        x: u32::try_from(x).map_err(|_| bad("dataWindow", format!("negative origin {x}")))?,
+        y: u32::try_from(y).map_err(|_| bad("dataWindow", format!("negative origin {y}")))?,
+        width: layer.size.width() as u32,
+        height: layer.size.height() as u32,
+    };
+    let display = (
+        display_window.size.width() as u32,
+        display_window.size.height() as u32,
+    );
+    if !window.fits(display.0, display.1) {
+        return Err(bad(
+            "dataWindow",
+            format!("{} lies outside the display window", window.describe()),
+        ));
+    }
+    let channels = layer
+        .channel_data
+        .list
+        .iter()
+        .map(|c| {
+            let plane = match &c.sample_data {
+                FlatSamples::F32(v) => v.clone(),
+                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+            };
+            (c.name.to_string(), plane)
+        })
+        .collect();
+    let attributes = layer
+        .attributes
+        .other
+        .iter()
+        .filter_map(|(name, value)| {
+            let value = match value {
+                AttributeValue::Text(t) => Attribute::Text(t.to_string()),
+                AttributeValue::I32(i) => Attribute::Int(*i),
+                AttributeValue::F32(f) => Attribute::Float(*f),
+                AttributeValue::F64(f) => Attribute::Double(*f),
+                _ => return None,
+            };
+            Some((name.to_string(), value))
+        })
+        .collect();
+    let header = Header {
+        world_to_camera: layer.attributes.world_to_camera,
+        world_to_ndc: layer.attributes.world_to_normalized_device,
+        attributes,
+    };
+    Ok((
+        Planes {
+            display,
+            window,
+            channels,
+        },
+        header,
+    ))
 }

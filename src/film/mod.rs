@@ -306,10 +306,88 @@ impl Tile {
 /// pixels do not dominate (`../shared/design.md`, "Accuracy and speed").
 pub const RELATIVE_ERROR_FLOOR: f64 = 0.01;
 
-/// All tiles of an image plus the AOV set and routing.
-pub struct Film {
+/// A rectangle of pixels of an image: a crop window, and the EXR data window it becomes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Window {
+    pub x: u32,
+    pub y: u32,
     pub width: u32,
     pub height: u32,
+}
+
+impl Window {
+    /// The whole of a `width` × `height` image.
+    pub fn full(width: u32, height: u32) -> Self {
+        Self {
+            x: 0,
+            y: 0,
+            width,
+            height,
+        }
+    }
+
+    /// Parses `X0,Y0,X1,Y1`: pixel columns X0..X1 and rows Y0..Y1 (ends excluded, origin at
+    /// the top left), e.g. `0,0,320,240` for the top-left quarter of a 640x480 image.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let numbers: Vec<u32> = text
+            .split(',')
+            .map(|v| v.trim().parse::<u32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("expected X0,Y0,X1,Y1 in pixels, got {text:?}"))?;
+        match numbers[..] {
+            [x0, y0, x1, y1] if x1 > x0 && y1 > y0 => Ok(Self {
+                x: x0,
+                y: y0,
+                width: x1 - x0,
+                height: y1 - y0,
+            }),
+            [_, _, _, _] => Err(format!(
+                "the window {text:?} is empty (X1 <= X0 or Y1 <= Y0)"
+            )),
+            _ => Err(format!("expected X0,Y0,X1,Y1 in pixels, got {text:?}")),
+        }
+    }
+
+    /// `X0,Y0,X1,Y1`, as [`Window::parse`] reads it.
+    pub fn describe(&self) -> String {
+        format!(
+            "{},{},{},{}",
+            self.x,
+            self.y,
+            self.x + self.width,
+            self.y + self.height
+        )
+    }
+
+    /// True if the window lies inside a `width` × `height` image.
+    pub fn fits(&self, width: u32, height: u32) -> bool {
+        self.x as u64 + self.width as u64 <= width as u64
+            && self.y as u64 + self.height as u64 <= height as u64
+    }
+
+    /// Number of pixels.
+    pub fn pixel_count(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// Row-major index in the window of image pixel (`x`, `y`), which must lie inside it.
+    #[inline]
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        (y - self.y) as usize * self.width as usize + (x - self.x) as usize
+    }
+}
+
+/// All tiles of an image's window plus the AOV set and routing. Tiles, and the sample
+/// sequences of their pixels, are placed in image coordinates, so that a window renders
+/// exactly the pixels the whole image would.
+pub struct Film {
+    /// Size of the window (the pixels this film holds).
+    pub width: u32,
+    pub height: u32,
+    /// Where those pixels lie in the image.
+    pub window: Window,
+    /// Size of the whole image (the EXR display window).
+    pub display: (u32, u32),
     pub aovs: AovSet,
     pub router: Router,
     pub tiles: Vec<Tile>,
@@ -319,21 +397,35 @@ impl Film {
     /// An empty film of `width` × `height` pixels for `aovs`; `adaptive` also keeps what
     /// adaptive sampling decides from (sums of squares, rays per pixel).
     pub fn new(width: u32, height: u32, aovs: AovSet, adaptive: bool) -> Self {
+        Self::cropped((width, height), Window::full(width, height), aovs, adaptive)
+    }
+
+    /// An empty film holding `window` of a `display`-sized image.
+    pub fn cropped(display: (u32, u32), window: Window, aovs: AovSet, adaptive: bool) -> Self {
         let router = Router::new(&aovs);
         let mut tiles = Vec::new();
-        for y0 in (0..height).step_by(TILE_SIZE as usize) {
-            for x0 in (0..width).step_by(TILE_SIZE as usize) {
-                let (w, h) = (TILE_SIZE.min(width - x0), TILE_SIZE.min(height - y0));
+        let (x_end, y_end) = (window.x + window.width, window.y + window.height);
+        for y0 in (window.y..y_end).step_by(TILE_SIZE as usize) {
+            for x0 in (window.x..x_end).step_by(TILE_SIZE as usize) {
+                let (w, h) = (TILE_SIZE.min(x_end - x0), TILE_SIZE.min(y_end - y0));
                 tiles.push(Tile::new(x0, y0, w, h, router.slots.len(), &aovs, adaptive));
             }
         }
         Self {
-            width,
-            height,
+            width: window.width,
+            height: window.height,
+            window,
+            display,
             aovs,
             router,
             tiles,
         }
+    }
+
+    /// Row-major index in the film of image pixel (`x`, `y`).
+    #[inline]
+    pub fn index(&self, x: u32, y: u32) -> usize {
+        self.window.index(x, y)
     }
 
     /// Bytes a film of `width` × `height` pixels for `aovs` holds once written: its tiles'
@@ -356,6 +448,118 @@ impl Film {
         width as u64 * height as u64 * (per_pixel + 4 * channels)
     }
 
+    /// Continues from an earlier render of the same window and AOVs (a checkpoint read
+    /// back): `planes` must hold every AOV of this film and `spp`. The sums are rebuilt as
+    /// mean × samples (exact up to float rounding); sums of squares, where this film keeps
+    /// them, from the `variance` layer. `discarded` is the checkpoint's NaN/Inf count.
+    pub fn restore(&mut self, planes: &exr::Planes, discarded: u64) -> Result<(), String> {
+        if planes.display != self.display || planes.window != self.window {
+            return Err(format!(
+                "it holds pixels {} of a {}x{} image; this render is pixels {} of {}x{}",
+                planes.window.describe(),
+                planes.display.0,
+                planes.display.1,
+                self.window.describe(),
+                self.display.0,
+                self.display.1
+            ));
+        }
+        let channel = |name: &str| {
+            planes
+                .channel(name)
+                .ok_or_else(|| format!("it has no channel {name}"))
+        };
+        let layer = |aov: Aov| -> Result<Vec<&[f32]>, String> {
+            aov.channel_names().iter().map(|n| channel(n)).collect()
+        };
+        let spp = channel("spp.Y")?;
+        let light: Vec<Vec<&[f32]>> = self
+            .router
+            .slots
+            .iter()
+            .map(|&a| layer(a))
+            .collect::<Result<_, _>>()?;
+        let data = |aov: Aov| -> Result<Option<Vec<&[f32]>>, String> {
+            if self.aovs.contains(aov) {
+                layer(aov).map(Some)
+            } else {
+                Ok(None)
+            }
+        };
+        let (albedo, normal, position, depth) = (
+            data(Aov::Albedo)?,
+            data(Aov::Normal)?,
+            data(Aov::Position)?,
+            data(Aov::Depth)?,
+        );
+        let keeps_squares = self.tiles.first().is_some_and(|t| !t.beauty_sum.is_empty());
+        if keeps_squares && !self.aovs.contains(Aov::Variance) {
+            return Err(
+                "adaptive sampling cannot continue a render without its variance layer".into(),
+            );
+        }
+        let variance = data(Aov::Variance)?;
+        if let Some(bad) = spp
+            .iter()
+            .find(|n| !(n.is_finite() && **n >= 0.0 && n.fract() == 0.0 && **n < 2e9))
+        {
+            return Err(format!("its spp layer holds {bad}, not a sample count"));
+        }
+        let window = self.window;
+        for tile in &mut self.tiles {
+            let tn = tile.pixel_count();
+            for ty in 0..tile.height {
+                for tx in 0..tile.width {
+                    let p = (ty * tile.width + tx) as usize;
+                    let i = window.index(tile.x0 + tx, tile.y0 + ty);
+                    let n = spp[i];
+                    let vec3 =
+                        |planes: &[&[f32]]| Vec3::new(planes[0][i], planes[1][i], planes[2][i]);
+                    tile.samples[p] = n as u32;
+                    for (slot, planes) in light.iter().enumerate() {
+                        tile.light[slot * tn + p] = vec3(planes) * n;
+                    }
+                    tile.coverage[p] = light[0][3][i] * n;
+                    for (sums, planes) in [
+                        (&mut tile.albedo, &albedo),
+                        (&mut tile.normal, &normal),
+                        (&mut tile.position, &position),
+                    ] {
+                        if let Some(planes) = planes {
+                            sums[p] = vec3(planes) * n;
+                        }
+                    }
+                    if let Some(d) = &depth {
+                        let d = d[0][i];
+                        tile.depth[p] = if d >= BACKGROUND_DEPTH {
+                            f32::INFINITY
+                        } else {
+                            d
+                        };
+                    }
+                    if keeps_squares {
+                        let n = n as f64;
+                        let sum = vec3(&light[0]).as_dvec3() * n;
+                        let var = variance
+                            .as_ref()
+                            .map_or(DVec3::ZERO, |v| vec3(v).as_dvec3());
+                        tile.beauty_sum[p] = sum;
+                        tile.beauty_squares[p] = if n > 0.0 {
+                            var * n * (n - 1.0) + sum * sum / n
+                        } else {
+                            DVec3::ZERO
+                        };
+                    }
+                }
+            }
+            tile.discarded = 0;
+        }
+        if let Some(first) = self.tiles.first_mut() {
+            first.discarded = discarded;
+        }
+        Ok(())
+    }
+
     /// Contributions dropped as NaN or infinite, over the whole image.
     pub fn discarded(&self) -> u64 {
         self.tiles.iter().map(|t| t.discarded).sum()
@@ -368,6 +572,16 @@ impl Film {
             .flat_map(|t| &t.samples)
             .copied()
             .max()
+            .unwrap_or(0)
+    }
+
+    /// The fewest samples any pixel took.
+    pub fn min_samples(&self) -> u32 {
+        self.tiles
+            .iter()
+            .flat_map(|t| &t.samples)
+            .copied()
+            .min()
             .unwrap_or(0)
     }
 
@@ -391,7 +605,7 @@ impl Film {
             for ty in 0..tile.height {
                 for tx in 0..tile.width {
                     let p = (ty * tile.width + tx) as usize;
-                    let out = ((tile.y0 + ty) * self.width + tile.x0 + tx) as usize;
+                    let out = self.index(tile.x0 + tx, tile.y0 + ty);
                     let spp = tile.samples[p] as f32;
                     let mean = |v: Vec3| if spp > 0.0 { v / spp } else { Vec3::ZERO };
                     let value: [f32; 4] = match (aov, slot) {
