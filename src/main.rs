@@ -66,12 +66,16 @@ enum Command {
     },
 }
 
-/// How to read the scene (USD stages use these).
+/// How to read the scene.
 #[derive(clap::Args)]
 struct LoadArgs {
-    /// Time code of an animated USD stage (default: the stage's start time code).
+    /// Frame of an animated scene: a USD time code (default: the stage's start time code);
+    /// in glTF the time FRAME / fps seconds (default: the nodes' rest transforms).
     #[arg(long)]
     frame: Option<f64>,
+    /// Frames per second of glTF animations.
+    #[arg(long, default_value_t = ingest::DEFAULT_FPS, value_parser = parse_fps)]
+    fps: f64,
     /// Convert a USD stage even if usd-core's validators report errors.
     #[arg(long)]
     no_validate: bool,
@@ -81,6 +85,7 @@ impl LoadArgs {
     fn options(&self) -> ingest::LoadOptions {
         ingest::LoadOptions {
             frame: self.frame,
+            fps: self.fps,
             validate: !self.no_validate,
         }
     }
@@ -93,9 +98,14 @@ struct RenderArgs {
     scene: Option<PathBuf>,
     #[command(flatten)]
     load: LoadArgs,
-    /// Output EXR file.
+    /// Output EXR file; `{frame}` (four digits), `{scene}` (the file's stem) and `{camera}`
+    /// are replaced, e.g. `out/{scene}.{camera}.{frame}.exr`.
     #[arg(short, long, default_value = "render.exr")]
     output: PathBuf,
+    /// Frames to render, e.g. 1-24, 1-24x2 (every second), 1,5,10-12; the output needs
+    /// `{frame}`.
+    #[arg(long, conflicts_with = "frame", value_parser = parse_frames)]
+    frames: Option<FrameList>,
     /// A TOML settings file (keys as the flags below, e.g. `mis = "balance"`); flags given
     /// on the command line override it.
     #[arg(long)]
@@ -245,6 +255,69 @@ impl RenderArgs {
     }
 }
 
+fn parse_fps(s: &str) -> std::result::Result<f64, String> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .ok_or_else(|| format!("frames per second must be a positive number, got {s:?}"))
+}
+
+/// The frames of `--frames`, in the order given.
+#[derive(Clone, Debug)]
+struct FrameList(Vec<f64>);
+
+/// Parses a frame list: comma-separated frames `A` and ranges `A-B` or `A-BxS` (every S-th
+/// frame from A to B).
+fn parse_frames(s: &str) -> std::result::Result<FrameList, String> {
+    let number = |v: &str| {
+        v.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{v:?} is not a frame number (a non-negative integer)"))
+    };
+    let mut frames = Vec::new();
+    for item in s.split(',') {
+        let (range, step) = match item.split_once('x') {
+            Some((r, step)) => (r, number(step)?),
+            None => (item, 1),
+        };
+        let (a, b) = match range.split_once('-') {
+            Some((a, b)) => (number(a)?, number(b)?),
+            None => (number(range)?, number(range)?),
+        };
+        if b < a || step == 0 {
+            return Err(format!("{item:?}: a range A-B[xS] needs A <= B and S >= 1"));
+        }
+        frames.extend((a..=b).step_by(step as usize).map(f64::from));
+    }
+    if frames.len() > 100_000 {
+        return Err("more than 100000 frames".into());
+    }
+    Ok(FrameList(frames))
+}
+
+/// The output path for `frame` of `scene` through `camera`: `pattern` with `{frame}`,
+/// `{scene}` and `{camera}` replaced.
+fn output_path(pattern: &Path, frame: Option<f64>, scene: &str, camera: &str) -> Result<PathBuf> {
+    let text = pattern.to_string_lossy();
+    let frame_text = match frame {
+        Some(f) if f.fract() == 0.0 => format!("{:04}", f as i64),
+        Some(f) => format!("{f}"),
+        None if text.contains("{frame}") => {
+            return Err(Error::bad_input(
+                "",
+                "--output",
+                format!("{text:?} has {{frame}} but no --frame or --frames was given"),
+            ));
+        }
+        None => String::new(),
+    };
+    Ok(PathBuf::from(
+        text.replace("{frame}", &frame_text)
+            .replace("{scene}", scene)
+            .replace("{camera}", camera),
+    ))
+}
+
 fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
@@ -281,9 +354,9 @@ fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
     }
 }
 
-fn load_scene(path: Option<&Path>, load: &LoadArgs) -> Result<Scene> {
+fn load_scene(path: Option<&Path>, load: &ingest::LoadOptions) -> Result<Scene> {
     let scene = match path {
-        Some(p) => ingest::load(p, &load.options())?,
+        Some(p) => ingest::load(p, load)?,
         None => ingest::default_scene()?,
     };
     for w in &scene.warnings {
@@ -399,7 +472,58 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         ));
     }
     let pool = thread_pool(args.threads)?;
-    let mut scene = load_scene(args.scene.as_deref(), &args.load)?;
+    let frames = match &args.frames {
+        Some(FrameList(frames)) => {
+            if frames.len() > 1 && !args.output.to_string_lossy().contains("{frame}") {
+                return Err(Error::bad_input(
+                    "",
+                    "--output",
+                    "several frames need {frame} in the output name",
+                ));
+            }
+            frames.iter().map(|&f| Some(f)).collect()
+        }
+        None => vec![args.load.frame],
+    };
+    for frame in frames {
+        if let Some(code) = render_frame(&args, &options, &pool, frame, &received)? {
+            return Ok(ExitCode::from(code));
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Renders one frame; `Some(exit code)` if a signal stopped it (its checkpoint written).
+fn render_frame(
+    args: &RenderArgs,
+    options: &RenderOptions,
+    pool: &rayon::ThreadPool,
+    frame: Option<f64>,
+    received: &AtomicUsize,
+) -> Result<Option<u8>> {
+    let load = ingest::LoadOptions {
+        frame,
+        ..args.load.options()
+    };
+    let mut scene = load_scene(args.scene.as_deref(), &load)?;
+    let stem = args
+        .scene
+        .as_deref()
+        .and_then(Path::file_stem)
+        .map_or("default".into(), |s| s.to_string_lossy().into_owned());
+    let camera_name = match &args.camera {
+        Some(name) => name.clone(),
+        None => scene
+            .cameras
+            .first()
+            .map_or("default".into(), |c| c.name.clone()),
+    };
+    let output = output_path(&args.output, frame, &stem, &camera_name)?;
+    let preview = args
+        .preview
+        .as_ref()
+        .map(|p| output_path(p, frame, &stem, &camera_name))
+        .transpose()?;
     if let Some(radiance) = args.env {
         ingest::set_constant_environment(&mut scene, radiance);
     }
@@ -410,7 +534,7 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         plan::strip_unused_attributes(&mut scene);
     }
     let limit = args.max_memory.or_else(memory::default_limit);
-    memory_estimate(&scene, args.camera.as_deref(), args.resolution, &options)
+    memory_estimate(&scene, args.camera.as_deref(), args.resolution, options)
         .check(limit, &scene.source)?;
     let source = scene.source.clone();
     let build_start = std::time::Instant::now();
@@ -436,26 +560,26 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
     }
     let mut film = options.film(&world);
     let resumed = if args.resume {
-        read_checkpoint(&args.output, &source, &options)?
+        read_checkpoint(&output, &source, options)?
     } else {
         None
     };
     if let Some(r) = &resumed {
         film.restore(&r.planes, r.discarded)
-            .map_err(|e| Error::bad_input(&args.output, "checkpoint", e))?;
+            .map_err(|e| Error::bad_input(&output, "checkpoint", e))?;
         eprintln!(
             "lucerna: continuing {} from {} samples per pixel",
-            args.output.display(),
+            output.display(),
             film.min_samples()
         );
     }
-    let (film, mut stats) = pool.install(|| render::render_into(&world, &options, film));
+    let (film, mut stats) = pool.install(|| render::render_into(&world, options, film));
     stats.seconds += resumed.as_ref().map_or(0.0, |r| r.seconds);
 
     // glam's column-major listing of a column-vector matrix is the row-major listing of
     // its transpose: exactly Imath's row-vector convention.
     let imath = |m: glam::DMat4| m.as_mat4().to_cols_array();
-    let header = Header {
+    let mut header = Header {
         world_to_camera: Some(imath(world.camera.world_to_camera)),
         world_to_ndc: Some(imath(world.camera.world_to_ndc)),
         attributes: vec![
@@ -491,23 +615,26 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
             ),
         ],
     };
+    if let Some(f) = frame {
+        header.set("lucerna/frame", Attribute::Double(f));
+    }
     // Whatever can be continued or merged carries its per-pixel sample counts.
     let extra: &[Aov] = if stats.interrupted || options.pass.is_some() {
         &[Aov::Spp]
     } else {
         &[]
     };
-    film::exr::write(&args.output, &film, &header, extra)?;
+    film::exr::write(&output, &film, &header, extra)?;
     if stats.interrupted {
         let signal = received.load(Ordering::Relaxed);
         eprintln!(
             "lucerna: interrupted (signal {signal}): wrote the {} samples taken so far to {}; continue with --resume",
             stats.samples,
-            args.output.display()
+            output.display()
         );
-        return Ok(ExitCode::from((128 + signal.min(127)) as u8));
+        return Ok(Some((128 + signal.min(127)) as u8));
     }
-    if let Some(png) = &args.preview {
+    if let Some(png) = &preview {
         film::preview::write(png, &film)?;
     }
     let peak = render::peak_memory_bytes().map_or(String::new(), |b| {
@@ -515,7 +642,7 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
     });
     eprintln!(
         "lucerna: wrote {} ({}x{}, {} threads): scene prepared in {:.2} s ({} primitives{}, BVH built in {:.2} s); rendered in {}{peak}",
-        args.output.display(),
+        output.display(),
         film.width,
         film.height,
         pool.current_num_threads(),
@@ -531,7 +658,7 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         world.bvh_seconds,
         stats.summary()
     );
-    Ok(ExitCode::SUCCESS)
+    Ok(None)
 }
 
 fn merge_command(inputs: &[PathBuf], output: &Path) -> Result<ExitCode> {
@@ -582,7 +709,7 @@ fn memory_estimate(
 }
 
 fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<ExitCode> {
-    let scene = load_scene(Some(path), load)?;
+    let scene = load_scene(Some(path), &load.options())?;
     lucerna::scene::file::write(&scene, output)?;
     eprintln!(
         "lucerna: wrote {} ({} meshes, {} materials, {} textures)",
@@ -608,7 +735,7 @@ fn inspect_command(
                 .map_err(|e| Error::bad_input("", format!("--{name}"), e))?;
         }
     }
-    let mut scene = load_scene(Some(path), load)?;
+    let mut scene = load_scene(Some(path), &load.options())?;
     if options.plan == PlanMode::Auto {
         plan::strip_unused_attributes(&mut scene);
     }

@@ -8,6 +8,7 @@
 //! alpha modes, double-sidedness, lucerna's BSDF selection in `extras`) and
 //! KHR_lights_punctual lights.
 
+use super::animation::{Interpolation, Track};
 use super::image as img;
 use super::{tangents, uri};
 use crate::error::{Error, Result};
@@ -15,7 +16,7 @@ use crate::scene::{
     self, AlphaMode, BsdfModel, Camera, Instance, Light, LightKind, Material, Mesh, Projection,
     Scene, TextureRef, UvTransform, Wrap,
 };
-use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
+use glam::{DMat4, DQuat, DVec3, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use std::collections::HashMap;
@@ -35,20 +36,31 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
 /// Deepest node hierarchy accepted (deeper ones are almost certainly malicious).
 const MAX_NODE_DEPTH: usize = 1024;
 
-/// Reads and converts the glTF file at `path`.
-pub fn load(path: &Path) -> Result<Scene> {
+/// Reads and converts the glTF file at `path`, posed at `time` seconds of its animations
+/// (`None`: the nodes' own transforms).
+pub fn load(path: &Path, time: Option<f64>) -> Result<Scene> {
     let bytes = std::fs::read(path)
         .map_err(|e| Error::bad_input(path, "file", format!("cannot read: {e}")))?;
     let base = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    import(&bytes, &path.display().to_string(), Some(base))
+    import_at(&bytes, &path.display().to_string(), Some(base), time)
 }
 
 /// Converts glTF bytes; `source` names the file in messages, `base` is its directory
 /// (`None`: external files are refused).
 pub fn import(bytes: &[u8], source: &str, base: Option<&Path>) -> Result<Scene> {
+    import_at(bytes, source, base, None)
+}
+
+/// [`import`], posed at `time` seconds of the file's animations.
+pub fn import_at(
+    bytes: &[u8],
+    source: &str,
+    base: Option<&Path>,
+    time: Option<f64>,
+) -> Result<Scene> {
     let gltf = parse(bytes, source)?;
     let mut importer = Importer {
         source: source.to_string(),
@@ -64,8 +76,9 @@ pub fn import(bytes: &[u8], source: &str, base: Option<&Path>) -> Result<Scene> 
         textures: HashMap::new(),
         materials: HashMap::new(),
         meshes: HashMap::new(),
+        pose: HashMap::new(),
     };
-    importer.run()?;
+    importer.run(time)?;
     Ok(importer.scene)
 }
 
@@ -170,6 +183,16 @@ struct Importer<'a> {
     materials: HashMap<Option<usize>, u32>,
     /// (glTF mesh, primitive) → scene mesh, or `None` for a skipped primitive.
     meshes: HashMap<(usize, usize), Option<u32>>,
+    /// Animated nodes' translation, rotation and scale at the render's time.
+    pose: HashMap<usize, NodePose>,
+}
+
+/// The animated parts of a node's transform at one time (the rest come from the node).
+#[derive(Default)]
+struct NodePose {
+    translation: Option<DVec3>,
+    rotation: Option<DQuat>,
+    scale: Option<DVec3>,
 }
 
 /// The lucerna section of a material's `extras`.
@@ -202,7 +225,7 @@ impl<'a> Importer<'a> {
         ));
     }
 
-    fn run(&mut self) -> Result<()> {
+    fn run(&mut self, time: Option<f64>) -> Result<()> {
         for ext in self.doc.extensions_used() {
             if !SUPPORTED_EXTENSIONS.contains(&ext) {
                 self.warn(
@@ -212,6 +235,14 @@ impl<'a> Importer<'a> {
             }
         }
         self.load_buffers()?;
+        match time {
+            Some(t) => self.pose_at(t)?,
+            None if self.doc.animations().next().is_some() => self.warn(
+                "animations",
+                "the file is animated; without a frame the nodes' rest transforms are rendered (render --frame F, at F / fps seconds)",
+            ),
+            None => {}
+        }
         let gltf_scene = match self
             .doc
             .default_scene()
@@ -262,6 +293,134 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
+    /// Samples every animation channel at `time` seconds into [`Importer::pose`]. All the
+    /// file's animations play together; a property animated twice takes the last.
+    fn pose_at(&mut self, time: f64) -> Result<()> {
+        use gltf::animation::Property;
+        use gltf::animation::util::ReadOutputs;
+        let mut animated: HashMap<(usize, &str), usize> = HashMap::new();
+        for animation in self.doc.animations() {
+            for channel in animation.channels() {
+                let element = format!(
+                    "animations[{}].channels[{}]",
+                    animation.index(),
+                    channel.index()
+                );
+                let sampler = channel.sampler();
+                let interpolation = match sampler.interpolation() {
+                    gltf::animation::Interpolation::Step => Interpolation::Step,
+                    gltf::animation::Interpolation::Linear => Interpolation::Linear,
+                    gltf::animation::Interpolation::CubicSpline => Interpolation::CubicSpline,
+                };
+                let property = channel.target().property();
+                let (name, dims, types) = match property {
+                    Property::Translation => {
+                        ("translation", Dimensions::Vec3, &[DataType::F32][..])
+                    }
+                    Property::Scale => ("scale", Dimensions::Vec3, &[DataType::F32][..]),
+                    Property::Rotation => (
+                        "rotation",
+                        Dimensions::Vec4,
+                        &[
+                            DataType::F32,
+                            DataType::I8,
+                            DataType::U8,
+                            DataType::I16,
+                            DataType::U16,
+                        ][..],
+                    ),
+                    Property::MorphTargetWeights => {
+                        self.warn(
+                            &element,
+                            "morph target weights are not supported; the channel is ignored",
+                        );
+                        continue;
+                    }
+                };
+                let node = channel.target().node().index();
+                if let Some(earlier) = animated.insert((node, name), animation.index()) {
+                    self.warn(
+                        &element,
+                        format!("nodes[{node}].{name} is also animated by animations[{earlier}]; the later one is used"),
+                    );
+                }
+                self.check_accessor(
+                    &sampler.input(),
+                    &format!("{element} input"),
+                    &[Dimensions::Scalar],
+                    &[DataType::F32],
+                    false,
+                )?;
+                self.check_accessor(
+                    &sampler.output(),
+                    &format!("{element} output"),
+                    &[dims],
+                    types,
+                    true,
+                )?;
+                let buffers = &self.buffers;
+                let reader = channel.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+                let unreadable = || self.err(&element, "the sampler's data cannot be read");
+                let times: Vec<f32> = reader.read_inputs().ok_or_else(unreadable)?.collect();
+                let sample = |values: &[[f32; 4]]| {
+                    let track = Track {
+                        times: &times,
+                        values,
+                        interpolation,
+                    };
+                    track.check().map(|()| track.sample(time))
+                };
+                let sample3 = |values: &[[f32; 3]]| {
+                    let track = Track {
+                        times: &times,
+                        values,
+                        interpolation,
+                    };
+                    track.check().map(|()| track.sample(time).truncate())
+                };
+                let pose = match reader.read_outputs().ok_or_else(unreadable)? {
+                    ReadOutputs::Translations(values) => {
+                        let v = sample3(&values.collect::<Vec<_>>());
+                        v.map(|v| (Some(v), None, None))
+                    }
+                    ReadOutputs::Scales(values) => {
+                        let v = sample3(&values.collect::<Vec<_>>());
+                        v.map(|v| (None, None, Some(v)))
+                    }
+                    ReadOutputs::Rotations(values) => {
+                        let v = sample(&values.into_f32().collect::<Vec<_>>());
+                        v.map(|q| (None, Some(DQuat::from_vec4(q)), None))
+                    }
+                    ReadOutputs::MorphTargetWeights(_) => unreachable!("skipped above"),
+                }
+                .map_err(|e| self.err(&element, e))?;
+                let entry = self.pose.entry(node).or_default();
+                match pose {
+                    (Some(t), _, _) => entry.translation = Some(t),
+                    (_, Some(r), _) => entry.rotation = Some(r),
+                    (_, _, Some(s)) => entry.scale = Some(s),
+                    _ => {}
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A node's local transform: its own, with the animated parts of its pose.
+    fn local_transform(&self, node: &gltf::Node) -> DMat4 {
+        let Some(pose) = self.pose.get(&node.index()) else {
+            return DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        };
+        let (t, r, s) = node.transform().decomposed();
+        DMat4::from_scale_rotation_translation(
+            pose.scale.unwrap_or(DVec3::from(s.map(f64::from))),
+            pose.rotation
+                .unwrap_or(DQuat::from_array(r.map(f64::from)))
+                .normalize(),
+            pose.translation.unwrap_or(DVec3::from(t.map(f64::from))),
+        )
+    }
+
     fn visit(&mut self, node: gltf::Node<'a>, parent: DMat4, path: &mut Vec<usize>) -> Result<()> {
         let element = format!("nodes[{}]", node.index());
         if path.contains(&node.index()) {
@@ -273,7 +432,7 @@ impl<'a> Importer<'a> {
                 format!("node hierarchy deeper than {MAX_NODE_DEPTH}"),
             ));
         }
-        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+        let local = self.local_transform(&node);
         if !local.is_finite() {
             return Err(self.err(&element, "transform is not finite"));
         }

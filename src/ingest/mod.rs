@@ -1,6 +1,7 @@
 //! Ingest: scene files to the internal [`Scene`]. glTF is read natively; the embedded
 //! default scene is the Cornell box of `scenes/cornell-box`.
 
+pub mod animation;
 pub mod gltf;
 pub mod image;
 pub mod tangents;
@@ -23,11 +24,17 @@ pub fn default_scene() -> Result<Scene> {
     gltf::import(CORNELL_BOX, DEFAULT_SCENE, None)
 }
 
+/// Frames per second when none is given: a glTF frame F is the time F / fps.
+pub const DEFAULT_FPS: f64 = 24.0;
+
 /// How to read a scene: options that only some formats use.
 #[derive(Clone, Debug)]
 pub struct LoadOptions {
-    /// Time code of an animated USD stage (default: its start time code).
+    /// The frame of an animation: a USD stage's time code (default: its start time code);
+    /// in glTF, the time frame / `fps` seconds (default: the nodes' rest transforms).
     pub frame: Option<f64>,
+    /// Frames per second of glTF animations.
+    pub fps: f64,
     /// Run usd-core's validators and stop on their errors (USD stages).
     pub validate: bool,
 }
@@ -36,6 +43,7 @@ impl Default for LoadOptions {
     fn default() -> Self {
         Self {
             frame: None,
+            fps: DEFAULT_FPS,
             validate: true,
         }
     }
@@ -49,7 +57,7 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         .map(str::to_ascii_lowercase)
         .unwrap_or_default();
     match ext.as_str() {
-        "gltf" | "glb" => gltf::load(path),
+        "gltf" | "glb" => gltf::load(path, options.frame.map(|f| f / options.fps)),
         scene::file::EXTENSION => scene::file::read(path),
         e if usd::EXTENSIONS.contains(&e) => usd::load(path, options),
         _ => Err(Error::bad_input(
