@@ -9,6 +9,7 @@
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0`, it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod batch;
 pub mod camera;
 pub mod color;
 pub mod error;
@@ -24,6 +25,7 @@ pub mod plan;
 pub mod render;
 pub mod sampling;
 pub mod scene;
+pub mod sequence;
 pub mod world;
 
 pub use error::{Error, ErrorKind, Result};

@@ -8,6 +8,7 @@ use lucerna::film::exr::{Attribute, Header};
 use lucerna::plan::{self, PlanMode, RenderPlan, SceneFeatures};
 use lucerna::render::{self, RenderOptions};
 use lucerna::scene::{LightKind, Scene};
+use lucerna::sequence::{FrameList, output_path};
 use lucerna::world::World;
 use lucerna::{film, ingest, memory};
 use std::path::{Path, PathBuf};
@@ -42,6 +43,18 @@ enum Command {
         /// auto or general, as `render --plan`.
         #[arg(long)]
         plan: Option<String>,
+    },
+    /// Run a job file's renders unattended: a child process and a log per frame, complete
+    /// outputs skipped, checkpoints resumed, a JSON summary; exits 1 if any frame failed.
+    Batch {
+        /// The job (TOML: [settings] for all, then [[render]] entries; see the README).
+        job: PathBuf,
+        /// Directory of the per-frame logs (default: JOB's name with `.logs`).
+        #[arg(long)]
+        logs: Option<PathBuf>,
+        /// The JSON summary to write (default: JOB's name with `.summary.json`).
+        #[arg(long)]
+        summary: Option<PathBuf>,
     },
     /// Combine the EXRs of a split render (sample passes and crop windows, in any mix) into
     /// one: sample-weighted means, pooled variance, summed sample counts.
@@ -104,7 +117,7 @@ struct RenderArgs {
     output: PathBuf,
     /// Frames to render, e.g. 1-24, 1-24x2 (every second), 1,5,10-12; the output needs
     /// `{frame}`.
-    #[arg(long, conflicts_with = "frame", value_parser = parse_frames)]
+    #[arg(long, conflicts_with = "frame", value_parser = FrameList::parse)]
     frames: Option<FrameList>,
     /// A TOML settings file (keys as the flags below, e.g. `mis = "balance"`); flags given
     /// on the command line override it.
@@ -260,62 +273,6 @@ fn parse_fps(s: &str) -> std::result::Result<f64, String> {
         .ok()
         .filter(|f| f.is_finite() && *f > 0.0)
         .ok_or_else(|| format!("frames per second must be a positive number, got {s:?}"))
-}
-
-/// The frames of `--frames`, in the order given.
-#[derive(Clone, Debug)]
-struct FrameList(Vec<f64>);
-
-/// Parses a frame list: comma-separated frames `A` and ranges `A-B` or `A-BxS` (every S-th
-/// frame from A to B).
-fn parse_frames(s: &str) -> std::result::Result<FrameList, String> {
-    let number = |v: &str| {
-        v.trim()
-            .parse::<u32>()
-            .map_err(|_| format!("{v:?} is not a frame number (a non-negative integer)"))
-    };
-    let mut frames = Vec::new();
-    for item in s.split(',') {
-        let (range, step) = match item.split_once('x') {
-            Some((r, step)) => (r, number(step)?),
-            None => (item, 1),
-        };
-        let (a, b) = match range.split_once('-') {
-            Some((a, b)) => (number(a)?, number(b)?),
-            None => (number(range)?, number(range)?),
-        };
-        if b < a || step == 0 {
-            return Err(format!("{item:?}: a range A-B[xS] needs A <= B and S >= 1"));
-        }
-        frames.extend((a..=b).step_by(step as usize).map(f64::from));
-    }
-    if frames.len() > 100_000 {
-        return Err("more than 100000 frames".into());
-    }
-    Ok(FrameList(frames))
-}
-
-/// The output path for `frame` of `scene` through `camera`: `pattern` with `{frame}`,
-/// `{scene}` and `{camera}` replaced.
-fn output_path(pattern: &Path, frame: Option<f64>, scene: &str, camera: &str) -> Result<PathBuf> {
-    let text = pattern.to_string_lossy();
-    let frame_text = match frame {
-        Some(f) if f.fract() == 0.0 => format!("{:04}", f as i64),
-        Some(f) => format!("{f}"),
-        None if text.contains("{frame}") => {
-            return Err(Error::bad_input(
-                "",
-                "--output",
-                format!("{text:?} has {{frame}} but no --frame or --frames was given"),
-            ));
-        }
-        None => String::new(),
-    };
-    Ok(PathBuf::from(
-        text.replace("{frame}", &frame_text)
-            .replace("{scene}", scene)
-            .replace("{camera}", camera),
-    ))
 }
 
 fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
@@ -518,12 +475,19 @@ fn render_frame(
             .first()
             .map_or("default".into(), |c| c.name.clone()),
     };
-    let output = output_path(&args.output, frame, &stem, &camera_name)?;
+    let output = output_path(&args.output, frame, &stem, &camera_name)
+        .map_err(|e| Error::bad_input("", "--output", e))?;
+    // The output's directory is made before rendering, so an impossible path fails at once.
+    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::other(dir, "output directory", e.to_string()))?;
+    }
     let preview = args
         .preview
         .as_ref()
         .map(|p| output_path(p, frame, &stem, &camera_name))
-        .transpose()?;
+        .transpose()
+        .map_err(|e| Error::bad_input("", "--preview", e))?;
     if let Some(radiance) = args.env {
         ingest::set_constant_environment(&mut scene, radiance);
     }
@@ -659,6 +623,42 @@ fn render_frame(
         stats.summary()
     );
     Ok(None)
+}
+
+fn batch_command(job: &Path, logs: Option<PathBuf>, summary: Option<PathBuf>) -> Result<ExitCode> {
+    let beside = |suffix: &str| job.with_extension(suffix);
+    let logs = logs.unwrap_or_else(|| beside("logs"));
+    let summary_path = summary.unwrap_or_else(|| beside("summary.json"));
+    let tasks = lucerna::batch::plan(job, &logs)?;
+    let (stop, received) = watch_signals()?;
+    let exe = std::env::current_exe().map_err(|e| Error::other("", "batch", e.to_string()))?;
+    let summary = lucerna::batch::run(job, &exe, &tasks, &stop);
+    let json = serde_json::to_string_pretty(&summary).expect("the summary serialises");
+    film::write_atomically(&summary_path, |w| {
+        use std::io::Write;
+        w.write_all(json.as_bytes())
+            .map_err(|e| Error::other(&summary_path, "summary", e.to_string()))
+    })?;
+    eprintln!(
+        "lucerna: batch {}: {} rendered, {} skipped (complete), {} failed{}; summary {}",
+        job.display(),
+        summary.rendered,
+        summary.skipped,
+        summary.failed,
+        if summary.interrupted {
+            ", interrupted"
+        } else {
+            ""
+        },
+        summary_path.display()
+    );
+    Ok(if summary.interrupted {
+        ExitCode::from((128 + received.load(Ordering::Relaxed).clamp(1, 127)) as u8)
+    } else if summary.failed > 0 {
+        ExitCode::from(1)
+    } else {
+        ExitCode::SUCCESS
+    })
 }
 
 fn merge_command(inputs: &[PathBuf], output: &Path) -> Result<ExitCode> {
@@ -846,6 +846,7 @@ fn main() -> ExitCode {
             load,
         } => convert_command(&scene, &output, &load),
         Command::Merge { inputs, output } => merge_command(&inputs, &output),
+        Command::Batch { job, logs, summary } => batch_command(&job, logs, summary),
     };
     match result {
         Ok(code) => code,

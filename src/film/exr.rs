@@ -157,6 +157,39 @@ pub fn write_planes(path: &Path, planes: &Planes, header: &Header) -> Result<()>
     })
 }
 
+/// The attributes lucerna reads back from a layer's header.
+fn header_of(attributes: &LayerAttributes) -> Header {
+    Header {
+        world_to_camera: attributes.world_to_camera,
+        world_to_ndc: attributes.world_to_normalized_device,
+        attributes: attributes
+            .other
+            .iter()
+            .filter_map(|(name, value)| {
+                let value = match value {
+                    AttributeValue::Text(t) => Attribute::Text(t.to_string()),
+                    AttributeValue::I32(i) => Attribute::Int(*i),
+                    AttributeValue::F32(f) => Attribute::Float(*f),
+                    AttributeValue::F64(f) => Attribute::Double(*f),
+                    _ => return None,
+                };
+                Some((name.to_string(), value))
+            })
+            .collect(),
+    }
+}
+
+/// Reads only the header of an EXR's first layer (no pixels).
+pub fn read_header(path: &Path) -> Result<Header> {
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| Error::bad_input(path, "EXR", e.to_string()))?;
+    let first = meta
+        .headers
+        .first()
+        .ok_or_else(|| Error::bad_input(path, "EXR", "no header"))?;
+    Ok(header_of(&first.own_attributes))
+}
+
 /// Reads an EXR's first layer: every channel as f32 planes, its windows, and the header
 /// attributes lucerna writes (text and numbers; others are skipped).
 pub fn read(path: &Path) -> Result<(Planes, Header)> {
@@ -213,26 +246,7 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
             (c.name.to_string(), plane)
         })
         .collect();
-    let attributes = layer
-        .attributes
-        .other
-        .iter()
-        .filter_map(|(name, value)| {
-            let value = match value {
-                AttributeValue::Text(t) => Attribute::Text(t.to_string()),
-                AttributeValue::I32(i) => Attribute::Int(*i),
-                AttributeValue::F32(f) => Attribute::Float(*f),
-                AttributeValue::F64(f) => Attribute::Double(*f),
-                _ => return None,
-            };
-            Some((name.to_string(), value))
-        })
-        .collect();
-    let header = Header {
-        world_to_camera: layer.attributes.world_to_camera,
-        world_to_ndc: layer.attributes.world_to_normalized_device,
-        attributes,
-    };
+    let header = header_of(&layer.attributes);
     Ok((
         Planes {
             display,
