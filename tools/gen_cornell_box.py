@@ -99,7 +99,35 @@ def material(name, colour, emissive=None):
     return m
 
 
-def build():
+# The animated variant: over ANIMATION_SECONDS the short block slides 0.1 m towards the red
+# wall (LINEAR) and the camera dollies 0.25 m in (CUBICSPLINE, easing in and out).
+ANIMATION_SECONDS = 2.0
+
+
+def animate(nodes, accessors, views, blob):
+    def accessor(values, kind):
+        data = b"".join(struct.pack(f"<{len(v)}f", *v) for v in values)
+        views.append({"buffer": 0, "byteOffset": len(blob), "byteLength": len(data)})
+        blob.extend(data)
+        accessors.append({"bufferView": len(views) - 1, "componentType": 5126,
+                          "count": len(values), "type": kind})
+        return len(accessors) - 1
+
+    times = accessor([(0.0,), (ANIMATION_SECONDS,)], "SCALAR")
+    slide = accessor([(0.0, 0.0, 0.0), (0.1, 0.0, 0.0)], "VEC3")
+    camera = next(i for i, n in enumerate(nodes) if n["name"] == "camera")
+    start, end = nodes[camera]["translation"], [0.278, 0.273, -0.55]
+    zero = (0.0, 0.0, 0.0)
+    dolly = accessor([zero, tuple(start), zero, zero, tuple(end), zero], "VEC3")
+    block = next(i for i, n in enumerate(nodes) if n["name"] == "short_block")
+    return [{"name": "shot", "samplers": [
+        {"input": times, "output": slide, "interpolation": "LINEAR"},
+        {"input": times, "output": dolly, "interpolation": "CUBICSPLINE"}],
+        "channels": [{"sampler": 0, "target": {"node": block, "path": "translation"}},
+                     {"sampler": 1, "target": {"node": camera, "path": "translation"}}]}]
+
+
+def build(animated=False):
     materials = [material("white", WHITE), material("red", RED), material("green", GREEN),
                  material("light", LIGHT_ALBEDO, LIGHT_RADIANCE)]
     material_index = {"white": 0, "red": 1, "green": 2, "light": 3}
@@ -134,8 +162,9 @@ def build():
         nodes.append({"name": name, "mesh": len(meshes) - 1})
     nodes.append({"name": "camera", "camera": 0, "translation": [0.278, 0.273, -0.8],
                   "rotation": [0.0, 1.0, 0.0, 0.0]})
+    animations = animate(nodes, accessors, views, blob) if animated else []
     uri = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
-    return {
+    doc = {
         "asset": {"version": "2.0", "generator": "lucerna tools/gen_cornell_box.py"},
         "extensionsUsed": ["KHR_materials_emissive_strength"],
         "scene": 0,
@@ -149,13 +178,21 @@ def build():
         "bufferViews": views,
         "buffers": [{"byteLength": len(blob), "uri": uri}],
     }
+    if animations:
+        doc["animations"] = animations
+    return doc
 
 
 def main():
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else \
-        Path(__file__).resolve().parent.parent / "scenes" / "cornell-box" / "cornell-box.gltf"
+    # gen_cornell_box.py [--animated] [OUT]
+    args = sys.argv[1:]
+    animated = "--animated" in args
+    args = [a for a in args if a != "--animated"]
+    name = "cornell-box-animated.gltf" if animated else "cornell-box.gltf"
+    out = Path(args[0]) if args else \
+        Path(__file__).resolve().parent.parent / "scenes" / "cornell-box" / name
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(build(), indent=1) + "\n")
+    out.write_text(json.dumps(build(animated), indent=1) + "\n")
     print(f"wrote {out}")
 
 
