@@ -3,10 +3,11 @@
 
 mod common;
 
+use common::cli::temp_dir;
 use common::gltf_builder::Builder;
 use glam::DVec3;
 use serde_json::json;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 
 /// An emissive quad under a parent node whose translation slides linearly from x = −3 to
@@ -54,13 +55,6 @@ fn animated_scene(times: [f32; 2]) -> Builder {
         }),
     );
     b
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("lucerna-anim-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn scene_at(b: &Builder, time: Option<f64>) -> lucerna::Result<lucerna::scene::Scene> {

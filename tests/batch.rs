@@ -1,16 +1,12 @@
 //! `lucerna batch`: a job with a broken scene renders the others, logs every frame, writes a
 //! summary naming the failure and exits non-zero; a rerun skips what is complete.
 
-use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("lucerna-batch-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use common::cli::temp_dir;
+use serde_json::Value;
+use std::path::Path;
+use std::process::{Command, Output};
 
 fn batch(job: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_lucerna"))

@@ -2,34 +2,10 @@
 
 mod common;
 
+use common::cli::{lucerna, lucerna_ok, temp_dir};
 use common::gltf_builder::{Builder, png_rgba};
 use serde_json::json;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn lucerna(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_lucerna"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-/// Runs the binary with `args` and asserts that it succeeded (showing its stderr if not).
-fn lucerna_ok(args: &[&str]) {
-    let run = lucerna(args);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("lucerna-cli-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A scene whose only geometry is a tiny quad far below the camera, and a camera at the
 /// origin looking along -Z (or along `forward` via a rotation about Y).

@@ -3,6 +3,7 @@
 
 mod common;
 
+use common::cli::temp_dir;
 use common::gltf_builder::{Builder, png_rgba};
 use common::scenes::render;
 use lucerna::error::ErrorKind;
@@ -12,14 +13,6 @@ use lucerna::integrator::Settings;
 use lucerna::scene::{Scene, file};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("lucerna-scene-file-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 /// A quad with every vertex attribute, two textures sharing one image (so the texels are
 /// written once), alpha masking, a normal map, a point light and a lat-long environment.

@@ -1,32 +1,12 @@
 //! Split renders end to end: sample passes and crop windows merge into the render with all
 //! the samples, and a render killed by a signal resumes to the image it would have made.
 
+mod common;
+
+use common::cli::{lucerna, lucerna_ok, temp_dir};
 use lucerna::film::exr::{self, Planes};
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn lucerna(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_lucerna"))
-        .args(args)
-        .output()
-        .unwrap()
-}
-
-fn lucerna_ok(args: &[&str]) {
-    let run = lucerna(args);
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("lucerna-split-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use std::path::Path;
+use std::process::Command;
 
 fn path(dir: &Path, name: &str) -> String {
     dir.join(name).to_str().unwrap().to_string()
@@ -59,6 +39,18 @@ fn assert_same_image(a: &Planes, b: &Planes, relative: f32) {
     }
 }
 
+/// Merges `parts` into `dir`/merged.exr and returns its path.
+fn merge(dir: &Path, parts: &[String]) -> String {
+    let merged = path(dir, "merged.exr");
+    let args: Vec<&str> = ["merge"]
+        .into_iter()
+        .chain(parts.iter().map(String::as_str))
+        .chain(["-o", &merged])
+        .collect();
+    lucerna_ok(&args);
+    merged
+}
+
 /// The default scene, all AOVs, at a size that is not a multiple of the 16-pixel tiles.
 const RENDER: [&str; 6] = ["render", "-q", "--resolution", "40x36", "--aov", "all"];
 
@@ -82,13 +74,7 @@ fn merge_of_four_passes_equals_the_single_render() {
         );
         parts.push(part);
     }
-    let merged = path(&dir, "merged.exr");
-    let args: Vec<&str> = ["merge"]
-        .into_iter()
-        .chain(parts.iter().map(String::as_str))
-        .chain(["-o", &merged])
-        .collect();
-    lucerna_ok(&args);
+    let merged = merge(&dir, &parts);
     assert_same_image(&read(&full), &read(&merged), 1e-5);
     let (_, header) = exr::read(Path::new(&merged)).unwrap();
     assert_eq!(header.number("lucerna/spp"), Some(16.0));
@@ -115,13 +101,7 @@ fn four_tiles_assemble_to_the_single_render() {
         assert_eq!(planes.window.describe(), *crop);
         parts.push(part);
     }
-    let merged = path(&dir, "merged.exr");
-    let args: Vec<&str> = ["merge"]
-        .into_iter()
-        .chain(parts.iter().map(String::as_str))
-        .chain(["-o", &merged])
-        .collect();
-    lucerna_ok(&args);
+    let merged = merge(&dir, &parts);
     assert_same_image(&read(&full), &read(&merged), 0.0);
 }
 

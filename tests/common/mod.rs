@@ -2,5 +2,6 @@
 #![allow(dead_code)]
 
 pub mod chi2;
+pub mod cli;
 pub mod gltf_builder;
 pub mod scenes;

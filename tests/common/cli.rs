@@ -1,0 +1,30 @@
+//! Running the `lucerna` binary from integration tests, and their scratch directories.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// Runs the binary with `args`.
+pub fn lucerna(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Runs the binary with `args` and asserts that it succeeded (showing its stderr if not).
+pub fn lucerna_ok(args: &[&str]) {
+    let run = lucerna(args);
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+}
+
+/// An empty directory of this test process named after `name`.
+pub fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("lucerna-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
