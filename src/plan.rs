@@ -312,7 +312,7 @@ impl RenderPlan {
     pub fn new(features: &SceneFeatures, aovs: &AovSet, mode: PlanMode, squares: bool) -> Self {
         let data_layers: Vec<Aov> = aovs
             .iter()
-            .filter(|a| matches!(a, Aov::Albedo | Aov::Normal | Aov::Depth | Aov::Position))
+            .filter(|a| *a == Aov::Depth || crate::film::MEAN_DATA.contains(a))
             .collect();
         let light_layers = aovs.iter().filter(|a| a.is_light()).count();
         let specialised = Kernel {

@@ -3,14 +3,14 @@
 
 mod common;
 
-use common::scenes::render;
+use common::scenes::{render, render_aovs};
 use glam::{DVec3, Vec2, Vec3};
 use lucerna::film::aov::{ALL, Aov, AovSet};
 use lucerna::ingest;
 use lucerna::integrator::Settings;
 use lucerna::integrator::path::{Contribution, FirstHit, PathTracer, RayCounts, Recorder, Source};
 use lucerna::sampling::sampler::{Sampler, SamplerKind};
-use lucerna::scene::{Light, LightKind, Scene};
+use lucerna::scene::{BsdfModel, Light, LightKind, Scene};
 use lucerna::world::World;
 
 /// The Cornell box with a point light, a spot light and a perfect mirror on the tall block,
@@ -161,6 +161,9 @@ impl Recorder for DirectStats {
     fn wants_single_technique(&self) -> bool {
         true
     }
+    fn wants_lobes(&self) -> bool {
+        false
+    }
     fn contribution(&mut self, c: Contribution) {
         if c.depth == 1 {
             assert_ne!(c.source, Source::Emission);
@@ -281,4 +284,107 @@ fn per_depth_layers_partition_direct_and_indirect() {
     }
     assert!(layers[4][0].iter().any(|&v| v > 0.0), "depth 3 gets light");
     assert_eq!(Aov::parse("nee_d17"), None);
+}
+
+/// The Cornell box's walls in every BSDF lucerna has: the back wall a coated glTF
+/// dielectric, the floor Phong, the tall block a perfect mirror, the rest Lambertian.
+fn cornell_with_every_lobe() -> Scene {
+    let mut scene = cornell_with_delta_paths();
+    let mut restyle = |instance: &str, f: &dyn Fn(&mut lucerna::scene::Material)| {
+        let mesh = scene
+            .instances
+            .iter()
+            .find(|i| i.name == instance)
+            .unwrap()
+            .mesh as usize;
+        let mut m = scene.materials[scene.meshes[mesh].material as usize].clone();
+        f(&mut m);
+        scene.materials.push(m);
+        scene.meshes[mesh].material = (scene.materials.len() - 1) as u32;
+    };
+    restyle("back_wall", &|m| {
+        m.model = BsdfModel::GltfPbr;
+        m.roughness = 0.3;
+        m.metallic = 0.2;
+        m.clearcoat = 0.5;
+        m.clearcoat_roughness = 0.1;
+    });
+    restyle("floor", &|m| {
+        m.model = BsdfModel::Phong {
+            exponent: 30.0,
+            specular: Vec3::splat(0.2),
+        };
+    });
+    scene
+}
+
+/// Per pixel, the lobe layers plus `emission` make the beauty (up to float rounding), the
+/// lobe colours lie in [0, 1] and add up to the albedo, and where a single lobe exists its
+/// colour is the albedo: Lambertian walls (diffuse), the mirror and the metal plates
+/// (glossy).
+#[test]
+fn lobe_layers_and_emission_make_the_beauty() {
+    let plates = ingest::load(
+        std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scenes/mis-plates/mis-plates.glb"
+        )),
+        &Default::default(),
+    )
+    .unwrap();
+    let aovs = AovSet::parse("lobes,emission,albedo,direct,indirect").unwrap();
+    // (scene, whether it has diffuse surfaces: the plates are all metal)
+    for (scene, has_diffuse) in [(cornell_with_every_lobe(), true), (plates, false)] {
+        let (film, stats) = render_aovs(scene, (48, 40), 16, Settings::default(), 2, aovs.clone());
+        assert_eq!(stats.discarded, 0);
+        let p = |aov: Aov| film.planes(aov);
+        let (beauty, emission, albedo) = (p(Aov::Beauty), p(Aov::Emission), p(Aov::Albedo));
+        let (direct, indirect) = (p(Aov::Direct), p(Aov::Indirect));
+        let lobes: Vec<_> = [
+            Aov::DiffuseDirect,
+            Aov::DiffuseIndirect,
+            Aov::GlossyDirect,
+            Aov::GlossyIndirect,
+            Aov::TransmissionDirect,
+            Aov::TransmissionIndirect,
+        ]
+        .map(p)
+        .into_iter()
+        .collect();
+        let colours = [Aov::DiffuseColor, Aov::GlossyColor, Aov::TransmissionColor].map(p);
+        let (mut glossy_light, mut diffuse_light) = (0.0, 0.0);
+        for i in 0..beauty[0].len() {
+            for c in 0..3 {
+                let sum: f32 = lobes.iter().map(|l| l[c][i]).sum();
+                assert_close(
+                    "lobes + emission = beauty",
+                    beauty[c][i],
+                    sum + emission[c][i],
+                );
+                let direct_sum = lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i];
+                assert_close("direct lobes = direct", direct[c][i], direct_sum);
+                let indirect_sum = lobes[1][c][i] + lobes[3][c][i] + lobes[5][c][i];
+                assert_close("indirect lobes = indirect", indirect[c][i], indirect_sum);
+                assert!(
+                    lobes[4][c][i] == 0.0 && lobes[5][c][i] == 0.0,
+                    "nothing transmits"
+                );
+                let [d, g, t] = [0, 1, 2].map(|k| colours[k][c][i]);
+                for v in [d, g, t] {
+                    assert!((0.0..=1.0 + 1e-6).contains(&v), "lobe colour {v}");
+                }
+                assert_close("lobe colours add up to the albedo", albedo[c][i], d + g + t);
+                if g == 0.0 || d == 0.0 {
+                    assert_close(
+                        "a single lobe's colour is the albedo",
+                        albedo[c][i],
+                        d.max(g),
+                    );
+                }
+                diffuse_light += lobes[0][c][i] + lobes[1][c][i];
+                glossy_light += lobes[2][c][i] + lobes[3][c][i];
+            }
+        }
+        assert!(glossy_light > 0.0 && (diffuse_light > 0.0) == has_diffuse);
+    }
 }

@@ -26,13 +26,38 @@ pub enum Aov {
     NeeDepth(u8),
     /// BSDF sampling's contributions after exactly K scattering events (on request).
     BsdfDepth(u8),
+    /// Light after one scattering event / more, by the lobe of the first (on request).
+    DiffuseDirect,
+    DiffuseIndirect,
+    GlossyDirect,
+    GlossyIndirect,
+    TransmissionDirect,
+    TransmissionIndirect,
     Albedo,
     Normal,
     Depth,
     Position,
     Spp,
     Variance,
+    /// Directional albedo of each lobe kind at the first surface (on request).
+    DiffuseColor,
+    GlossyColor,
+    TransmissionColor,
 }
+
+/// The lobe layers (`--aov lobes`): full contributions by the lobe of the first scattering
+/// event, direct and indirect, then the lobe albedos.
+pub const LOBES: [Aov; 9] = [
+    Aov::DiffuseDirect,
+    Aov::DiffuseIndirect,
+    Aov::GlossyDirect,
+    Aov::GlossyIndirect,
+    Aov::TransmissionDirect,
+    Aov::TransmissionIndirect,
+    Aov::DiffuseColor,
+    Aov::GlossyColor,
+    Aov::TransmissionColor,
+];
 
 /// Every AOV written by default (`all`), in canonical order; per-depth layers come only on
 /// request.
@@ -84,6 +109,15 @@ impl Aov {
             Self::Position => "position",
             Self::Spp => "spp",
             Self::Variance => "variance",
+            Self::DiffuseDirect => "diffuse_direct",
+            Self::DiffuseIndirect => "diffuse_indirect",
+            Self::GlossyDirect => "glossy_direct",
+            Self::GlossyIndirect => "glossy_indirect",
+            Self::TransmissionDirect => "transmission_direct",
+            Self::TransmissionIndirect => "transmission_indirect",
+            Self::DiffuseColor => "diffuse_color",
+            Self::GlossyColor => "glossy_color",
+            Self::TransmissionColor => "transmission_color",
             Self::NeeDepth(_) | Self::BsdfDepth(_) => unreachable!("named above"),
         }
         .to_string()
@@ -118,7 +152,15 @@ impl Aov {
     pub fn is_light(self) -> bool {
         !matches!(
             self,
-            Self::Albedo | Self::Normal | Self::Depth | Self::Position | Self::Spp | Self::Variance
+            Self::Albedo
+                | Self::Normal
+                | Self::Depth
+                | Self::Position
+                | Self::Spp
+                | Self::Variance
+                | Self::DiffuseColor
+                | Self::GlossyColor
+                | Self::TransmissionColor
         )
     }
 
@@ -156,7 +198,21 @@ impl Aov {
         if let Some(k) = depth("bsdf_d") {
             return Some(Self::BsdfDepth(k));
         }
-        ALL.iter().copied().find(|a| a.name() == name)
+        ALL.iter().chain(&LOBES).copied().find(|a| a.name() == name)
+    }
+
+    /// The lobe (0 diffuse, 1 glossy, 2 transmission) and whether indirect, of a lobe
+    /// light layer.
+    fn lobe_split(self) -> Option<(usize, usize)> {
+        Some(match self {
+            Self::DiffuseDirect => (0, 0),
+            Self::DiffuseIndirect => (0, 1),
+            Self::GlossyDirect => (1, 0),
+            Self::GlossyIndirect => (1, 1),
+            Self::TransmissionDirect => (2, 0),
+            Self::TransmissionIndirect => (2, 1),
+            _ => return None,
+        })
     }
 }
 
@@ -179,11 +235,16 @@ impl AovSet {
         let mut aovs = vec![Aov::Beauty];
         for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
             if name == "all" {
-                return Ok(Self::default());
+                aovs.extend(ALL);
+                continue;
+            }
+            if name == "lobes" {
+                aovs.extend(LOBES);
+                continue;
             }
             let aov = Aov::parse(name).ok_or_else(|| {
                 let known: Vec<String> = ALL.iter().map(|a| a.name()).collect();
-                format!("unknown AOV {name:?} (known: all, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
+                format!("unknown AOV {name:?} (known: all, lobes, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
             })?;
             aovs.push(aov);
         }
@@ -207,6 +268,12 @@ impl AovSet {
         if self.aovs == ALL {
             return "all".into();
         }
+        let mut all = ALL.to_vec();
+        all.extend(LOBES);
+        all.sort();
+        if self.aovs == all {
+            return "all,lobes".into();
+        }
         self.aovs
             .iter()
             .map(|a| a.name())
@@ -228,6 +295,9 @@ pub struct Router {
     table: [[Vec<u8>; ROUTED_DEPTHS]; 3],
     /// Slots of `direct_nee_unweighted` and `direct_bsdf_unweighted`.
     pub single_technique: [Option<u8>; 2],
+    /// [lobe][direct, indirect] → slot of the lobe layers, which take each contribution
+    /// times its lobe share.
+    pub lobes: [[Option<u8>; 2]; 3],
 }
 
 impl Router {
@@ -243,6 +313,7 @@ impl Router {
                     depth: d as u32,
                     source: sources[s],
                     single_technique: None,
+                    lobes: None,
                 };
                 slots
                     .iter()
@@ -252,14 +323,26 @@ impl Router {
                     .collect()
             })
         });
+        let mut lobes = [[None; 2]; 3];
+        for (i, aov) in slots.iter().enumerate() {
+            if let Some((lobe, indirect)) = aov.lobe_split() {
+                lobes[lobe][indirect] = Some(i as u8);
+            }
+        }
         Self {
             single_technique: [
                 slot_of(Aov::DirectNeeUnweighted),
                 slot_of(Aov::DirectBsdfUnweighted),
             ],
+            lobes,
             table,
             slots,
         }
+    }
+
+    /// True if some layer takes lobe shares.
+    pub fn wants_lobes(&self) -> bool {
+        self.lobes.iter().flatten().any(Option::is_some)
     }
 
     /// The slots taking contribution `c`'s weighted value.

@@ -16,6 +16,31 @@ pub const TILE_SIZE: u32 = 16;
 /// Depth written where the camera saw nothing (as Cycles does).
 pub const BACKGROUND_DEPTH: f32 = 1e10;
 
+/// The data AOVs that are means of a first-hit vector over the pixel's samples, in the
+/// order of [`mean_data`].
+pub const MEAN_DATA: [Aov; 6] = [
+    Aov::Albedo,
+    Aov::Normal,
+    Aov::Position,
+    Aov::DiffuseColor,
+    Aov::GlossyColor,
+    Aov::TransmissionColor,
+];
+
+/// The values of [`MEAN_DATA`] at a first hit.
+#[inline]
+fn mean_data(hit: &FirstHit) -> [Vec3; 6] {
+    let [diffuse, glossy, transmission] = hit.lobe_albedo;
+    [
+        hit.albedo,
+        hit.normal,
+        hit.position,
+        diffuse,
+        glossy,
+        transmission,
+    ]
+}
+
 /// What one camera sample produced, routed into light-AOV slots as it arrives. Without
 /// `ROUTED` (the beauty is the only light layer) every contribution goes to slot 0 and the
 /// routing table is never read.
@@ -60,6 +85,11 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
     }
 
     #[inline]
+    fn wants_lobes(&self) -> bool {
+        ROUTED && self.router.wants_lobes()
+    }
+
+    #[inline]
     fn contribution(&mut self, c: Contribution) {
         // A non-finite contribution is dropped whole, from every AOV, and counted.
         let finite = c.value.is_finite()
@@ -83,6 +113,14 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
                 }
             }
         }
+        if let Some(shares) = c.lobes.filter(|_| c.depth >= 1) {
+            let indirect = usize::from(c.depth >= 2);
+            for (share, slots) in shares.iter().zip(&self.router.lobes) {
+                if let Some(slot) = slots[indirect] {
+                    self.values[slot as usize] += c.value * *share;
+                }
+            }
+        }
     }
 
     #[inline]
@@ -91,10 +129,7 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
             self.covered = true;
             return;
         };
-        let finite = hit.albedo.is_finite()
-            && hit.normal.is_finite()
-            && hit.position.is_finite()
-            && hit.depth.is_finite();
+        let finite = mean_data(&hit).iter().all(|v| v.is_finite()) && hit.depth.is_finite();
         if finite {
             self.covered = true;
             self.hit = Some(hit);
@@ -109,9 +144,8 @@ pub struct PixelAccumulator {
     light: Vec<DVec3>,
     beauty_squares: DVec3,
     coverage: f64,
-    albedo: DVec3,
-    normal: DVec3,
-    position: DVec3,
+    /// Sums of [`MEAN_DATA`].
+    data: [DVec3; 6],
     depth: f32,
     samples: u32,
     /// Rays the samples traced (the pixel's cost, for adaptive sampling).
@@ -126,9 +160,7 @@ impl PixelAccumulator {
             light: vec![DVec3::ZERO; slots],
             beauty_squares: DVec3::ZERO,
             coverage: 0.0,
-            albedo: DVec3::ZERO,
-            normal: DVec3::ZERO,
-            position: DVec3::ZERO,
+            data: [DVec3::ZERO; 6],
             depth: f32::INFINITY,
             samples: 0,
             rays: 0,
@@ -141,9 +173,7 @@ impl PixelAccumulator {
         self.light.fill(DVec3::ZERO);
         self.beauty_squares = DVec3::ZERO;
         self.coverage = 0.0;
-        self.albedo = DVec3::ZERO;
-        self.normal = DVec3::ZERO;
-        self.position = DVec3::ZERO;
+        self.data = [DVec3::ZERO; 6];
         self.depth = f32::INFINITY;
         self.samples = 0;
         self.rays = 0;
@@ -162,9 +192,9 @@ impl PixelAccumulator {
             self.coverage += 1.0;
         }
         if let Some(h) = &rec.hit {
-            self.albedo += h.albedo.as_dvec3();
-            self.normal += h.normal.as_dvec3();
-            self.position += h.position.as_dvec3();
+            for (sum, v) in self.data.iter_mut().zip(mean_data(h)) {
+                *sum += v.as_dvec3();
+            }
             self.depth = self.depth.min(h.depth);
         }
         self.samples += 1;
@@ -187,9 +217,8 @@ pub struct Tile {
     /// Rays traced per pixel (adaptive sampling only).
     rays: Vec<u64>,
     coverage: Vec<f32>,
-    albedo: Vec<Vec3>,
-    normal: Vec<Vec3>,
-    position: Vec<Vec3>,
+    /// Sums of [`MEAN_DATA`] (empty where not requested).
+    data: [Vec<Vec3>; 6],
     depth: Vec<f32>,
     samples: Vec<u32>,
     /// Contributions dropped for being NaN or infinite.
@@ -233,9 +262,7 @@ impl Tile {
             },
             rays: if adaptive { vec![0; n] } else { Vec::new() },
             coverage: vec![0.0; n],
-            albedo: vec3s(Aov::Albedo),
-            normal: vec3s(Aov::Normal),
-            position: vec3s(Aov::Position),
+            data: MEAN_DATA.map(vec3s),
             depth: if aovs.contains(Aov::Depth) {
                 vec![f32::INFINITY; n]
             } else {
@@ -265,14 +292,10 @@ impl Tile {
             self.rays[pixel] += acc.rays;
         }
         self.coverage[pixel] += acc.coverage as f32;
-        if !self.albedo.is_empty() {
-            self.albedo[pixel] += acc.albedo.as_vec3();
-        }
-        if !self.normal.is_empty() {
-            self.normal[pixel] += acc.normal.as_vec3();
-        }
-        if !self.position.is_empty() {
-            self.position[pixel] += acc.position.as_vec3();
+        for (sums, sum) in self.data.iter_mut().zip(acc.data) {
+            if !sums.is_empty() {
+                sums[pixel] += sum.as_vec3();
+            }
         }
         if !self.depth.is_empty() {
             self.depth[pixel] = self.depth[pixel].min(acc.depth);
@@ -440,7 +463,7 @@ impl Film {
         if adaptive {
             per_pixel += 8; // rays
         }
-        for aov in [Aov::Albedo, Aov::Normal, Aov::Position] {
+        for aov in MEAN_DATA {
             per_pixel += if aovs.contains(aov) { vec3 } else { 0 };
         }
         per_pixel += if aovs.contains(Aov::Depth) { 4 } else { 0 };
@@ -486,12 +509,11 @@ impl Film {
                 Ok(None)
             }
         };
-        let (albedo, normal, position, depth) = (
-            data(Aov::Albedo)?,
-            data(Aov::Normal)?,
-            data(Aov::Position)?,
-            data(Aov::Depth)?,
-        );
+        let means = MEAN_DATA
+            .iter()
+            .map(|&aov| data(aov))
+            .collect::<Result<Vec<_>, _>>()?;
+        let depth = data(Aov::Depth)?;
         let keeps_squares = self.tiles.first().is_some_and(|t| !t.beauty_sum.is_empty());
         if keeps_squares && !self.aovs.contains(Aov::Variance) {
             return Err(
@@ -520,11 +542,7 @@ impl Film {
                         tile.light[slot * tn + p] = vec3(planes) * n;
                     }
                     tile.coverage[p] = light[0][3][i] * n;
-                    for (sums, planes) in [
-                        (&mut tile.albedo, &albedo),
-                        (&mut tile.normal, &normal),
-                        (&mut tile.position, &position),
-                    ] {
+                    for (sums, planes) in tile.data.iter_mut().zip(&means) {
                         if let Some(planes) = planes {
                             sums[p] = vec3(planes) * n;
                         }
@@ -600,6 +618,7 @@ impl Film {
         let n = (self.width * self.height) as usize;
         let mut planes = vec![vec![0.0f32; n]; channels];
         let slot = self.router.slots.iter().position(|&a| a == aov);
+        let mean_slot = MEAN_DATA.iter().position(|&a| a == aov);
         for tile in &self.tiles {
             let tn = tile.pixel_count();
             for ty in 0..tile.height {
@@ -617,9 +636,10 @@ impl Film {
                             })
                             .to_array(),
                         (_, Some(s)) => mean(tile.light[s * tn + p]).extend(0.0).to_array(),
-                        (Aov::Albedo, _) => mean(tile.albedo[p]).extend(0.0).to_array(),
-                        (Aov::Normal, _) => mean(tile.normal[p]).extend(0.0).to_array(),
-                        (Aov::Position, _) => mean(tile.position[p]).extend(0.0).to_array(),
+                        (_, None) if mean_slot.is_some() => {
+                            let sums = &tile.data[mean_slot.expect("checked")];
+                            mean(sums[p]).extend(0.0).to_array()
+                        }
                         (Aov::Depth, _) => {
                             let d = tile.depth[p];
                             [
@@ -715,9 +735,10 @@ mod tests {
                         + size_of_val(t.beauty_squares.as_slice())
                         + size_of_val(t.rays.as_slice())
                         + size_of_val(t.coverage.as_slice())
-                        + size_of_val(t.albedo.as_slice())
-                        + size_of_val(t.normal.as_slice())
-                        + size_of_val(t.position.as_slice())
+                        + t.data
+                            .iter()
+                            .map(|d| size_of_val(d.as_slice()))
+                            .sum::<usize>()
                         + size_of_val(t.depth.as_slice())
                         + size_of_val(t.samples.as_slice())
                 })

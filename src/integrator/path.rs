@@ -17,7 +17,7 @@ use super::mis::{Mis, Technique};
 use super::settings::{RussianRoulette, Settings};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
-use crate::material::{self, Bsdf};
+use crate::material::{self, Bsdf, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
@@ -45,6 +45,9 @@ pub struct Contribution {
     /// The same contribution weighted for light sampling alone and BSDF sampling alone
     /// (each the unbiased single-technique estimator), when the recorder asks for them.
     pub single_technique: Option<[Vec3; 2]>,
+    /// Shares of `value` owed to each lobe of the first scattering event, when the
+    /// recorder asks for them (depth >= 1).
+    pub lobes: Option<PerLobe>,
 }
 
 /// What the camera ray saw first: the data AOVs.
@@ -57,12 +60,16 @@ pub struct FirstHit {
     pub depth: f32,
     /// World-space position.
     pub position: Vec3,
+    /// Directional albedo of each lobe kind.
+    pub lobe_albedo: PerLobe,
 }
 
 /// Receives what a path produces.
 pub trait Recorder {
     /// Whether to compute [`Contribution::single_technique`] for direct light.
     fn wants_single_technique(&self) -> bool;
+    /// Whether to compute [`Contribution::lobes`].
+    fn wants_lobes(&self) -> bool;
     fn contribution(&mut self, c: Contribution);
     /// The camera ray hit a surface (coverage); with its data when the kernel computes it.
     fn first_hit(&mut self, hit: Option<FirstHit>);
@@ -104,6 +111,8 @@ struct PathState {
     prev_delta: bool,
     /// Shadow rays sent from the previous vertex (light sampling's sample count there).
     prev_nee_count: u32,
+    /// Lobe shares of the first scattering event (once there was one, and if wanted).
+    lobes: PerLobe,
 }
 
 /// An emitter a path ran into: radiance towards the path, light index, and where.
@@ -121,6 +130,8 @@ struct Emitter {
 struct Walk<'l> {
     mis: Mis,
     single: bool,
+    /// Whether contributions carry their lobe shares.
+    lobes: bool,
     pixel: usize,
     /// Paths this pixel sample has branched into so far (1: no branching).
     paths: u32,
@@ -175,6 +186,7 @@ impl PathState {
                 depth: 0,
                 source: Source::Emission,
                 single_technique: None,
+                lobes: None,
             });
             return;
         }
@@ -196,7 +208,7 @@ impl PathState {
             walk,
             Technique::Bsdf,
             self.beta * le,
-            self.depth,
+            (self.depth, self.lobes),
             self.prev_pdf,
             p_light,
         );
@@ -227,6 +239,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         let mut walk = Walk {
             mis: self.settings.mis,
             single: rec.wants_single_technique(),
+            lobes: rec.wants_lobes(),
             pixel,
             paths: 1,
             learning,
@@ -240,6 +253,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             prev_pdf: 0.0,
             prev_delta: true,
             prev_nee_count: 1,
+            lobes: [Vec3::ZERO; 3],
         };
         self.trace_from(ray, camera, &mut walk, sampler, rec, rays);
     }
@@ -341,6 +355,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     normal: it.frame.n,
                     depth: world.camera.depth(it.p),
                     position: world.space.to_world(it.p).as_vec3(),
+                    lobe_albedo: bsdf.albedo_lobes(wo),
                 }));
             }
             // The region efficiency-aware roulette keeps statistics for (only in that mode).
@@ -405,9 +420,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     walk.paths += 1;
                     walk.paths - 1
                 };
-                let Some(child) =
-                    self.scatter(&it, &bsdf, wo, &path, &sample, &continuation, n_nee, branch)
-                else {
+                let Some(child) = self.scatter(
+                    &it,
+                    &bsdf,
+                    wo,
+                    &path,
+                    walk,
+                    &sample,
+                    &continuation,
+                    n_nee,
+                    branch,
+                ) else {
                     continue;
                 };
                 if k + 1 == continuation.count {
@@ -481,6 +504,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         bsdf: &Bsdf,
         wo: Vec3,
         path: &PathState,
+        walk: &Walk,
         vs: &VertexSample,
         c: &Continuation,
         n_nee: u32,
@@ -511,6 +535,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         if !(beta.max_element() > 0.0) {
             return None;
         }
+        // The first scattering event decides the lobe shares of all the path brings back.
+        let lobes = if walk.lobes && path.depth == 0 {
+            bsdf.lobe_shares(wo, (!bs.is_delta()).then_some(bs.wi))
+        } else {
+            path.lobes
+        };
         let next = PathState {
             beta,
             depth,
@@ -520,6 +550,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             prev_pdf: bs.pdf * c.mis_count as f32,
             prev_delta: bs.is_delta(),
             prev_nee_count: n_nee,
+            lobes,
         };
         Some((Ray::new(offset_ray_origin(it.p, it.ng), wi), next))
     }
@@ -585,12 +616,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             bsdf.pdf(wo, wi)
         };
         let value = path.beta * f * radiance / (p_light * n_nee as f32);
+        let lobes = if walk.lobes && path.depth == 0 {
+            bsdf.lobe_shares(wo, Some(wi))
+        } else {
+            path.lobes
+        };
         record(
             rec,
             walk,
             Technique::Nee,
             value,
-            path.depth + 1,
+            (path.depth + 1, lobes),
             p_light * n_nee as f32,
             p_bsdf * n_bsdf as f32,
         );
@@ -600,14 +636,15 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
 
 /// Records `value`, found by `technique` with density `own`, where the other technique's
 /// density is `other` (densities times sample counts; 0 where a technique cannot produce
-/// the path: delta lights, delta lobes, so that every heuristic gives weight 1 there).
+/// the path: delta lights, delta lobes, so that every heuristic gives weight 1 there), with
+/// the path's depth and lobe shares.
 #[inline]
 fn record<R: Recorder>(
     rec: &mut R,
     walk: &mut Walk,
     technique: Technique,
     value: Vec3,
-    depth: u32,
+    (depth, lobes): (u32, PerLobe),
     own: f32,
     other: f32,
 ) {
@@ -625,5 +662,6 @@ fn record<R: Recorder>(
         },
         single_technique: (walk.single && depth == 1)
             .then(|| [value * weight(Mis::NeeOnly), value * weight(Mis::BsdfOnly)]),
+        lobes: walk.lobes.then_some(lobes),
     });
 }

@@ -144,25 +144,36 @@ impl GltfPbr {
     }
 
     /// f · cos θi of the non-delta lobes.
+    #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let [diffuse, glossy] = self.eval_lobes(wo, wi);
+        diffuse + glossy
+    }
+
+    /// f · cos θi split into the diffuse lobe and the glossy ones (specular and coat).
+    #[inline]
+    pub fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> [Vec3; 2] {
         if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Vec3::ZERO;
+            return [Vec3::ZERO; 2];
         }
         let h = (wo + wi).normalize();
         let v_h = wo.dot(h);
-        let mut f = self.diffuse_weight(v_h) * FRAC_1_PI;
+        let mut diffuse = self.diffuse_weight(v_h) * FRAC_1_PI;
+        let mut glossy = Vec3::ZERO;
         if !self.smooth() {
             let vd = self.ggx.visibility(wi.z, wo.z) * self.ggx.d(h);
-            f += self.specular_fresnel(v_h) * vd;
+            glossy += self.specular_fresnel(v_h) * vd;
         }
         if self.coat > 0.0 {
-            f *= self.coat_transmission(wo.z, wi.z);
+            let through = self.coat_transmission(wo.z, wi.z);
+            diffuse *= through;
+            glossy *= through;
             if !self.coat_smooth() {
                 let vd = self.coat_ggx.visibility(wi.z, wo.z) * self.coat_ggx.d(h);
-                f += Vec3::splat(self.coat_fresnel(v_h) * vd);
+                glossy += Vec3::splat(self.coat_fresnel(v_h) * vd);
             }
         }
-        f * wi.z
+        [diffuse * wi.z, glossy * wi.z]
     }
 
     /// Density of [`GltfPbr::sample`] for the non-delta lobes.
@@ -247,8 +258,17 @@ impl GltfPbr {
     /// Directional albedo estimate at `wo` (Fresnel at n·v, no microfacet energy loss):
     /// the denoising albedo.
     pub fn albedo(&self, wo: Vec3) -> Vec3 {
+        let [diffuse, glossy] = self.albedo_lobes(wo);
+        diffuse + glossy
+    }
+
+    /// [`GltfPbr::albedo`] split into the diffuse lobe and the glossy ones.
+    pub fn albedo_lobes(&self, wo: Vec3) -> [Vec3; 2] {
         let c = wo.z.clamp(0.0, 1.0);
         let coat = self.coat_fresnel(c);
-        (self.diffuse_weight(c) + self.specular_fresnel(c)) * (1.0 - coat) + Vec3::splat(coat)
+        [
+            self.diffuse_weight(c) * (1.0 - coat),
+            self.specular_fresnel(c) * (1.0 - coat) + Vec3::splat(coat),
+        ]
     }
 }

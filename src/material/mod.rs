@@ -17,6 +17,11 @@ use gltf_pbr::GltfPbr;
 use lambert::Lambert;
 use phong::Phong;
 
+/// A colour per lobe kind: diffuse, glossy, transmission. As lobe shares, the parts of a
+/// path's light owed to each lobe of its first scattering event, per channel (they add up
+/// to one where the path carries light); as albedos, each lobe's reflectance.
+pub type PerLobe = [Vec3; 3];
+
 /// The kind of lobe a sample came from (the lobe splits of the AOVs follow it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Lobe {
@@ -75,6 +80,29 @@ impl Bsdf {
         }
     }
 
+    /// [`Bsdf::eval`] split by lobe: diffuse, glossy (lucerna's BSDFs transmit nothing).
+    #[inline]
+    pub fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> [Vec3; 2] {
+        match self {
+            Self::Lambert(b) => [b.eval(wo, wi), Vec3::ZERO],
+            Self::GltfPbr(b) => b.eval_lobes(wo, wi),
+            Self::Phong(b) => b.eval_lobes(wo, wi),
+        }
+    }
+
+    /// The lobe shares of light arriving along `wi` and leaving along `wo`; for a sample of
+    /// a delta lobe (a perfect mirror: glossy), pass `wi` = `None`.
+    #[inline]
+    pub fn lobe_shares(&self, wo: Vec3, wi: Option<Vec3>) -> PerLobe {
+        let Some(wi) = wi else {
+            return [Vec3::ZERO, Vec3::ONE, Vec3::ZERO];
+        };
+        let [diffuse, glossy] = self.eval_lobes(wo, wi);
+        let total = diffuse + glossy;
+        let share = |part: Vec3| Vec3::select(total.cmpgt(Vec3::ZERO), part / total, Vec3::ZERO);
+        [share(diffuse), share(glossy), Vec3::ZERO]
+    }
+
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` (non-delta lobes).
     #[inline]
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
@@ -110,6 +138,18 @@ impl Bsdf {
             Self::Lambert(b) => b.albedo,
             Self::GltfPbr(b) => b.albedo(wo),
             Self::Phong(b) => b.albedo(),
+        }
+    }
+
+    /// [`Bsdf::albedo`] split by lobe (diffuse, glossy, transmission): the `*_color` AOVs.
+    pub fn albedo_lobes(&self, wo: Vec3) -> PerLobe {
+        match self {
+            Self::Lambert(b) => [b.albedo, Vec3::ZERO, Vec3::ZERO],
+            Self::GltfPbr(b) => {
+                let [diffuse, glossy] = b.albedo_lobes(wo);
+                [diffuse, glossy, Vec3::ZERO]
+            }
+            Self::Phong(b) => [b.kd, b.ks, Vec3::ZERO],
         }
     }
 }

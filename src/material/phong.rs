@@ -39,13 +39,21 @@ impl Phong {
     }
 
     /// f · cos θi.
+    #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        let [diffuse, glossy] = self.eval_lobes(wo, wi);
+        diffuse + glossy
+    }
+
+    /// f · cos θi of the diffuse and the glossy lobe.
+    #[inline]
+    pub fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> [Vec3; 2] {
         if wo.z <= 0.0 || wi.z <= 0.0 {
-            return Vec3::ZERO;
+            return [Vec3::ZERO; 2];
         }
         let cos_r = Self::mirror(wo).dot(wi).max(0.0);
         let spec = (self.exponent + 2.0) / (2.0 * PI) * cos_r.powf(self.exponent);
-        (self.kd * FRAC_1_PI + self.ks * spec) * wi.z
+        [self.kd * (FRAC_1_PI * wi.z), self.ks * (spec * wi.z)]
     }
 
     /// Density of [`Phong::sample`].

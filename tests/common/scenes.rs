@@ -170,6 +170,18 @@ pub fn render(
     settings: Settings,
     threads: usize,
 ) -> (Film, RenderStats) {
+    render_aovs(scene, res, spp, settings, threads, AovSet::default())
+}
+
+/// [`render`] with the AOV set `aovs`.
+pub fn render_aovs(
+    scene: Scene,
+    res: (u32, u32),
+    spp: u32,
+    settings: Settings,
+    threads: usize,
+    aovs: AovSet,
+) -> (Film, RenderStats) {
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
@@ -180,7 +192,7 @@ pub fn render(
         let options = RenderOptions {
             spp: Some(spp),
             settings,
-            aovs: AovSet::default(),
+            aovs,
             filter: PixelFilter::box_filter(),
             ..Default::default()
         };
