@@ -191,6 +191,11 @@ struct RenderArgs {
     /// Samples every pixel takes before adaptive sampling decides (default 16).
     #[arg(long)]
     min_spp: Option<String>,
+    /// A light group: NAME=PATTERN[,PATTERN...] (repeatable; `*` and `?` wildcards) over the
+    /// names of the emitters (instances, shapes, lights, `environment`); with `--aov
+    /// lightgroups` each group gets an `lg_NAME` layer, the rest `lg_default`.
+    #[arg(long = "light-group")]
+    light_group: Vec<String>,
     /// Render only pixels X0..X1 × Y0..Y1 of the image, e.g. 0,0,320,240 (ends excluded);
     /// the EXR's data window is the crop, its display window the whole image.
     #[arg(long)]
@@ -250,7 +255,8 @@ impl RenderArgs {
             ("crop", &self.crop),
             ("pass", &self.pass),
         ];
-        for (name, value) in flags {
+        let light_groups = (!self.light_group.is_empty()).then(|| self.light_group.join(";"));
+        for (name, value) in flags.into_iter().chain([("light-groups", &light_groups)]) {
             if let Some(v) = value {
                 options
                     .set(name, v)
@@ -349,6 +355,9 @@ fn watch_signals() -> Result<(Arc<AtomicBool>, Arc<AtomicUsize>)> {
     Ok((stop, received))
 }
 
+/// Most light groups a render writes layers for.
+const MAX_LIGHT_GROUPS: usize = 64;
+
 /// What a checkpoint being resumed already holds.
 struct Resumed {
     planes: film::exr::Planes,
@@ -389,6 +398,7 @@ fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result
             earlier.filter.describe() != options.filter.describe(),
         ),
         ("crop", earlier.crop != options.crop),
+        ("light groups", earlier.light_groups != options.light_groups),
         ("pass", earlier.pass != options.pass),
     ];
     if let Some((what, _)) = differs.iter().find(|(_, d)| *d) {
@@ -521,6 +531,19 @@ fn render_frame(
                 crop.describe()
             ),
         ));
+    }
+    if options.aovs.wants_light_groups() {
+        let groups = options.light_groups(&world).names;
+        if groups.len() > MAX_LIGHT_GROUPS {
+            return Err(Error::bad_input(
+                "",
+                "light groups",
+                format!(
+                    "{} groups; at most {MAX_LIGHT_GROUPS} get layers of their own",
+                    groups.len()
+                ),
+            ));
+        }
     }
     let mut film = options.film(&world);
     let resumed = if args.resume {

@@ -318,7 +318,7 @@ impl RenderPlan {
         let specialised = Kernel {
             emitter_hits: features.lights.reachable_by_bsdf_sampling(),
             first_hit_data: !data_layers.is_empty(),
-            routing: light_layers > 1,
+            routing: light_layers > 1 || aovs.wants_light_groups(),
         };
         Self {
             mode,

@@ -8,6 +8,7 @@ use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
 use crate::integrator::{RussianRoulette, Settings};
+use crate::light::groups::LightGroups;
 use crate::plan::{PlanMode, RenderPlan};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
@@ -46,6 +47,8 @@ pub struct RenderOptions {
     pub settings: Settings,
     pub aovs: AovSet,
     pub filter: PixelFilter,
+    /// Light groups of the request (`--light-group`), before the scene's own.
+    pub light_groups: Vec<crate::scene::LightGroup>,
     /// Render only these pixels of the image (a tile of a split render).
     pub crop: Option<Window>,
     /// Take only pass K of N (1-based): the K-th of N disjoint ranges of each pixel's sample
@@ -68,6 +71,7 @@ impl Default for RenderOptions {
             settings: Settings::default(),
             aovs: AovSet::default(),
             filter: PixelFilter::blackman_harris(1.5),
+            light_groups: Vec::new(),
             crop: None,
             pass: None,
             progress: false,
@@ -125,6 +129,7 @@ impl RenderOptions {
             }
             "aov" => self.aovs = AovSet::parse(value)?,
             "crop" => self.crop = Some(Window::parse(value)?),
+            "light-groups" => self.light_groups = crate::light::groups::parse(value)?,
             "pass" => {
                 let pass = value
                     .split_once('/')
@@ -168,6 +173,12 @@ impl RenderOptions {
         pairs.push(("filter".into(), self.filter.describe()));
         pairs.push(("aov".into(), self.aovs.describe()));
         pairs.push(("plan".into(), self.plan.name().into()));
+        if !self.light_groups.is_empty() {
+            pairs.push((
+                "light-groups".into(),
+                crate::light::groups::describe(&self.light_groups),
+            ));
+        }
         if let Some(window) = self.crop {
             pairs.push(("crop".into(), window.describe()));
         }
@@ -231,15 +242,34 @@ impl RenderOptions {
         Ok(())
     }
 
-    /// The empty film this request renders into, for `world`'s camera.
+    /// The light groups of this request in `world`: the request's, the scene's, and
+    /// `default`.
+    pub fn light_groups(&self, world: &World) -> LightGroups {
+        LightGroups::assign(&world.light_names, &self.light_groups, &world.light_groups)
+    }
+
+    /// The empty film this request renders into, for `world`'s camera, with a layer for
+    /// each light group if they are requested.
     pub fn film(&self, world: &World) -> Film {
         let display = (world.camera.width(), world.camera.height());
-        Film::cropped(
+        let groups = self
+            .aovs
+            .wants_light_groups()
+            .then(|| self.light_groups(world));
+        let aovs = match &groups {
+            Some(g) => self.aovs.with_light_groups(&g.names),
+            None => self.aovs.clone(),
+        };
+        let mut film = Film::cropped(
             display,
             self.crop.unwrap_or(Window::full(display.0, display.1)),
-            self.aovs.clone(),
+            aovs,
             self.noise_threshold.is_some(),
-        )
+        );
+        if let Some(g) = groups {
+            film.router.set_light_groups(&g.of_light);
+        }
+        film
     }
 
     /// The render plan for `world` with these options.
@@ -676,8 +706,10 @@ mod tests {
             ("min-spp", "8"),
             ("plan", "general"),
             ("filter", "box"),
-            ("aov", "albedo,spp"),
+            ("aov", "albedo,spp,lobes,lightgroups"),
             ("mis", "balance"),
+            ("light-groups", "key=lamp_*,sun;sky=environment"),
+            ("crop", "1,2,30,40"),
         ] {
             options.set(name, value).unwrap();
         }
@@ -691,6 +723,8 @@ mod tests {
         assert_eq!(read.aovs, options.aovs);
         assert_eq!(read.filter.describe(), "box");
         assert_eq!(read.settings, options.settings);
+        assert_eq!(read.light_groups, options.light_groups);
+        assert_eq!(read.crop, options.crop);
     }
 
     #[test]

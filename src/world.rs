@@ -156,6 +156,11 @@ pub struct World {
     pub bvh_seconds: f64,
     /// What the scene contains that costs work (the scene half of the render plan).
     pub features: SceneFeatures,
+    /// Name of the emitter each light of [`World::lights`] comes from: the instance,
+    /// shape or punctual light, or `environment` (light groups match these).
+    pub light_names: Vec<String>,
+    /// The light groups the scene declares.
+    pub light_groups: Vec<crate::scene::LightGroup>,
 }
 
 fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
@@ -685,7 +690,29 @@ impl World {
             &quadrics,
             &scene.textures,
         );
+        // The emitters' names, in the order of `lights`: area lights by primitive, then
+        // the punctual lights, then the environment.
+        let flattened: Vec<&str> = scene
+            .instances
+            .iter()
+            .filter(|inst| shared_index[inst.mesh as usize] == NOT_SHARED)
+            .map(|inst| inst.name.as_str())
+            .collect();
+        let quadric_names: Vec<&str> = (scene.disks.iter().map(|d| d.name.as_str()))
+            .chain(scene.cylinders.iter().map(|c| c.name.as_str()))
+            .collect();
+        let mut light_names: Vec<String> = refs
+            .iter()
+            .zip(&prim_light)
+            .filter(|&(_, &l)| l != NO_LIGHT)
+            .map(|(r, _)| match *r {
+                PrimRef::Triangle { mesh, .. } => flattened[mesh as usize].to_string(),
+                PrimRef::Sphere(i) => scene.spheres[i as usize].name.clone(),
+                PrimRef::Quadric(i) => quadric_names[i as usize].to_string(),
+            })
+            .collect();
         lights.extend(punctual_lights(&scene, &space));
+        light_names.extend(scene.lights.iter().map(|l| l.name.clone()));
         let bvh_start = std::time::Instant::now();
         let bvh = Bvh::build(&prims, &flags);
         drop(prims);
@@ -710,6 +737,9 @@ impl World {
         let (width, height) = camera::resolve_resolution(resolution, Some(&scene_camera));
         let camera = Camera::new(&scene_camera, &space, width, height);
         let environment = build_environment(&scene);
+        if environment.is_some() {
+            light_names.push("environment".into());
+        }
         Ok(Self {
             bvh,
             placed: placed_bvh,
@@ -730,6 +760,8 @@ impl World {
             radius,
             bvh_seconds,
             features,
+            light_names,
+            light_groups: std::mem::take(&mut scene.light_groups),
         })
     }
 

@@ -388,3 +388,43 @@ fn lobe_layers_and_emission_make_the_beauty() {
         assert!(glossy_light > 0.0 && (diffuse_light > 0.0) == has_diffuse);
     }
 }
+
+/// Per pixel, the light-group layers plus `emission` make the beauty: two groups the scene
+/// declares (the punctual lights, the ceiling light) and `default` for what no group names
+/// (the environment); each group's layer holds light.
+#[test]
+fn light_groups_and_emission_make_the_beauty() {
+    let mut scene = cornell_with_delta_paths();
+    ingest::set_constant_environment(&mut scene, Vec3::new(0.2, 0.3, 0.4));
+    for member in ["point", "spot"] {
+        scene.add_to_light_group("warm", member);
+    }
+    scene.add_to_light_group("ceiling", "light");
+    let aovs = AovSet::parse("lightgroups,emission").unwrap();
+    let (film, stats) = render_aovs(scene, (40, 40), 16, Settings::default(), 2, aovs);
+    assert_eq!(stats.discarded, 0);
+    let groups: Vec<Aov> = film
+        .aovs
+        .iter()
+        .filter(|a| matches!(a, Aov::LightGroup(_)))
+        .collect();
+    let names: Vec<String> = groups.iter().map(|&a| film.aovs.layer_name(a)).collect();
+    assert_eq!(names, ["lg_warm", "lg_ceiling", "lg_default"]);
+    let (beauty, emission) = (film.planes(Aov::Beauty), film.planes(Aov::Emission));
+    let layers: Vec<_> = groups.iter().map(|&a| film.planes(a)).collect();
+    let mut totals = vec![0.0f64; layers.len()];
+    for i in 0..beauty[0].len() {
+        for c in 0..3 {
+            let sum: f32 = layers.iter().map(|l| l[c][i]).sum();
+            assert_close(
+                "groups + emission = beauty",
+                beauty[c][i],
+                sum + emission[c][i],
+            );
+            for (t, l) in totals.iter_mut().zip(&layers) {
+                *t += l[c][i] as f64;
+            }
+        }
+    }
+    assert!(totals.iter().all(|&t| t > 0.0), "{totals:?}");
+}

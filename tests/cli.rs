@@ -304,3 +304,62 @@ fn settings_file_flags_and_time_budget() {
     assert!(String::from_utf8_lossy(&run.stderr).contains("unknown setting \"colour\""));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Light groups end to end: two emissive quads grouped `key` by their glTF node `extras`,
+/// a point light matched by `--light-group rim=fi*`; each group gets its `lg_` layer and
+/// nothing is left for `lg_default`.
+#[test]
+fn light_groups_come_from_extras_and_the_command_line() {
+    let dir = temp_dir("light-groups");
+    let mut b = Builder::new();
+    let grey = b.add("materials", json!({"pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.5, 0.5, 1], "metallicFactor": 0}}));
+    let glow = b.add("materials", json!({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1]}, "emissiveFactor": [1, 0.8, 0.6]}));
+    let floor = b.quad_primitive(Some(grey));
+    let floor = b.mesh(json!([floor]));
+    let lamp = b.quad_primitive(Some(glow));
+    let lamp = b.mesh(json!([lamp]));
+    b.root(json!({"name": "floor", "mesh": floor, "translation": [0, 0, -3], "scale": [4, 4, 1]}));
+    // Facing down: a quarter turn about X.
+    let s = std::f64::consts::FRAC_1_SQRT_2;
+    for (name, x) in [("lamp_a", -1.0), ("lamp_b", 1.0)] {
+        b.root(json!({"name": name, "mesh": lamp, "translation": [x, 1.5, -2], "rotation": [s, 0, 0, s], "scale": [0.3, 0.3, 0.3], "extras": {"lucerna": {"light_group": "key"}}}));
+    }
+    b.json["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    b.json["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "point", "color": [1, 1, 1], "intensity": 2}]}});
+    b.root(json!({"name": "fill", "extensions": {"KHR_lights_punctual": {"light": 0}}, "translation": [0, 0, -1]}));
+    b.add("cameras", json!({"type": "perspective", "perspective": {"yfov": 1.0, "aspectRatio": 1.0, "znear": 0.01}}));
+    b.root(json!({"camera": 0}));
+    let scene = b.write_embedded(&dir, "groups");
+    let out = dir.join("groups.exr");
+    lucerna_ok(&[
+        "render",
+        "-q",
+        scene.to_str().unwrap(),
+        "--resolution",
+        "24x24",
+        "--spp",
+        "8",
+        "--aov",
+        "lightgroups,emission",
+        "--light-group",
+        "rim=fi*",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let (planes, _) = lucerna::film::exr::read(&out).unwrap();
+    let layers: Vec<&str> = planes
+        .channels
+        .iter()
+        .filter_map(|(n, _)| n.strip_suffix(".R"))
+        .filter(|n| n.starts_with("lg_"))
+        .collect();
+    assert_eq!(layers, ["lg_key", "lg_rim"]);
+    let sum = |name: &str| planes.channel(name).unwrap().iter().sum::<f32>();
+    assert!(sum("lg_key.R") > 0.0 && sum("lg_rim.R") > 0.0);
+    let total = sum("lg_key.G") + sum("lg_rim.G") + sum("emission.G");
+    assert!(
+        (total - sum("G")).abs() <= 1e-4 * sum("G"),
+        "{total} vs {}",
+        sum("G")
+    );
+}

@@ -33,6 +33,9 @@ pub enum Aov {
     GlossyIndirect,
     TransmissionDirect,
     TransmissionIndirect,
+    /// Light of light group K (`lg_<name>`, named by the [`AovSet`]) after one or more
+    /// scattering events (on request, with `lightgroups`).
+    LightGroup(u16),
     Albedo,
     Normal,
     Depth,
@@ -88,6 +91,8 @@ impl Aov {
         match self {
             Self::NeeDepth(k) => return format!("nee_d{k}"),
             Self::BsdfDepth(k) => return format!("bsdf_d{k}"),
+            // The set knows the group's name: `AovSet::layer_name`.
+            Self::LightGroup(k) => return format!("lg_{k}"),
             _ => {}
         }
         match self {
@@ -118,7 +123,9 @@ impl Aov {
             Self::DiffuseColor => "diffuse_color",
             Self::GlossyColor => "glossy_color",
             Self::TransmissionColor => "transmission_color",
-            Self::NeeDepth(_) | Self::BsdfDepth(_) => unreachable!("named above"),
+            Self::NeeDepth(_) | Self::BsdfDepth(_) | Self::LightGroup(_) => {
+                unreachable!("named above")
+            }
         }
         .to_string()
     }
@@ -220,12 +227,20 @@ impl Aov {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct AovSet {
     aovs: Vec<Aov>,
+    /// Whether the light-group layers are requested (`lightgroups`).
+    light_groups: bool,
+    /// Names of the light groups, once the scene is known ([`AovSet::with_light_groups`]).
+    group_names: Vec<String>,
 }
 
 impl Default for AovSet {
     /// Every AOV.
     fn default() -> Self {
-        Self { aovs: ALL.to_vec() }
+        Self {
+            aovs: ALL.to_vec(),
+            light_groups: false,
+            group_names: Vec::new(),
+        }
     }
 }
 
@@ -233,7 +248,12 @@ impl AovSet {
     /// Parses a comma-separated list of layer names, or `all`; the beauty is added.
     pub fn parse(list: &str) -> Result<Self, String> {
         let mut aovs = vec![Aov::Beauty];
+        let mut light_groups = false;
         for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            if name == "lightgroups" {
+                light_groups = true;
+                continue;
+            }
             if name == "all" {
                 aovs.extend(ALL);
                 continue;
@@ -244,13 +264,58 @@ impl AovSet {
             }
             let aov = Aov::parse(name).ok_or_else(|| {
                 let known: Vec<String> = ALL.iter().map(|a| a.name()).collect();
-                format!("unknown AOV {name:?} (known: all, lobes, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
+                format!("unknown AOV {name:?} (known: all, lobes, lightgroups, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
             })?;
             aovs.push(aov);
         }
         aovs.sort();
         aovs.dedup();
-        Ok(Self { aovs })
+        Ok(Self {
+            aovs,
+            light_groups,
+            group_names: Vec::new(),
+        })
+    }
+
+    /// Whether the light-group layers are requested.
+    pub fn wants_light_groups(&self) -> bool {
+        self.light_groups
+    }
+
+    /// This set with one `lg_<name>` layer for each of `names` (if light groups are
+    /// requested).
+    pub fn with_light_groups(&self, names: &[String]) -> Self {
+        let mut set = self.clone();
+        if set.light_groups {
+            set.aovs.retain(|a| !matches!(a, Aov::LightGroup(_)));
+            set.aovs
+                .extend((0..names.len()).map(|k| Aov::LightGroup(k as u16)));
+            set.aovs.sort();
+            set.group_names = names.to_vec();
+        }
+        set
+    }
+
+    /// The EXR layer name of `aov` (light groups by their names).
+    pub fn layer_name(&self, aov: Aov) -> String {
+        match aov {
+            Aov::LightGroup(k) => format!("lg_{}", self.group_names[k as usize]),
+            _ => aov.name(),
+        }
+    }
+
+    /// Full EXR channel names of `aov` (`layer.C`, or `C` for the beauty).
+    pub fn channel_names(&self, aov: Aov) -> Vec<String> {
+        match aov {
+            Aov::LightGroup(_) => {
+                let layer = self.layer_name(aov);
+                aov.channels()
+                    .iter()
+                    .map(|c| format!("{layer}.{c}"))
+                    .collect()
+            }
+            _ => aov.channel_names(),
+        }
     }
 
     /// The AOVs in canonical order.
@@ -263,22 +328,28 @@ impl AovSet {
         self.aovs.contains(&aov)
     }
 
-    /// Comma-separated names (`all` for the default set).
+    /// Comma-separated names (`all` for the default set), as [`AovSet::parse`] reads them.
     pub fn describe(&self) -> String {
-        if self.aovs == ALL {
-            return "all".into();
-        }
-        let mut all = ALL.to_vec();
-        all.extend(LOBES);
-        all.sort();
-        if self.aovs == all {
-            return "all,lobes".into();
-        }
-        self.aovs
+        let aovs: Vec<Aov> = self
+            .aovs
             .iter()
-            .map(|a| a.name())
-            .collect::<Vec<_>>()
-            .join(",")
+            .copied()
+            .filter(|a| !matches!(a, Aov::LightGroup(_)))
+            .collect();
+        let mut all_lobes = ALL.to_vec();
+        all_lobes.extend(LOBES);
+        all_lobes.sort();
+        let mut names = if aovs == ALL {
+            vec!["all".to_string()]
+        } else if aovs == all_lobes {
+            vec!["all".to_string(), "lobes".to_string()]
+        } else {
+            aovs.iter().map(|a| a.name()).collect()
+        };
+        if self.light_groups {
+            names.push("lightgroups".into());
+        }
+        names.join(",")
     }
 }
 
@@ -298,6 +369,10 @@ pub struct Router {
     /// [lobe][direct, indirect] → slot of the lobe layers, which take each contribution
     /// times its lobe share.
     pub lobes: [[Option<u8>; 2]; 3],
+    /// Slot of each light group's layer.
+    group_slots: Vec<u8>,
+    /// Slot of each light's group (empty without light groups).
+    light_slot: Vec<u8>,
 }
 
 impl Router {
@@ -314,6 +389,7 @@ impl Router {
                     source: sources[s],
                     single_technique: None,
                     lobes: None,
+                    light: None,
                 };
                 slots
                     .iter()
@@ -324,9 +400,14 @@ impl Router {
             })
         });
         let mut lobes = [[None; 2]; 3];
+        let mut group_slots = Vec::new();
         for (i, aov) in slots.iter().enumerate() {
             if let Some((lobe, indirect)) = aov.lobe_split() {
                 lobes[lobe][indirect] = Some(i as u8);
+            }
+            if let Aov::LightGroup(k) = aov {
+                debug_assert_eq!(*k as usize, group_slots.len());
+                group_slots.push(i as u8);
             }
         }
         Self {
@@ -335,9 +416,28 @@ impl Router {
                 slot_of(Aov::DirectBsdfUnweighted),
             ],
             lobes,
+            group_slots,
+            light_slot: Vec::new(),
             table,
             slots,
         }
+    }
+
+    /// Routes each light's contributions to its group's layer: `of_light[l]` is the group
+    /// of light `l` (see `light::groups`).
+    pub fn set_light_groups(&mut self, of_light: &[u32]) {
+        if !self.group_slots.is_empty() {
+            self.light_slot = of_light
+                .iter()
+                .map(|&g| self.group_slots[g as usize])
+                .collect();
+        }
+    }
+
+    /// The light-group slot of light `light`, if light groups are routed.
+    #[inline]
+    pub fn light_group_slot(&self, light: u32) -> Option<u8> {
+        self.light_slot.get(light as usize).copied()
     }
 
     /// True if some layer takes lobe shares.

@@ -105,7 +105,12 @@ pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result
     let mut aovs: Vec<Aov> = film.aovs.iter().collect();
     aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
     for aov in aovs {
-        channels.extend(aov.channel_names().into_iter().zip(film.planes(aov)));
+        channels.extend(
+            film.aovs
+                .channel_names(aov)
+                .into_iter()
+                .zip(film.planes(aov)),
+        );
     }
     let planes = Planes {
         display: film.display,

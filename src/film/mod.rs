@@ -113,6 +113,13 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
                 }
             }
         }
+        if let Some(slot) = c
+            .light
+            .filter(|_| c.depth >= 1)
+            .and_then(|l| self.router.light_group_slot(l))
+        {
+            self.values[slot as usize] += c.value;
+        }
         if let Some(shares) = c.lobes.filter(|_| c.depth >= 1) {
             let indirect = usize::from(c.depth >= 2);
             for (share, slots) in shares.iter().zip(&self.router.lobes) {
@@ -493,7 +500,11 @@ impl Film {
                 .ok_or_else(|| format!("it has no channel {name}"))
         };
         let layer = |aov: Aov| -> Result<Vec<&[f32]>, String> {
-            aov.channel_names().iter().map(|n| channel(n)).collect()
+            self.aovs
+                .channel_names(aov)
+                .iter()
+                .map(|n| channel(n))
+                .collect()
         };
         let spp = channel("spp.Y")?;
         let light: Vec<Vec<&[f32]>> = self

@@ -438,6 +438,9 @@ impl<'a> Importer<'a> {
         }
         let world = parent * local;
         let name = node.name().map_or_else(|| element.clone(), str::to_string);
+        if let Some(group) = self.light_group(&node, &element)? {
+            self.scene.add_to_light_group(&group, &name);
+        }
         if let Some(mesh) = node.mesh() {
             if self.is_sphere(&mesh)? {
                 self.sphere(&mesh, world, &name)?;
@@ -466,6 +469,29 @@ impl<'a> Importer<'a> {
         }
         path.pop();
         Ok(())
+    }
+
+    /// The light group a node's `extras` put it in: `{"lucerna": {"light_group": "key"}}`
+    /// (its emitting meshes and its light go to `lg_key`).
+    fn light_group(&self, node: &gltf::Node, element: &str) -> Result<Option<String>> {
+        let Some(raw) = node.extras() else {
+            return Ok(None);
+        };
+        let value: serde_json::Value = serde_json::from_str(raw.get())
+            .map_err(|e| self.err(format!("{element}.extras"), e.to_string()))?;
+        match value.get("lucerna").and_then(|l| l.get("light_group")) {
+            None => Ok(None),
+            Some(serde_json::Value::String(group))
+                if !group.is_empty()
+                    && group.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') =>
+            {
+                Ok(Some(group.to_ascii_lowercase()))
+            }
+            Some(other) => Err(self.err(
+                format!("{element}.extras.lucerna.light_group"),
+                format!("{other} is not a group name (letters, digits and _)"),
+            )),
+        }
     }
 
     /// Whether the mesh's `extras` make it an analytic sphere:

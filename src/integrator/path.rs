@@ -48,6 +48,8 @@ pub struct Contribution {
     /// Shares of `value` owed to each lobe of the first scattering event, when the
     /// recorder asks for them (depth >= 1).
     pub lobes: Option<PerLobe>,
+    /// The light it came from (light sampling and BSDF-sampled emitter hits).
+    pub light: Option<u32>,
 }
 
 /// What the camera ray saw first: the data AOVs.
@@ -187,6 +189,7 @@ impl PathState {
                 source: Source::Emission,
                 single_technique: None,
                 lobes: None,
+                light: Some(light as u32),
             });
             return;
         }
@@ -208,7 +211,7 @@ impl PathState {
             walk,
             Technique::Bsdf,
             self.beta * le,
-            (self.depth, self.lobes),
+            (self.depth, self.lobes, light),
             self.prev_pdf,
             p_light,
         );
@@ -626,7 +629,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             walk,
             Technique::Nee,
             value,
-            (path.depth + 1, lobes),
+            (path.depth + 1, lobes, index),
             p_light * n_nee as f32,
             p_bsdf * n_bsdf as f32,
         );
@@ -644,7 +647,7 @@ fn record<R: Recorder>(
     walk: &mut Walk,
     technique: Technique,
     value: Vec3,
-    (depth, lobes): (u32, PerLobe),
+    (depth, lobes, light): (u32, PerLobe, usize),
     own: f32,
     other: f32,
 ) {
@@ -663,5 +666,6 @@ fn record<R: Recorder>(
         single_technique: (walk.single && depth == 1)
             .then(|| [value * weight(Mis::NeeOnly), value * weight(Mis::BsdfOnly)]),
         lobes: walk.lobes.then_some(lobes),
+        light: Some(light as u32),
     });
 }

@@ -4,6 +4,7 @@
 //! light to sample is `selection`'s job.
 
 pub mod environment;
+pub mod groups;
 pub mod selection;
 pub mod solid_angle;
 pub mod tree;

@@ -14,7 +14,7 @@
 //! before anything uses the scene.
 
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
-use super::{Cylinder, Disk, Instance, Sphere, Texels, Texture, TextureRef, Wrap};
+use super::{Cylinder, Disk, Instance, LightGroup, Sphere, Texels, Texture, TextureRef, Wrap};
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
@@ -50,6 +50,8 @@ struct Manifest {
     lights: Vec<Light>,
     cameras: Vec<Camera>,
     environment: Option<Environment>,
+    #[serde(default)]
+    light_groups: Vec<LightGroup>,
     warnings: Vec<String>,
 }
 
@@ -207,6 +209,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         lights: scene.lights.clone(),
         cameras: scene.cameras.clone(),
         environment: scene.environment.clone(),
+        light_groups: scene.light_groups.clone(),
         warnings: scene.warnings.clone(),
     };
     let json = serde_json::to_vec_pretty(&manifest)
@@ -357,6 +360,7 @@ pub fn parse(
         lights: manifest.lights,
         cameras: manifest.cameras,
         environment: manifest.environment,
+        light_groups: manifest.light_groups,
         warnings: manifest.warnings,
     };
     validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
@@ -460,6 +464,15 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
     let finite = |values: &[f32]| values.iter().all(|x| x.is_finite());
     let materials = scene.materials.len();
     let textures = scene.textures.len();
+    for (i, g) in scene.light_groups.iter().enumerate() {
+        let lower = |c: char| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_';
+        if g.name.is_empty() || !g.name.chars().all(lower) {
+            return fail(
+                format!("light_groups[{i}].name"),
+                "a light group name is lower-case letters, digits and _",
+            );
+        }
+    }
     for (i, m) in scene.meshes.iter().enumerate() {
         if m.material as usize >= materials {
             return fail(

@@ -30,8 +30,31 @@ pub struct Scene {
     pub lights: Vec<Light>,
     pub cameras: Vec<Camera>,
     pub environment: Option<Environment>,
+    /// Light groups the scene declares (the `lg_<name>` AOVs).
+    pub light_groups: Vec<LightGroup>,
     /// Problems that did not stop the import (unsupported features, repaired data).
     pub warnings: Vec<String>,
+}
+
+/// A light group: the emitters named in `members` (instances, analytic shapes, punctual
+/// lights, `environment`), whose light goes to the `lg_<name>` AOV.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LightGroup {
+    pub name: String,
+    pub members: Vec<String>,
+}
+
+impl Scene {
+    /// Puts emitter `member` into light group `group`, creating the group.
+    pub fn add_to_light_group(&mut self, group: &str, member: &str) {
+        match self.light_groups.iter_mut().find(|g| g.name == group) {
+            Some(g) => g.members.push(member.to_string()),
+            None => self.light_groups.push(LightGroup {
+                name: group.to_string(),
+                members: vec![member.to_string()],
+            }),
+        }
+    }
 }
 
 /// A triangle mesh in object space with one material.

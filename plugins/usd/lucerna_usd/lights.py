@@ -140,6 +140,24 @@ def _analytic_cylinder(writer, name, material, world, radius, length):
     return True
 
 
+LIGHT_GROUP_ATTRIBUTE = "lucerna:lightGroup"
+
+
+def _light_group(prim, time, warn):
+    """The light group of a light prim: its `string lucerna:lightGroup` attribute (letters,
+    digits and _, lower-cased), or None."""
+    attr = prim.GetAttribute(LIGHT_GROUP_ATTRIBUTE)
+    value = attr.Get(time) if attr and attr.HasAuthoredValue() else None
+    if value is None:
+        return None
+    group = str(value).lower()
+    if not group or not all(c.isascii() and (c.isalnum() or c == "_") for c in group):
+        warn(str(prim.GetPath()), f"{LIGHT_GROUP_ATTRIBUTE} {value!r} is not a group name "
+             "(letters, digits and _); ignored")
+        return None
+    return group
+
+
 def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
     """Adds the light `prim` placed by each row-vector matrix of `usd_worlds` (stage
     space); `to_lucerna` maps stage space to lucerna's (Y up, metres)."""
@@ -148,8 +166,11 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
     normalize = _normalize(prim, time)
     if prim.HasAPI(UsdLux.ShapingAPI):
         warn(path, "ShapingAPI (cone, focus, IES) is not supported and is ignored")
+    group = _light_group(prim, time, warn)
     for k, usd_world in enumerate(usd_worlds):
         name = path if len(usd_worlds) == 1 else f"{path}[{k}]"
+        if group:
+            writer.add_to_light_group(group, name)
         world = usd_world @ to_lucerna
         if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight) or prim.IsA(UsdLux.CylinderLight):
             analytic = None

@@ -70,6 +70,7 @@ class SceneWriter:
         self.lights = []
         self.cameras = []
         self.environment = None
+        self.light_groups = []
         self.warnings = []
 
     def _view(self, array, dtype, width):
@@ -103,6 +104,14 @@ class SceneWriter:
                 "mesh": int(mesh),
                 "transform": matrix(m),
             })
+
+    def add_to_light_group(self, group, member):
+        """Puts the emitter named `member` into light group `group` (the lg_<group> AOV)."""
+        for g in self.light_groups:
+            if g["name"] == group:
+                g["members"].append(member)
+                return
+        self.light_groups.append({"name": group, "members": [member]})
 
     def add_material(self, material):
         self.materials.append(material)
@@ -148,6 +157,7 @@ class SceneWriter:
             "lights": self.lights,
             "cameras": self.cameras,
             "environment": self.environment,
+            "light_groups": self.light_groups,
             "warnings": self.warnings,
         }
         text = json.dumps(manifest, indent=1, allow_nan=False)

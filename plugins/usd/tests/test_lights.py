@@ -212,3 +212,26 @@ def test_dome_texture_orientation_follows_openexr_latlong(stage_file, tmp_path, 
     ball = image[8:24]
     left, right = ball[:, 4:14].mean(), ball[:, 18:28].mean()
     assert right > 10 * left, (left, right)
+
+
+def test_light_group_attribute_puts_lights_in_groups(stage_file, converted):
+    s = converted(stage_file(world('''
+    def SphereLight "Key" {
+        float inputs:radius = 0.1
+        string lucerna:lightGroup = "Warm"
+    }
+    def SphereLight "Fill" {
+        float inputs:radius = 0.1
+        string lucerna:lightGroup = "warm"
+        double3 xformOp:translate = (1, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def DistantLight "Sun" {
+        string lucerna:lightGroup = "bad name"
+    }
+    def Sphere "Ball" {
+        double radius = 0.5
+    }
+    ''')))
+    assert s["light_groups"] == [{"name": "warm", "members": ["/World/Key", "/World/Fill"]}]
+    assert any("lucerna:lightGroup" in w and "/World/Sun" in w for w in s["warnings"])
