@@ -605,6 +605,18 @@ fn render_frame(
     if let Some(f) = frame {
         header.set("lucerna/frame", Attribute::Double(f));
     }
+    if film.aovs.wants_crypto() {
+        use lucerna::film::crypto::{Kind, header_attributes};
+        let materials = world.material_names();
+        for (kind, names) in [
+            (Kind::Object, &world.objects.names),
+            (Kind::Material, &materials),
+        ] {
+            for (name, value) in header_attributes(kind, names) {
+                header.set(&name, Attribute::Text(value));
+            }
+        }
+    }
     // Whatever can be continued or merged carries its per-pixel sample counts.
     let extra: &[Aov] = if stats.interrupted || options.pass.is_some() {
         &[Aov::Spp]

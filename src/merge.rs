@@ -111,6 +111,21 @@ fn check(parts: &[Part]) -> Result<()> {
             if !overlap(&a.planes.window, &b.planes.window) {
                 continue;
             }
+            if let Some((name, _)) = a
+                .planes
+                .channels
+                .iter()
+                .find(|(n, _)| n.starts_with("Crypto"))
+            {
+                return Err(Error::bad_input(
+                    &b.path,
+                    name.as_str(),
+                    format!(
+                        "it overlaps {}: Cryptomatte ranks of overlapping parts cannot be combined (split renders with crypto layers by --crop only)",
+                        a.path.display()
+                    ),
+                ));
+            }
             let ((seed_a, range_a), (seed_b, range_b)) = (samples(a)?, samples(b)?);
             if seed_a == seed_b && range_a.start < range_b.end && range_b.start < range_a.end {
                 return Err(Error::bad_input(

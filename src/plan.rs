@@ -317,7 +317,7 @@ impl RenderPlan {
         let light_layers = aovs.iter().filter(|a| a.is_light()).count();
         let specialised = Kernel {
             emitter_hits: features.lights.reachable_by_bsdf_sampling(),
-            first_hit_data: !data_layers.is_empty(),
+            first_hit_data: !data_layers.is_empty() || aovs.wants_crypto(),
             routing: light_layers > 1 || aovs.wants_light_groups(),
         };
         Self {

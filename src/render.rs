@@ -269,6 +269,10 @@ impl RenderOptions {
         if let Some(g) = groups {
             film.router.set_light_groups(&g.of_light);
         }
+        if film.aovs.wants_crypto() {
+            film.crypto_ids =
+                crate::film::crypto::Ids::new(&world.objects.names, &world.material_names());
+        }
         film
     }
 
@@ -624,6 +628,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
         bar,
     } = *args;
     let router = &film.router;
+    let crypto = film.aovs.wants_crypto();
     let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears);
     let window = film.window;
     let camera = &world.camera;
@@ -633,7 +638,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
         .map(|tile| {
             let mut sampler = Sampler::new(options.settings.sampler, options.settings.seed);
             let mut record = SampleRecord::<ROUTED>::new(router);
-            let mut pixel = PixelAccumulator::new(router.slots.len());
+            let mut pixel = PixelAccumulator::new(router.slots.len(), crypto);
             let mut rays = RayCounts::default();
             let mut tile_learning = learning.then(Learning::default);
             let mut taken = 0u64;

@@ -161,6 +161,22 @@ pub struct World {
     pub light_names: Vec<String>,
     /// The light groups the scene declares.
     pub light_groups: Vec<crate::scene::LightGroup>,
+    /// The objects that hits belong to (Cryptomatte).
+    pub objects: Objects,
+}
+
+/// The named objects of the scene, and which object each hit primitive belongs to: the
+/// instances (flattened or placed) in scene order, then the spheres, disks and cylinders.
+#[derive(Clone, Debug, Default)]
+pub struct Objects {
+    pub names: Vec<String>,
+    /// Flattened render mesh → object.
+    meshes: Vec<u32>,
+    /// Placement → object.
+    placements: Vec<u32>,
+    /// Objects of the first sphere and the first quadric.
+    first_sphere: u32,
+    first_quadric: u32,
 }
 
 fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
@@ -736,6 +752,23 @@ impl World {
         };
         let (width, height) = camera::resolve_resolution(resolution, Some(&scene_camera));
         let camera = Camera::new(&scene_camera, &space, width, height);
+        let objects = {
+            let mut names: Vec<String> = scene.instances.iter().map(|i| i.name.clone()).collect();
+            let (meshes, placements) = (0..scene.instances.len() as u32).partition(|&i| {
+                shared_index[scene.instances[i as usize].mesh as usize] == NOT_SHARED
+            });
+            let first_sphere = names.len() as u32;
+            names.extend(scene.spheres.iter().map(|s| s.name.clone()));
+            let first_quadric = names.len() as u32;
+            names.extend(quadric_names.iter().map(|n| n.to_string()));
+            Objects {
+                names,
+                meshes,
+                placements,
+                first_sphere,
+                first_quadric,
+            }
+        };
         let environment = build_environment(&scene);
         if environment.is_some() {
             light_names.push("environment".into());
@@ -762,6 +795,7 @@ impl World {
             features,
             light_names,
             light_groups: std::mem::take(&mut scene.light_groups),
+            objects,
         })
     }
 
@@ -820,6 +854,28 @@ impl World {
     #[inline]
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
         self.surfaces.interaction(ray, hit)
+    }
+
+    /// The materials' names, by index (Cryptomatte's material mattes).
+    pub fn material_names(&self) -> Vec<String> {
+        self.surfaces
+            .materials
+            .iter()
+            .map(|m| m.name.clone())
+            .collect()
+    }
+
+    /// The object (index into [`Objects::names`]) that `it` lies on.
+    pub fn object_of(&self, it: &Interaction) -> u32 {
+        let o = &self.objects;
+        if it.instance != NOT_PLACED {
+            return o.placements[it.instance as usize];
+        }
+        match self.surfaces.prims[it.prim as usize] {
+            PrimRef::Triangle { mesh, .. } => o.meshes[mesh as usize],
+            PrimRef::Sphere(i) => o.first_sphere + i,
+            PrimRef::Quadric(i) => o.first_quadric + i,
+        }
     }
 
     /// Index of the light that the primitive of `it` is, if it emits (emitters are never

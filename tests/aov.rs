@@ -5,7 +5,7 @@ mod common;
 
 use common::scenes::{render, render_aovs};
 use glam::{DVec3, Vec2, Vec3};
-use lucerna::film::aov::{ALL, Aov, AovSet};
+use lucerna::film::aov::{ALL, Aov, AovSet, LOBES};
 use lucerna::ingest;
 use lucerna::integrator::Settings;
 use lucerna::integrator::path::{Contribution, FirstHit, PathTracer, RayCounts, Recorder, Source};
@@ -340,17 +340,8 @@ fn lobe_layers_and_emission_make_the_beauty() {
         let p = |aov: Aov| film.planes(aov);
         let (beauty, emission, albedo) = (p(Aov::Beauty), p(Aov::Emission), p(Aov::Albedo));
         let (direct, indirect) = (p(Aov::Direct), p(Aov::Indirect));
-        let lobes: Vec<_> = [
-            Aov::DiffuseDirect,
-            Aov::DiffuseIndirect,
-            Aov::GlossyDirect,
-            Aov::GlossyIndirect,
-            Aov::TransmissionDirect,
-            Aov::TransmissionIndirect,
-        ]
-        .map(p)
-        .into_iter()
-        .collect();
+        // The six light layers of LOBES (then come the colours).
+        let lobes: Vec<_> = LOBES[..6].iter().map(|&a| p(a)).collect();
         let colours = [Aov::DiffuseColor, Aov::GlossyColor, Aov::TransmissionColor].map(p);
         let (mut glossy_light, mut diffuse_light) = (0.0, 0.0);
         for i in 0..beauty[0].len() {

@@ -1,6 +1,7 @@
 //! The AOVs (render passes) lucerna can write, their EXR layer names and channels, and the
 //! routing of tagged contributions to the light AOVs that want them.
 
+use super::crypto;
 use crate::integrator::path::{Contribution, Source};
 
 /// Deepest per-depth layer (`nee_d16`, `bsdf_d16`).
@@ -46,6 +47,8 @@ pub enum Aov {
     DiffuseColor,
     GlossyColor,
     TransmissionColor,
+    /// Cryptomatte layer K (ranks 2K and 2K + 1) of objects or materials (on request).
+    Crypto(crypto::Kind, u8),
 }
 
 /// The lobe layers (`--aov lobes`): full contributions by the lobe of the first scattering
@@ -93,6 +96,7 @@ impl Aov {
             Self::BsdfDepth(k) => return format!("bsdf_d{k}"),
             // The set knows the group's name: `AovSet::layer_name`.
             Self::LightGroup(k) => return format!("lg_{k}"),
+            Self::Crypto(kind, layer) => return format!("{}{layer:02}", kind.type_name()),
             _ => {}
         }
         match self {
@@ -123,7 +127,7 @@ impl Aov {
             Self::DiffuseColor => "diffuse_color",
             Self::GlossyColor => "glossy_color",
             Self::TransmissionColor => "transmission_color",
-            Self::NeeDepth(_) | Self::BsdfDepth(_) | Self::LightGroup(_) => {
+            Self::NeeDepth(_) | Self::BsdfDepth(_) | Self::LightGroup(_) | Self::Crypto(..) => {
                 unreachable!("named above")
             }
         }
@@ -133,7 +137,7 @@ impl Aov {
     /// Channel names within the layer.
     pub fn channels(self) -> &'static [&'static str] {
         match self {
-            Self::Beauty => &["R", "G", "B", "A"],
+            Self::Beauty | Self::Crypto(..) => &["R", "G", "B", "A"],
             Self::Normal | Self::Position => &["X", "Y", "Z"],
             Self::Depth => &["Z"],
             Self::Spp => &["Y"],
@@ -168,6 +172,7 @@ impl Aov {
                 | Self::DiffuseColor
                 | Self::GlossyColor
                 | Self::TransmissionColor
+                | Self::Crypto(..)
         )
     }
 
@@ -254,6 +259,12 @@ impl AovSet {
                 light_groups = true;
                 continue;
             }
+            if name == "crypto" {
+                for kind in [crypto::Kind::Object, crypto::Kind::Material] {
+                    aovs.extend((0..crypto::LAYERS).map(|k| Aov::Crypto(kind, k)));
+                }
+                continue;
+            }
             if name == "all" {
                 aovs.extend(ALL);
                 continue;
@@ -264,7 +275,7 @@ impl AovSet {
             }
             let aov = Aov::parse(name).ok_or_else(|| {
                 let known: Vec<String> = ALL.iter().map(|a| a.name()).collect();
-                format!("unknown AOV {name:?} (known: all, lobes, lightgroups, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
+                format!("unknown AOV {name:?} (known: all, lobes, lightgroups, crypto, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
             })?;
             aovs.push(aov);
         }
@@ -275,6 +286,11 @@ impl AovSet {
             light_groups,
             group_names: Vec::new(),
         })
+    }
+
+    /// Whether the Cryptomatte layers are requested.
+    pub fn wants_crypto(&self) -> bool {
+        self.aovs.iter().any(|a| matches!(a, Aov::Crypto(..)))
     }
 
     /// Whether the light-group layers are requested.
@@ -330,11 +346,12 @@ impl AovSet {
 
     /// Comma-separated names (`all` for the default set), as [`AovSet::parse`] reads them.
     pub fn describe(&self) -> String {
+        let crypto = self.wants_crypto();
         let aovs: Vec<Aov> = self
             .aovs
             .iter()
             .copied()
-            .filter(|a| !matches!(a, Aov::LightGroup(_)))
+            .filter(|a| !matches!(a, Aov::LightGroup(_) | Aov::Crypto(..)))
             .collect();
         let mut all_lobes = ALL.to_vec();
         all_lobes.extend(LOBES);
@@ -348,6 +365,9 @@ impl AovSet {
         };
         if self.light_groups {
             names.push("lightgroups".into());
+        }
+        if crypto {
+            names.push("crypto".into());
         }
         names.join(",")
     }

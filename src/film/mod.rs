@@ -3,6 +3,7 @@
 //! reach the tile, so a pixel's value does not depend on the thread count.
 
 pub mod aov;
+pub mod crypto;
 pub mod exr;
 pub mod filter;
 pub mod preview;
@@ -153,6 +154,8 @@ pub struct PixelAccumulator {
     coverage: f64,
     /// Sums of [`MEAN_DATA`].
     data: [DVec3; 6],
+    /// Samples per object and per material hit (Cryptomatte only).
+    crypto: Option<[crypto::Counts; 2]>,
     depth: f32,
     samples: u32,
     /// Rays the samples traced (the pixel's cost, for adaptive sampling).
@@ -161,9 +164,11 @@ pub struct PixelAccumulator {
 }
 
 impl PixelAccumulator {
-    /// An empty accumulator for `slots` light slots.
-    pub fn new(slots: usize) -> Self {
+    /// An empty accumulator for `slots` light slots; `crypto` also counts the objects and
+    /// materials hit.
+    pub fn new(slots: usize, crypto: bool) -> Self {
         Self {
+            crypto: crypto.then(Default::default),
             light: vec![DVec3::ZERO; slots],
             beauty_squares: DVec3::ZERO,
             coverage: 0.0,
@@ -181,6 +186,10 @@ impl PixelAccumulator {
         self.beauty_squares = DVec3::ZERO;
         self.coverage = 0.0;
         self.data = [DVec3::ZERO; 6];
+        if let Some(c) = &mut self.crypto {
+            c[0].clear();
+            c[1].clear();
+        }
         self.depth = f32::INFINITY;
         self.samples = 0;
         self.rays = 0;
@@ -201,6 +210,10 @@ impl PixelAccumulator {
         if let Some(h) = &rec.hit {
             for (sum, v) in self.data.iter_mut().zip(mean_data(h)) {
                 *sum += v.as_dvec3();
+            }
+            if let Some([objects, materials]) = &mut self.crypto {
+                crypto::count(objects, h.object, 1);
+                crypto::count(materials, h.material, 1);
             }
             self.depth = self.depth.min(h.depth);
         }
@@ -226,6 +239,8 @@ pub struct Tile {
     coverage: Vec<f32>,
     /// Sums of [`MEAN_DATA`] (empty where not requested).
     data: [Vec<Vec3>; 6],
+    /// Per pixel, samples per object and per material (empty without Cryptomatte).
+    crypto: [Vec<crypto::Counts>; 2],
     depth: Vec<f32>,
     samples: Vec<u32>,
     /// Contributions dropped for being NaN or infinite.
@@ -270,6 +285,11 @@ impl Tile {
             rays: if adaptive { vec![0; n] } else { Vec::new() },
             coverage: vec![0.0; n],
             data: MEAN_DATA.map(vec3s),
+            crypto: if aovs.wants_crypto() {
+                [vec![Vec::new(); n], vec![Vec::new(); n]]
+            } else {
+                Default::default()
+            },
             depth: if aovs.contains(Aov::Depth) {
                 vec![f32::INFINITY; n]
             } else {
@@ -302,6 +322,13 @@ impl Tile {
         for (sums, sum) in self.data.iter_mut().zip(acc.data) {
             if !sums.is_empty() {
                 sums[pixel] += sum.as_vec3();
+            }
+        }
+        if let Some(counts) = &acc.crypto {
+            for (tile_counts, pixel_counts) in self.crypto.iter_mut().zip(counts) {
+                for &(index, n) in pixel_counts {
+                    crypto::count(&mut tile_counts[pixel], index, n);
+                }
             }
         }
         if !self.depth.is_empty() {
@@ -421,6 +448,9 @@ pub struct Film {
     pub aovs: AovSet,
     pub router: Router,
     pub tiles: Vec<Tile>,
+    /// Cryptomatte ids of the objects and materials, by index (set with the Cryptomatte
+    /// layers).
+    pub crypto_ids: crypto::Ids,
 }
 
 impl Film {
@@ -449,6 +479,7 @@ impl Film {
             aovs,
             router,
             tiles,
+            crypto_ids: crypto::Ids::default(),
         }
     }
 
@@ -474,6 +505,11 @@ impl Film {
             per_pixel += if aovs.contains(aov) { vec3 } else { 0 };
         }
         per_pixel += if aovs.contains(Aov::Depth) { 4 } else { 0 };
+        if aovs.wants_crypto() {
+            // Two lists a pixel; their length varies: counted for four objects each.
+            let list = std::mem::size_of::<crypto::Counts>() as u64;
+            per_pixel += 2 * (list + 4 * 8);
+        }
         let channels: u64 = aovs.iter().map(|aov| aov.channels().len() as u64).sum();
         width as u64 * height as u64 * (per_pixel + 4 * channels)
     }
@@ -525,6 +561,9 @@ impl Film {
             .map(|&aov| data(aov))
             .collect::<Result<Vec<_>, _>>()?;
         let depth = data(Aov::Depth)?;
+        if self.aovs.wants_crypto() {
+            return Err("Cryptomatte keeps every object's sample count, more than its six ranks in the EXR: a render with crypto layers cannot be continued".into());
+        }
         let keeps_squares = self.tiles.first().is_some_and(|t| !t.beauty_sum.is_empty());
         if keeps_squares && !self.aovs.contains(Aov::Variance) {
             return Err(
@@ -661,6 +700,24 @@ impl Film {
                             ]
                         }
                         (Aov::Spp, _) => [spp, 0.0, 0.0, 0.0],
+                        (Aov::Crypto(kind, layer), _) => {
+                            let k = match kind {
+                                crypto::Kind::Object => 0,
+                                crypto::Kind::Material => 1,
+                            };
+                            let ranks = crypto::ranks(
+                                &tile.crypto[k][p],
+                                self.crypto_ids.of(kind),
+                                tile.samples[p],
+                            );
+                            let rank = |r: usize| {
+                                ranks
+                                    .get(r)
+                                    .map_or((0.0, 0.0), |&(id, c)| (f32::from_bits(id), c))
+                            };
+                            let (a, b) = (rank(2 * layer as usize), rank(2 * layer as usize + 1));
+                            [a.0, a.1, b.0, b.1]
+                        }
                         (Aov::Variance, _) => {
                             let n = tile.samples[p] as f64;
                             let v = if n > 1.0 {

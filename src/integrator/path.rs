@@ -64,6 +64,9 @@ pub struct FirstHit {
     pub position: Vec3,
     /// Directional albedo of each lobe kind.
     pub lobe_albedo: PerLobe,
+    /// The object and the material hit (indices: `World::objects`, the materials).
+    pub object: u32,
+    pub material: u32,
 }
 
 /// Receives what a path produces.
@@ -359,6 +362,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     depth: world.camera.depth(it.p),
                     position: world.space.to_world(it.p).as_vec3(),
                     lobe_albedo: bsdf.albedo_lobes(wo),
+                    object: world.object_of(&it),
+                    material: it.material,
                 }));
             }
             // The region efficiency-aware roulette keeps statistics for (only in that mode).

@@ -58,11 +58,11 @@ def render_seconds(scene, out, resolution, **settings):
 
 
 def instructions(scene, out, resolution, **settings):
-    """Instructions callgrind counts in the render loop (`render::render`: no loading, BVH
-    or EXR writing) on one thread; None without valgrind."""
+    """Instructions callgrind counts in the render loop (`render::render_into`: no loading,
+    BVH or EXR writing) on one thread; None without valgrind (or if nothing was counted)."""
     profile = Path(out).with_suffix(".callgrind")
     cmd = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={profile}",
-           "--toggle-collect=lucerna::render::render", lt.BINARY, "render", str(scene),
+           "--toggle-collect=lucerna::render::render_into", lt.BINARY, "render", str(scene),
            "-o", str(out), "-q", "--threads", "1", "--resolution", f"{resolution[0]}x{resolution[1]}"]
     for key, value in settings.items():
         cmd += [f"--{key.replace('_', '-')}", str(value)]
@@ -72,14 +72,13 @@ def instructions(scene, out, resolution, **settings):
         return None
     for line in profile.read_text().splitlines():
         if line.startswith("totals:") or line.startswith("summary:"):
-            return int(line.split()[1])
+            return int(line.split()[1]) or None
     return None
 
 
-def feature_costs(work, repeats, quick):
+def feature_cost_cases(work):
     punctual = punctual_cornell(work)
-    spp = 8 if quick else 32
-    cases = [
+    return [
         # (case, scene, resolution, settings A, settings B, what the ratio B/A says)
         ("Cornell box: all AOVs / beauty only", CORNELL, (256, 256),
          {"aov": "beauty"}, {"aov": "all"}),
@@ -92,6 +91,13 @@ def feature_costs(work, repeats, quick):
         ("MIS plates: general / plan", PLATES, (240, 160),
          {"aov": "beauty"}, {"aov": "beauty", "plan": "general"}),
     ]
+
+
+def feature_costs(work, repeats, quick, cases=None):
+    """Render seconds (interleaved pairs) and render-loop instructions of each case of
+    `cases` (default: the render plan's)."""
+    cases = feature_cost_cases(work) if cases is None else cases
+    spp = 8 if quick else 32
     rows = []
     for name, scene, resolution, a, b in cases:
         seconds = {"a": [], "b": []}
