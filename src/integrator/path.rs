@@ -356,14 +356,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             );
             let wo = it.frame.to_local(-ray.dir);
             if path.depth == 0 && path.branch == 0 {
-                rec.first_hit(DATA.then(|| FirstHit {
-                    albedo: bsdf.albedo(wo),
-                    normal: it.frame.n,
-                    depth: world.camera.depth(it.p),
-                    position: world.space.to_world(it.p).as_vec3(),
-                    lobe_albedo: bsdf.albedo_lobes(wo),
-                    object: world.object_of(&it),
-                    material: it.material,
+                rec.first_hit(DATA.then(|| {
+                    let lobe_albedo = bsdf.albedo_lobes(wo);
+                    FirstHit {
+                        albedo: lobe_albedo.iter().sum(),
+                        normal: it.frame.n,
+                        depth: world.camera.depth(it.p),
+                        position: world.space.to_world(it.p).as_vec3(),
+                        lobe_albedo,
+                        object: world.object_of(&it),
+                        material: it.material,
+                    }
                 }));
             }
             // The region efficiency-aware roulette keeps statistics for (only in that mode).
@@ -599,7 +602,13 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             return 0;
         }
         let wi = it.frame.to_local(ls.wi);
-        let f = bsdf.eval(wo, wi);
+        // At the first vertex the lobe layers need f split by lobe: evaluated once, split.
+        let (f, lobes) = if walk.lobes && path.depth == 0 {
+            let parts = bsdf.eval_lobes(wo, wi);
+            (parts[0] + parts[1], material::shares(parts))
+        } else {
+            (bsdf.eval(wo, wi), path.lobes)
+        };
         if f == Vec3::ZERO {
             return 0;
         }
@@ -624,11 +633,6 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             bsdf.pdf(wo, wi)
         };
         let value = path.beta * f * radiance / (p_light * n_nee as f32);
-        let lobes = if walk.lobes && path.depth == 0 {
-            bsdf.lobe_shares(wo, Some(wi))
-        } else {
-            path.lobes
-        };
         record(
             rec,
             walk,

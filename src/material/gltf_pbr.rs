@@ -255,14 +255,8 @@ impl GltfPbr {
         !self.smooth() || self.metallic < 1.0 || (self.coat > 0.0 && !self.coat_smooth())
     }
 
-    /// Directional albedo estimate at `wo` (Fresnel at n·v, no microfacet energy loss):
-    /// the denoising albedo.
-    pub fn albedo(&self, wo: Vec3) -> Vec3 {
-        let [diffuse, glossy] = self.albedo_lobes(wo);
-        diffuse + glossy
-    }
-
-    /// [`GltfPbr::albedo`] split into the diffuse lobe and the glossy ones.
+    /// Directional albedo estimate at `wo` (Fresnel at n·v, no microfacet energy loss) of
+    /// the diffuse lobe and of the glossy ones: their sum is the denoising albedo.
     pub fn albedo_lobes(&self, wo: Vec3) -> [Vec3; 2] {
         let c = wo.z.clamp(0.0, 1.0);
         let coat = self.coat_fresnel(c);

@@ -22,6 +22,14 @@ use phong::Phong;
 /// to one where the path carries light); as albedos, each lobe's reflectance.
 pub type PerLobe = [Vec3; 3];
 
+/// The lobe shares of f · cos θi split as `[diffuse, glossy]` (see [`Bsdf::eval_lobes`]).
+#[inline]
+pub fn shares([diffuse, glossy]: [Vec3; 2]) -> PerLobe {
+    let total = diffuse + glossy;
+    let share = |part: Vec3| Vec3::select(total.cmpgt(Vec3::ZERO), part / total, Vec3::ZERO);
+    [share(diffuse), share(glossy), Vec3::ZERO]
+}
+
 /// The kind of lobe a sample came from (the lobe splits of the AOVs follow it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Lobe {
@@ -94,13 +102,10 @@ impl Bsdf {
     /// a delta lobe (a perfect mirror: glossy), pass `wi` = `None`.
     #[inline]
     pub fn lobe_shares(&self, wo: Vec3, wi: Option<Vec3>) -> PerLobe {
-        let Some(wi) = wi else {
-            return [Vec3::ZERO, Vec3::ONE, Vec3::ZERO];
-        };
-        let [diffuse, glossy] = self.eval_lobes(wo, wi);
-        let total = diffuse + glossy;
-        let share = |part: Vec3| Vec3::select(total.cmpgt(Vec3::ZERO), part / total, Vec3::ZERO);
-        [share(diffuse), share(glossy), Vec3::ZERO]
+        match wi {
+            Some(wi) => shares(self.eval_lobes(wo, wi)),
+            None => [Vec3::ZERO, Vec3::ONE, Vec3::ZERO],
+        }
     }
 
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` (non-delta lobes).
@@ -132,16 +137,8 @@ impl Bsdf {
         }
     }
 
-    /// Directional albedo estimate at `wo`, as denoisers expect it in the albedo AOV.
-    pub fn albedo(&self, wo: Vec3) -> Vec3 {
-        match self {
-            Self::Lambert(b) => b.albedo,
-            Self::GltfPbr(b) => b.albedo(wo),
-            Self::Phong(b) => b.albedo(),
-        }
-    }
-
-    /// [`Bsdf::albedo`] split by lobe (diffuse, glossy, transmission): the `*_color` AOVs.
+    /// Directional albedo estimate at `wo` of each lobe (diffuse, glossy, transmission):
+    /// the `*_color` AOVs; their sum is the albedo denoisers expect in the albedo AOV.
     pub fn albedo_lobes(&self, wo: Vec3) -> PerLobe {
         match self {
             Self::Lambert(b) => [b.albedo, Vec3::ZERO, Vec3::ZERO],

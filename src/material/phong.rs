@@ -86,9 +86,4 @@ impl Phong {
         }
         BsdfSample::from_mixture(wi, self.eval(wo, wi), self.pdf(wo, wi), lobe)
     }
-
-    /// Directional albedo estimate (kd + ks).
-    pub fn albedo(&self) -> Vec3 {
-        self.kd + self.ks
-    }
 }
