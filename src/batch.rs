@@ -118,6 +118,7 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
         ));
     }
     let base = job_path.parent().unwrap_or(Path::new(""));
+    std::fs::create_dir_all(logs).map_err(|e| Error::other(logs, "logs", e.to_string()))?;
     let mut tasks = Vec::new();
     for (i, render) in job.render.iter().enumerate() {
         let element = |key: &str| format!("render[{i}].{key}");
@@ -161,7 +162,6 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
             .and_then(Path::file_stem)
             .map_or("default".into(), |s| s.to_string_lossy().into_owned());
         let camera = render.camera.clone().unwrap_or_default();
-        std::fs::create_dir_all(logs).map_err(|e| Error::other(logs, "logs", e.to_string()))?;
         let settings_file = logs.join(format!("render{i}.settings.toml"));
         std::fs::write(&settings_file, &settings_text)
             .map_err(|e| Error::other(&settings_file, "logs", e.to_string()))?;

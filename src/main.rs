@@ -709,14 +709,15 @@ fn merge_command(inputs: &[PathBuf], output: &Path) -> Result<ExitCode> {
         })
         .collect::<Result<Vec<_>>>()?;
     let (planes, header) = lucerna::merge::merge(&parts)?;
-    film::exr::write_planes(output, &planes, &header)?;
+    let (window, display) = (planes.window, planes.display);
+    film::exr::write_planes(output, planes, &header)?;
     eprintln!(
         "lucerna: merged {} parts into {} (pixels {} of {}x{})",
         parts.len(),
         output.display(),
-        planes.window.describe(),
-        planes.display.0,
-        planes.display.1
+        window.describe(),
+        display.0,
+        display.1
     );
     Ok(ExitCode::SUCCESS)
 }

@@ -99,15 +99,18 @@ fn check(parts: &[Part]) -> Result<()> {
         }
     }
     // Which samples of which sequence each part holds.
-    let samples = |p: &Part| {
-        let mut options = RenderOptions::default();
-        options
-            .load_settings(p.header.text("lucerna/settings").unwrap_or_default())
-            .map(|()| (options.settings.seed, options.sample_range()))
-            .map_err(|e| Error::bad_input(&p.path, "lucerna/settings", e))
-    };
+    let samples = parts
+        .iter()
+        .map(|p| {
+            let mut options = RenderOptions::default();
+            options
+                .load_settings(p.header.text("lucerna/settings").unwrap_or_default())
+                .map(|()| (options.settings.seed, options.sample_range()))
+                .map_err(|e| Error::bad_input(&p.path, "lucerna/settings", e))
+        })
+        .collect::<Result<Vec<_>>>()?;
     for (i, a) in parts.iter().enumerate() {
-        for b in &parts[i + 1..] {
+        for (j, b) in parts.iter().enumerate().skip(i + 1) {
             if !overlap(&a.planes.window, &b.planes.window) {
                 continue;
             }
@@ -126,7 +129,7 @@ fn check(parts: &[Part]) -> Result<()> {
                     ),
                 ));
             }
-            let ((seed_a, range_a), (seed_b, range_b)) = (samples(a)?, samples(b)?);
+            let ((seed_a, range_a), (seed_b, range_b)) = (&samples[i], &samples[j]);
             if seed_a == seed_b && range_a.start < range_b.end && range_b.start < range_a.end {
                 return Err(Error::bad_input(
                     &b.path,
@@ -251,7 +254,8 @@ pub fn merge(parts: &[Part]) -> Result<(Planes, Header)> {
         window,
         channels,
     };
-    Ok((planes.clone(), merged_header(parts, &planes)?))
+    let header = merged_header(parts, &planes)?;
+    Ok((planes, header))
 }
 
 /// Calls `f(index in part, index in out)` for every pixel of window `part` inside `out`.

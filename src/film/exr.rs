@@ -117,21 +117,23 @@ pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result
         window: film.window,
         channels,
     };
-    write_planes(path, &planes, header)
+    write_planes(path, planes, header)
 }
 
-/// Writes `planes` to `path` atomically, with `header` in the header.
-pub fn write_planes(path: &Path, planes: &Planes, header: &Header) -> Result<()> {
+/// Writes `planes` to `path` atomically, with `header` in the header. The planes move into
+/// the encoder: no copy of the image is made.
+pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> {
+    let (display, window) = (planes.display, planes.window);
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = planes
         .channels
-        .iter()
-        .map(|(name, plane)| AnyChannel::new(text(name), FlatSamples::F32(plane.clone())))
+        .into_iter()
+        .map(|(name, plane)| AnyChannel::new(text(&name), FlatSamples::F32(plane)))
         .collect();
     let mut layer_attributes = LayerAttributes {
         software_name: Some(text(crate::RENDERER)),
         world_to_camera: header.world_to_camera,
         world_to_normalized_device: header.world_to_ndc,
-        layer_position: Vec2(planes.window.x as i32, planes.window.y as i32),
+        layer_position: Vec2(window.x as i32, window.y as i32),
         ..Default::default()
     };
     for (name, value) in &header.attributes {
@@ -144,15 +146,12 @@ pub fn write_planes(path: &Path, planes: &Planes, header: &Header) -> Result<()>
         layer_attributes.other.insert(text(name), value);
     }
     let layer = Layer::new(
-        (planes.window.width as usize, planes.window.height as usize),
+        (window.width as usize, window.height as usize),
         layer_attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(channels),
     );
-    let display = IntegerBounds::new(
-        (0, 0),
-        (planes.display.0 as usize, planes.display.1 as usize),
-    );
+    let display = IntegerBounds::new((0, 0), (display.0 as usize, display.1 as usize));
     let image = Image::new(ImageAttributes::new(display), layer);
     super::write_atomically(path, |file| {
         image
