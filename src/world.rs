@@ -540,6 +540,7 @@ fn area_lights(
                 centre,
                 radius,
                 two_sided: m.double_sided,
+                textured: m.emissive_texture.is_some(),
                 mean_radiance,
             }),
             Primitive::Quadric(quadric) => Light::Quadric(QuadricLight {
@@ -1137,10 +1138,16 @@ impl Surfaces {
     /// which already checked the side).
     #[inline]
     pub fn emission_at(&self, prim: u32, b: Vec2) -> Vec3 {
-        let (mat, attrs) = self.material_at(prim, b);
+        let material = match self.prims[prim as usize] {
+            PrimRef::Triangle { mesh, .. } => self.meshes[mesh as usize].material,
+            PrimRef::Sphere(s) => self.spheres[s as usize].material,
+            PrimRef::Quadric(q) => self.quadrics[q as usize].material,
+        };
+        let mat = &self.materials[material as usize];
         if mat.emissive_texture.is_none() {
             return mat.emissive;
         }
+        let (mat, attrs) = self.material_at(prim, b);
         material::emission(mat, &self.textures, &attrs)
     }
 }

@@ -178,6 +178,7 @@ fn area_lights_by_area_and_by_solid_angle() {
             centre: Vec3::new(0.3, 1.5, -0.2),
             radius: 0.6,
             two_sided,
+            textured: false,
             mean_radiance: Vec3::ONE,
         })
     };

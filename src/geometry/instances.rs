@@ -5,13 +5,10 @@
 //! and Cycles' instancing, instead of with every placed triangle.
 
 use super::ray::Ray;
-use super::{Bvh, Hit, PrimitiveHit, Traversal, build_wide_bvh};
-use glam::{Affine3A, UVec2, Vec3};
-use obvhs::{
-    aabb::Aabb,
-    cwbvh::{CwBvh, node::CwBvhNode},
-    traverse,
-};
+use super::wide::{LeafResult, WideBvh};
+use super::{Bvh, Hit, PrimitiveHit};
+use glam::{Affine3A, Vec3};
+use obvhs::aabb::Aabb;
 
 /// One placement of a shared BVH.
 #[derive(Clone, Copy, Debug)]
@@ -24,11 +21,11 @@ pub struct Placement {
 
 /// A top-level BVH over placements of shared BVHs.
 pub struct InstancedBvh {
-    top: CwBvh,
+    /// The top level; its leaf order maps to the placement's index as given to
+    /// [`InstancedBvh::build`].
+    top: WideBvh,
     /// Placements in top-level leaf order.
     placements: Vec<Placement>,
-    /// Leaf order to the placement's index as given to [`InstancedBvh::build`].
-    order: Vec<u32>,
     shared: Vec<Bvh>,
 }
 
@@ -41,15 +38,9 @@ impl InstancedBvh {
             .iter()
             .map(|&(lo, hi)| Aabb::new(lo.into(), hi.into()))
             .collect();
-        let mut top = if aabbs.is_empty() {
-            CwBvh::default()
-        } else {
-            build_wide_bvh(&aabbs)
-        };
-        let order = std::mem::take(&mut top.primitive_indices);
+        let top = WideBvh::build(&aabbs);
         Self {
-            placements: order.iter().map(|&i| placements[i as usize]).collect(),
-            order,
+            placements: top.order.iter().map(|&i| placements[i as usize]).collect(),
             top,
             shared,
         }
@@ -57,9 +48,8 @@ impl InstancedBvh {
 
     /// Bytes the structure holds: top-level nodes, placements, and the shared BVHs.
     pub fn bytes(&self) -> usize {
-        use std::mem::size_of;
-        self.top.nodes.len() * size_of::<CwBvhNode>()
-            + self.placements.len() * (size_of::<Placement>() + size_of::<u32>())
+        self.top.bytes()
+            + self.placements.len() * std::mem::size_of::<Placement>()
             + self.shared.iter().map(Bvh::bytes).sum::<usize>()
     }
 
@@ -76,7 +66,7 @@ impl InstancedBvh {
             tmax,
         };
         (
-            self.order[leaf],
+            self.top.order[leaf],
             object_ray,
             &self.shared[placement.shared as usize],
         )
@@ -90,30 +80,22 @@ impl InstancedBvh {
         ray: &Ray,
         mut accept: F,
     ) -> Option<Hit> {
-        if self.top.nodes.is_empty() {
-            return None;
-        }
-        let mut node_ray = super::NodeRay::new(ray);
         let mut best: Option<Hit> = None;
-        let mut state = Traversal::new(&self.top, ray.dir);
-        let mut node;
-        traverse!(
-            self.top,
-            node,
-            state,
-            super::intersect_node(node, &node_ray, state.oct_inv4),
-            {
-                let (placement, object_ray, shared) =
-                    self.enter(state.primitive_id as usize, ray, node_ray.tmax);
+        self.top.traverse(ray, |leaves, mut tmax| {
+            let mut result = LeafResult::Miss;
+            for leaf in leaves {
+                let (placement, object_ray, shared) = self.enter(leaf, ray, tmax);
                 if let Some(mut hit) = shared.intersect(&object_ray, |prim, h| {
                     accept(placement, prim, h, &object_ray)
                 }) {
-                    node_ray.tmax = hit.t;
+                    tmax = hit.t;
+                    result = LeafResult::Closer(hit.t);
                     hit.instance = placement;
                     best = Some(hit);
                 }
             }
-        );
+            result
+        });
         best
     }
 
@@ -123,31 +105,19 @@ impl InstancedBvh {
         ray: &Ray,
         mut accept: F,
     ) -> bool {
-        if self.top.nodes.is_empty() {
-            return false;
-        }
-        let node_ray = super::NodeRay::new(ray);
-        let mut state = Traversal::new(&self.top, ray.dir);
-        let mut node;
         let mut occluded = false;
-        'search: {
-            traverse!(
-                self.top,
-                node,
-                state,
-                super::intersect_node(node, &node_ray, state.oct_inv4),
-                {
-                    let (placement, object_ray, shared) =
-                        self.enter(state.primitive_id as usize, ray, ray.tmax);
-                    if shared.occluded(&object_ray, |prim, h| {
-                        accept(placement, prim, h, &object_ray)
-                    }) {
-                        occluded = true;
-                        break 'search;
-                    }
+        self.top.traverse(ray, |leaves, _| {
+            for leaf in leaves {
+                let (placement, object_ray, shared) = self.enter(leaf, ray, ray.tmax);
+                if shared.occluded(&object_ray, |prim, h| {
+                    accept(placement, prim, h, &object_ray)
+                }) {
+                    occluded = true;
+                    return LeafResult::Stop;
                 }
-            );
-        }
+            }
+            LeafResult::Miss
+        });
         occluded
     }
 }

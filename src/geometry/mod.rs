@@ -1,4 +1,4 @@
-//! Geometry in render space: triangles, the BVH over them (an obvhs compressed wide BVH8),
+//! Geometry in render space: triangles, the BVH over them (four-wide, built by obvhs),
 //! and the two ray queries the integrator needs: closest hit and occlusion.
 
 pub mod frame;
@@ -7,17 +7,13 @@ pub mod quadric;
 pub mod ray;
 pub mod sphere;
 pub mod triangle;
+pub mod wide;
 
-use glam::{UVec2, Vec3, Vec3A};
-use obvhs::{
-    BvhBuildParams,
-    aabb::Aabb,
-    cwbvh::{CwBvh, builder::build_cwbvh, node::CwBvhNode},
-    faststack::FastStack,
-    traverse,
-};
+use glam::Vec3;
+use obvhs::aabb::Aabb;
 use ray::Ray;
 use triangle::RayShear;
+use wide::{LeafResult, WideBvh};
 
 /// A primitive the BVH holds.
 #[derive(Clone, Copy, Debug)]
@@ -84,180 +80,10 @@ pub const NOT_PLACED: u32 = u32::MAX;
 /// A BVH over primitives with per-primitive flags, answering closest-hit and occlusion
 /// queries.
 pub struct Bvh {
-    bvh: CwBvh,
+    bvh: WideBvh,
     /// Primitives in BVH leaf order, so leaves read them without indirection.
     prims: Vec<Primitive>,
     flags: Vec<u8>,
-    /// BVH leaf order to input order.
-    order: Vec<u32>,
-}
-
-/// Slab-test constants of a ray for wide-node traversal.
-struct NodeRay {
-    origin: Vec3A,
-    inv_dir: Vec3A,
-    negative: [bool; 3],
-    tmax: f32,
-}
-
-/// Relative error bound of the slab test's three float operations (pbrt's 1 + 2γ₃): the
-/// far distance is enlarged by it so rounding never culls a box the ray touches.
-const SLAB_ROBUSTNESS: f32 =
-    1.0 + 2.0 * (3.0 * f32::EPSILON * 0.5) / (1.0 - 3.0 * f32::EPSILON * 0.5);
-
-impl NodeRay {
-    fn new(ray: &Ray) -> Self {
-        // A finite reciprocal keeps 0 * inf = NaN out of the slab test.
-        let inv = |d: f32| {
-            if d.abs() < 1e-20 {
-                1e20f32.copysign(d)
-            } else {
-                1.0 / d
-            }
-        };
-        let inv_dir = Vec3A::new(inv(ray.dir.x), inv(ray.dir.y), inv(ray.dir.z));
-        Self {
-            origin: ray.origin.into(),
-            inv_dir,
-            // From the reciprocal's sign, so that -0.0 components pick near and far planes
-            // consistently with it.
-            negative: [inv_dir.x < 0.0, inv_dir.y < 0.0, inv_dir.z < 0.0],
-            tmax: ray.tmax,
-        }
-    }
-}
-
-/// Which of a node's eight children the ray overlaps, as the hit mask obvhs's traversal
-/// expects. Unlike obvhs's own node test, which clamps the near distance to an absolute 1e-4,
-/// this one accepts boxes from t = 0: rays leave surfaces at tiny offsets and must still see
-/// a wall right next to them.
-#[inline(always)]
-fn intersect_node(node: &CwBvhNode, ray: &NodeRay, oct_inv4: u32) -> u32 {
-    let scale = node.compute_extent() * ray.inv_dir;
-    let offset = (Vec3A::from(node.p) - ray.origin) * ray.inv_dir;
-    let pick = |neg: bool, lo: &[u8; 8], hi: &[u8; 8]| if neg { (*hi, *lo) } else { (*lo, *hi) };
-    let (near_x, far_x) = pick(ray.negative[0], &node.child_min_x, &node.child_max_x);
-    let (near_y, far_y) = pick(ray.negative[1], &node.child_min_y, &node.child_max_y);
-    let (near_z, far_z) = pick(ray.negative[2], &node.child_min_z, &node.child_max_z);
-    let mut overlaps = [false; 8];
-    for c in 0..8 {
-        let t0 = (near_x[c] as f32 * scale.x + offset.x)
-            .max(near_y[c] as f32 * scale.y + offset.y)
-            .max(near_z[c] as f32 * scale.z + offset.z)
-            .max(0.0);
-        let t1 = (far_x[c] as f32 * scale.x + offset.x)
-            .min(far_y[c] as f32 * scale.y + offset.y)
-            .min(far_z[c] as f32 * scale.z + offset.z)
-            * SLAB_ROBUSTNESS;
-        overlaps[c] = t0 <= t1.min(ray.tmax);
-    }
-    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-    let mut hit_mask = 0u32;
-    for (c, &hit) in overlaps.iter().enumerate() {
-        if hit {
-            let child_bits = (child_bits8 >> (c * 8)) as u32 & 0xff;
-            let bit_index = (bit_index8 >> (c * 8)) as u32 & 0xff;
-            hit_mask |= child_bits << bit_index;
-        }
-    }
-    hit_mask
-}
-
-/// Builds obvhs's wide BVH over `aabbs` (not empty).
-fn build_wide_bvh(aabbs: &[Aabb]) -> CwBvh {
-    build_cwbvh(
-        aabbs,
-        BvhBuildParams::medium_build(),
-        &mut std::time::Duration::default(),
-    )
-}
-
-/// Node groups the traversal stack keeps inline: a BVH8 of any sensible scene is far
-/// shallower.
-const INLINE_STACK: usize = 32;
-
-/// The traversal stack. obvhs's own holds 32 node groups and, when full, overwrites its top
-/// one, losing geometry; a BVH can be deeper than that (PLOC chains thousands of coincident
-/// instances, corrupt vertex data spans every float exponent). This one spills into a heap
-/// vector past its inline entries, which only such BVHs ever allocate.
-struct TraversalStack {
-    inline: [UVec2; INLINE_STACK],
-    len: usize,
-    spill: Vec<UVec2>,
-}
-
-impl FastStack<UVec2> for TraversalStack {
-    #[inline(always)]
-    fn push(&mut self, v: UVec2) {
-        if self.len < INLINE_STACK {
-            self.inline[self.len] = v;
-            self.len += 1;
-        } else {
-            #[cfg(test)]
-            SPILLED.store(true, std::sync::atomic::Ordering::Relaxed);
-            self.spill.push(v);
-        }
-    }
-    #[inline(always)]
-    fn pop_fast(&mut self) -> UVec2 {
-        self.pop().unwrap_or_default()
-    }
-    #[inline(always)]
-    fn pop(&mut self) -> Option<UVec2> {
-        if let Some(v) = self.spill.pop() {
-            return Some(v);
-        }
-        self.len = self.len.checked_sub(1)?;
-        Some(self.inline[self.len])
-    }
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.len + self.spill.len()
-    }
-    #[inline(always)]
-    fn is_empty(&self) -> bool {
-        self.len == 0
-    }
-    #[inline(always)]
-    fn clear(&mut self) {
-        self.len = 0;
-        self.spill.clear();
-    }
-}
-
-/// Set when a traversal stack spills (tests check that deep cases reach the spill).
-#[cfg(test)]
-static SPILLED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Traversal state with the fields obvhs's `traverse!` macro uses, over a
-/// [`TraversalStack`].
-struct Traversal {
-    stack: TraversalStack,
-    current_group: UVec2,
-    primitive_group: UVec2,
-    oct_inv4: u32,
-    primitive_id: u32,
-    hitmask: u32,
-}
-
-impl Traversal {
-    /// The state at the root of `bvh` for rays along `dir`.
-    #[inline(always)]
-    fn new(bvh: &CwBvh, dir: Vec3) -> Self {
-        let start = bvh.new_traversal(Vec3A::from(dir));
-        Self {
-            stack: TraversalStack {
-                inline: [UVec2::ZERO; INLINE_STACK],
-                len: 0,
-                spill: Vec::new(),
-            },
-            current_group: start.current_group,
-            primitive_group: start.primitive_group,
-            oct_inv4: start.oct_inv4,
-            primitive_id: 0,
-            hitmask: 0,
-        }
-    }
 }
 
 impl Bvh {
@@ -265,23 +91,12 @@ impl Bvh {
     /// the current rayon pool.
     pub fn build(prims: &[Primitive], flags: &[u8]) -> Self {
         assert_eq!(prims.len(), flags.len());
-        if prims.is_empty() {
-            return Self {
-                bvh: CwBvh::default(),
-                prims: Vec::new(),
-                flags: Vec::new(),
-                order: Vec::new(),
-            };
-        }
         let aabbs: Vec<Aabb> = prims.iter().map(Primitive::aabb).collect();
-        let mut bvh = build_wide_bvh(&aabbs);
+        let bvh = WideBvh::build(&aabbs);
         drop(aabbs);
-        // Leaves index `prims` directly; the BVH's own copy of the order is not needed.
-        let order = std::mem::take(&mut bvh.primitive_indices);
         Self {
-            prims: order.iter().map(|&i| prims[i as usize]).collect(),
-            flags: order.iter().map(|&i| flags[i as usize]).collect(),
-            order,
+            prims: bvh.order.iter().map(|&i| prims[i as usize]).collect(),
+            flags: bvh.order.iter().map(|&i| flags[i as usize]).collect(),
             bvh,
         }
     }
@@ -289,8 +104,7 @@ impl Bvh {
     /// Bytes the structure holds: wide nodes, and per primitive its data, flags and index.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        self.bvh.nodes.len() * size_of::<CwBvhNode>()
-            + self.prims.len() * (size_of::<Primitive>() + size_of::<u8>() + size_of::<u32>())
+        self.bvh.bytes() + self.prims.len() * (size_of::<Primitive>() + size_of::<u8>())
     }
 
     /// Tests one leaf primitive; `accept` is consulted only for alpha-tested ones.
@@ -313,7 +127,7 @@ impl Bvh {
             if flags & CULL_BACK != 0 && !hit.front {
                 return None;
             }
-            if flags & ALPHA_TESTED != 0 && !accept(self.order[leaf], &hit) {
+            if flags & ALPHA_TESTED != 0 && !accept(self.bvh.order[leaf], &hit) {
                 return None;
             }
         }
@@ -327,30 +141,32 @@ impl Bvh {
         ray: &Ray,
         mut accept: F,
     ) -> Option<Hit> {
-        if self.bvh.nodes.is_empty() {
-            return None;
-        }
         let shear = RayShear::new(ray);
-        let mut node_ray = NodeRay::new(ray);
         let mut best: Option<(usize, PrimitiveHit)> = None;
-        let mut state = Traversal::new(&self.bvh, ray.dir);
-        let mut node;
-        traverse!(
-            self.bvh,
-            node,
-            state,
-            intersect_node(node, &node_ray, state.oct_inv4),
-            {
-                let leaf = state.primitive_id as usize;
-                if let Some(hit) = self.test(leaf, ray, &shear, node_ray.tmax, &mut accept) {
-                    node_ray.tmax = hit.t;
-                    best = Some((leaf, hit));
+        let mut best_prim = u32::MAX;
+        self.bvh.traverse(ray, |leaves, tmax| {
+            let mut result = LeafResult::Miss;
+            let mut tmax = tmax;
+            for leaf in leaves {
+                // A hit at exactly the closest distance so far wins if its primitive was
+                // given first: coincident primitives resolve to the same one whatever the
+                // BVH's layout and traversal order.
+                let bound = if best.is_some() { tmax.next_up() } else { tmax };
+                if let Some(hit) = self.test(leaf, ray, &shear, bound, &mut accept) {
+                    let prim = self.bvh.order[leaf];
+                    if hit.t < tmax || prim < best_prim {
+                        tmax = hit.t;
+                        best_prim = prim;
+                        result = LeafResult::Closer(hit.t);
+                        best = Some((leaf, hit));
+                    }
                 }
             }
-        );
+            result
+        });
         best.map(|(leaf, h)| Hit {
             t: h.t,
-            prim: self.order[leaf],
+            prim: self.bvh.order[leaf],
             b1: h.b1,
             b2: h.b2,
             front: h.front,
@@ -360,32 +176,20 @@ impl Bvh {
 
     /// True if anything accepted lies along `ray` in `(0, ray.tmax)`; stops at the first hit.
     pub fn occluded<F: FnMut(u32, &PrimitiveHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
-        if self.bvh.nodes.is_empty() {
-            return false;
-        }
         let shear = RayShear::new(ray);
-        let node_ray = NodeRay::new(ray);
-        let mut state = Traversal::new(&self.bvh, ray.dir);
-        let mut node;
         let mut occluded = false;
-        'search: {
-            traverse!(
-                self.bvh,
-                node,
-                state,
-                intersect_node(node, &node_ray, state.oct_inv4),
+        self.bvh.traverse(ray, |leaves, _| {
+            for leaf in leaves {
+                if self
+                    .test(leaf, ray, &shear, ray.tmax, &mut accept)
+                    .is_some()
                 {
-                    let leaf = state.primitive_id as usize;
-                    if self
-                        .test(leaf, ray, &shear, ray.tmax, &mut accept)
-                        .is_some()
-                    {
-                        occluded = true;
-                        break 'search;
-                    }
+                    occluded = true;
+                    return LeafResult::Stop;
                 }
-            );
-        }
+            }
+            LeafResult::Miss
+        });
         occluded
     }
 }
@@ -493,7 +297,7 @@ mod tests {
             }
         }
         let bvh = Bvh::build(&prims(&tris), &vec![ALPHA_TESTED; tris.len()]);
-        SPILLED.store(false, std::sync::atomic::Ordering::Relaxed);
+        wide::SPILLED.store(false, std::sync::atomic::Ordering::Relaxed);
         let ray = Ray::new(Vec3::new(-1.0, 0.0, 0.0), Vec3::X);
         let shear = RayShear::new(&ray);
         let mut found = 0;
@@ -522,25 +326,9 @@ mod tests {
         }
         assert!(found > 100, "only {found} rays hit");
         assert!(
-            SPILLED.load(std::sync::atomic::Ordering::Relaxed),
+            wide::SPILLED.load(std::sync::atomic::Ordering::Relaxed),
             "never spilled"
         );
-    }
-
-    /// The stack stays last-in first-out past its inline entries.
-    #[test]
-    fn traversal_stack_spills_in_order() {
-        let mut stack = Traversal::new(&CwBvh::default(), Vec3::X).stack;
-        for round in 0..2 {
-            for i in 0..3 * INLINE_STACK as u32 {
-                stack.push(UVec2::new(i, round));
-            }
-            assert_eq!(stack.len(), 3 * INLINE_STACK);
-            for i in (0..3 * INLINE_STACK as u32).rev() {
-                assert_eq!(stack.pop(), Some(UVec2::new(i, round)));
-            }
-            assert!(stack.is_empty() && stack.pop().is_none());
-        }
     }
 
     #[test]

@@ -6,12 +6,16 @@ use super::ray::Ray;
 use glam::{DVec3, Vec3};
 
 /// Per-ray constants of the watertight test: the axis permutation and shear that map the
-/// ray onto +z.
+/// ray onto +z, as three rows (`x' = row_x · p`, ...), so the test reads no vector by a
+/// run-time index. Each row holds exactly 1 and 0 where the permutation puts them, so a
+/// row's dot product rounds exactly like the permuted difference `p[kx] - sx p[kz]` of
+/// Woop et al.: the transformed vertices, and with them the watertightness, are theirs.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
     origin: Vec3,
-    k: [usize; 3],
-    shear: Vec3,
+    row_x: Vec3,
+    row_y: Vec3,
+    row_z: Vec3,
 }
 
 impl RayShear {
@@ -20,40 +24,42 @@ impl RayShear {
     pub fn new(ray: &Ray) -> Self {
         let d = ray.dir;
         let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
+        // The permutation (kx, ky, kz) as unit vectors: z along the largest component.
+        let (mut ex, mut ey, ez) = if a.x > a.y {
+            if a.x > a.z {
+                (Vec3::Y, Vec3::Z, Vec3::X)
+            } else {
+                (Vec3::X, Vec3::Y, Vec3::Z)
+            }
         } else if a.y > a.z {
-            1
+            (Vec3::Z, Vec3::X, Vec3::Y)
         } else {
-            2
+            (Vec3::X, Vec3::Y, Vec3::Z)
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
+        let dz = d.dot(ez);
         // Swapping keeps the winding of triangles seen along the ray.
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
+        if dz < 0.0 {
+            std::mem::swap(&mut ex, &mut ey);
         }
+        let (sx, sy, sz) = (d.dot(ex) / dz, d.dot(ey) / dz, 1.0 / dz);
         Self {
             origin: ray.origin,
-            k: [kx, ky, kz],
-            shear: Vec3::new(d[kx] / d[kz], d[ky] / d[kz], 1.0 / d[kz]),
+            row_x: ex - sx * ez,
+            row_y: ey - sy * ez,
+            row_z: sz * ez,
         }
     }
 }
 
 /// Intersects the ray described by `shear` with triangle `p0 p1 p2` in `(0, tmax)`.
-#[inline]
+#[inline(always)]
 pub fn intersect(s: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Option<PrimitiveHit> {
-    let [kx, ky, kz] = s.k;
     let a = p0 - s.origin;
     let b = p1 - s.origin;
     let c = p2 - s.origin;
-    let ax = a[kx] - s.shear.x * a[kz];
-    let ay = a[ky] - s.shear.y * a[kz];
-    let bx = b[kx] - s.shear.x * b[kz];
-    let by = b[ky] - s.shear.y * b[kz];
-    let cx = c[kx] - s.shear.x * c[kz];
-    let cy = c[ky] - s.shear.y * c[kz];
+    let (ax, ay) = (a.dot(s.row_x), a.dot(s.row_y));
+    let (bx, by) = (b.dot(s.row_x), b.dot(s.row_y));
+    let (cx, cy) = (c.dot(s.row_x), c.dot(s.row_y));
     let mut u = cx * by - cy * bx;
     let mut v = ax * cy - ay * cx;
     let mut w = bx * ay - by * ax;
@@ -73,10 +79,7 @@ pub fn intersect(s: &RayShear, p0: Vec3, p1: Vec3, p2: Vec3, tmax: f32) -> Optio
     if det == 0.0 {
         return None;
     }
-    let az = s.shear.z * a[kz];
-    let bz = s.shear.z * b[kz];
-    let cz = s.shear.z * c[kz];
-    let t_scaled = u * az + v * bz + w * cz;
+    let t_scaled = u * a.dot(s.row_z) + v * b.dot(s.row_z) + w * c.dot(s.row_z);
     let inv_det = 1.0 / det;
     let t = t_scaled * inv_det;
     // Positive comparisons: NaN fails them.

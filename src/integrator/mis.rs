@@ -41,7 +41,9 @@ impl Mis {
         match *self {
             Self::Balance => own / (own + other),
             Self::Power(beta) => {
-                let r = (other / own).powf(beta);
+                let q = other / own;
+                // β = 2, the default, without the cost of powf.
+                let r = if beta == 2.0 { q * q } else { q.powf(beta) };
                 1.0 / (1.0 + r)
             }
             Self::Maximum => {

@@ -80,6 +80,8 @@ pub struct SphereLight {
     pub centre: Vec3,
     pub radius: f32,
     pub two_sided: bool,
+    /// Whether its emission is textured: only then does a sample need its point's uv.
+    pub textured: bool,
     /// Mean emitted radiance, for selection by power.
     pub mean_radiance: Vec3,
 }
@@ -248,27 +250,23 @@ impl Light {
                     let n =
                         solid_angle::sample_sphere_cone(p, sp.centre, sp.radius, one_minus_cos, u);
                     let y = sp.centre + sp.radius * n;
-                    let (mut s, _) = area_sample(
-                        p,
-                        y,
-                        n,
-                        sp.two_sided,
-                        sp.prim,
-                        crate::geometry::sphere::uv(n),
-                    )?;
+                    let uv = if sp.textured {
+                        crate::geometry::sphere::uv(n)
+                    } else {
+                        Vec2::ZERO
+                    };
+                    let (mut s, _) = area_sample(p, y, n, sp.two_sided, sp.prim, uv)?;
                     s.pdf = solid_angle::sphere_cone_pdf(one_minus_cos);
                     return Some(s);
                 }
                 let n = square_to_uniform_sphere(u);
                 let y = sp.centre + sp.radius * n;
-                let (mut s, to_solid_angle) = area_sample(
-                    p,
-                    y,
-                    n,
-                    sp.two_sided,
-                    sp.prim,
-                    crate::geometry::sphere::uv(n),
-                )?;
+                let uv = if sp.textured {
+                    crate::geometry::sphere::uv(n)
+                } else {
+                    Vec2::ZERO
+                };
+                let (mut s, to_solid_angle) = area_sample(p, y, n, sp.two_sided, sp.prim, uv)?;
                 s.pdf = to_solid_angle / (4.0 * PI * sp.radius * sp.radius);
                 Some(s)
             }
@@ -452,6 +450,7 @@ mod tests {
             centre: Vec3::new(0.5, 3.0, 0.2),
             radius: 0.7,
             two_sided: false,
+            textured: false,
             mean_radiance: Vec3::ONE,
         });
         for light in [tri.clone(), sphere] {
