@@ -248,6 +248,54 @@ mod tests {
             .collect()
     }
 
+    /// A soup of 3,000 random triangles (sizes over three decades, with exact duplicates)
+    /// against brute force, for random rays from inside and outside it with random bounds:
+    /// the same closest hit (distance, and the first-given primitive of coincident ones) and
+    /// the same occlusion answer. This exercises multi-level nodes, nearest-first order and
+    /// pruning by the closest hit.
+    #[test]
+    fn closest_hits_and_occlusion_match_brute_force() {
+        let mut rng = crate::sampling::pcg::Pcg32::new(11, 3);
+        let mut point = |scale: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * scale
+                - Vec3::splat(scale)
+        };
+        let mut tris = Vec::new();
+        for i in 0..3000 {
+            let size = [0.01, 0.1, 1.0][i % 3];
+            let c = point(4.0);
+            tris.push([c + point(size), c + point(size), c + point(size)]);
+            if i % 50 == 0 {
+                tris.push(tris[tris.len() - 1]);
+            }
+        }
+        let bvh = Bvh::build(&prims(&tris), &vec![0; tris.len()]);
+        let mut hits = 0;
+        for k in 0..4000 {
+            let origin = point(6.0);
+            let dir = point(1.0);
+            let tmax = if k % 2 == 0 { f32::INFINITY } else { 4.0 };
+            let ray = Ray { origin, dir, tmax };
+            let shear = RayShear::new(&ray);
+            let brute = tris
+                .iter()
+                .enumerate()
+                .filter_map(|(i, t)| {
+                    Some((triangle::intersect(&shear, t[0], t[1], t[2], tmax)?, i))
+                })
+                .min_by(|a, b| a.0.t.total_cmp(&b.0.t).then(a.1.cmp(&b.1)));
+            let hit = bvh.intersect(&ray, |_, _| true);
+            assert_eq!(
+                hit.map(|h| (h.t, h.prim)),
+                brute.map(|(h, i)| (h.t, i as u32)),
+                "ray {ray:?}"
+            );
+            assert_eq!(bvh.occluded(&ray, |_, _| true), brute.is_some());
+            hits += brute.is_some() as u32;
+        }
+        assert!(hits > 1000, "only {hits} rays hit");
+    }
+
     #[test]
     fn rays_from_inside_a_closed_cube_always_hit_it() {
         let tris = cube();
