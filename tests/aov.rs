@@ -45,6 +45,21 @@ fn assert_close(name: &str, a: f32, b: f32) {
     );
 }
 
+/// In every pixel and channel, `layers` plus the emission add up to the beauty.
+fn assert_layers_and_emission_make_beauty(
+    what: &str,
+    layers: &[Vec<Vec<f32>>],
+    emission: &[Vec<f32>],
+    beauty: &[Vec<f32>],
+) {
+    for i in 0..beauty[0].len() {
+        for c in 0..3 {
+            let sum: f32 = layers.iter().map(|l| l[c][i]).sum();
+            assert_close(what, beauty[c][i], sum + emission[c][i]);
+        }
+    }
+}
+
 #[test]
 fn layer_sums_hold_in_every_pixel() {
     for scene in [ingest::default_scene().unwrap(), cornell_with_delta_paths()] {
@@ -343,15 +358,15 @@ fn lobe_layers_and_emission_make_the_beauty() {
         // The six light layers of LOBES (then come the colours).
         let lobes: Vec<_> = LOBES[..6].iter().map(|&a| p(a)).collect();
         let colours = [Aov::DiffuseColor, Aov::GlossyColor, Aov::TransmissionColor].map(p);
+        assert_layers_and_emission_make_beauty(
+            "lobes + emission = beauty",
+            &lobes,
+            &emission,
+            &beauty,
+        );
         let (mut glossy_light, mut diffuse_light) = (0.0, 0.0);
         for i in 0..beauty[0].len() {
             for c in 0..3 {
-                let sum: f32 = lobes.iter().map(|l| l[c][i]).sum();
-                assert_close(
-                    "lobes + emission = beauty",
-                    beauty[c][i],
-                    sum + emission[c][i],
-                );
                 let direct_sum = lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i];
                 assert_close("direct lobes = direct", direct[c][i], direct_sum);
                 let indirect_sum = lobes[1][c][i] + lobes[3][c][i] + lobes[5][c][i];
@@ -403,15 +418,15 @@ fn light_groups_and_emission_make_the_beauty() {
     assert_eq!(names, ["lg_warm", "lg_ceiling", "lg_default"]);
     let (beauty, emission) = (film.planes(Aov::Beauty), film.planes(Aov::Emission));
     let layers: Vec<_> = groups.iter().map(|&a| film.planes(a)).collect();
+    assert_layers_and_emission_make_beauty(
+        "groups + emission = beauty",
+        &layers,
+        &emission,
+        &beauty,
+    );
     let mut totals = vec![0.0f64; layers.len()];
     for i in 0..beauty[0].len() {
         for c in 0..3 {
-            let sum: f32 = layers.iter().map(|l| l[c][i]).sum();
-            assert_close(
-                "groups + emission = beauty",
-                beauty[c][i],
-                sum + emission[c][i],
-            );
             for (t, l) in totals.iter_mut().zip(&layers) {
                 *t += l[c][i] as f64;
             }

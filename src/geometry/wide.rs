@@ -316,9 +316,10 @@ fn collapse(bvh2: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<Node>, Child) {
     let mut work = vec![(0usize, 0usize)];
     while let Some((inner, wide)) = work.pop() {
         let left = bvh2[inner].first_index as usize;
-        let mut group = vec![left, left + 1];
-        while group.len() < 4 {
-            let largest = group
+        let mut group = [left, left + 1, 0, 0];
+        let mut len = 2;
+        while len < 4 {
+            let largest = group[..len]
                 .iter()
                 .enumerate()
                 .filter(|&(_, &c)| !bvh2[c].is_leaf())
@@ -329,10 +330,11 @@ fn collapse(bvh2: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<Node>, Child) {
             let Some((slot, &open)) = largest else { break };
             let first = bvh2[open].first_index as usize;
             group[slot] = first;
-            group.push(first + 1);
+            group[len] = first + 1;
+            len += 1;
         }
         let mut node = empty;
-        for (lane, &c) in group.iter().enumerate() {
+        for (lane, &c) in group[..len].iter().enumerate() {
             let aabb = bvh2[c].aabb();
             let (lo, hi) = (Vec3::from(aabb.min), Vec3::from(aabb.max));
             for axis in 0..3 {
