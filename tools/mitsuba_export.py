@@ -88,7 +88,7 @@ def emitter(material):
     return {"type": "area", "radiance": {"type": "rgb", "value": radiance}} if max(radiance) > 0 else None
 
 
-def camera(manifest, width, height, name=None):
+def camera(manifest, width, height, name=None, sampler="independent"):
     cameras = manifest["cameras"]
     if not cameras:
         raise Unsupported("the scene has no camera")
@@ -113,17 +113,18 @@ def camera(manifest, width, height, name=None):
                                                    up=up.tolist()),
         "film": {"type": "hdrfilm", "width": width, "height": height, "rfilter": {"type": "box"},
                  "pixel_format": "rgb"},
-        "sampler": {"type": "independent"},
+        "sampler": {"type": sampler},
     }
 
 
-def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=None):
-    """A Mitsuba scene dictionary (for `mi.load_dict`) of the lucerna scene file. Meshes are
+def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=None, sampler="independent"):
+    """A Mitsuba scene dictionary (for `mi.load_dict`) of the lucerna scene file, sampled by
+    Mitsuba's `sampler` plugin (its sample count is the one `mi.render` is given). Meshes are
     written as PLY files into `workdir`, which must outlive the loaded scene's creation."""
     import mitsuba as mi
     manifest, buffer = read_scene_file(scene_file)
     scene = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth},
-             "sensor": camera(manifest, width, height, camera_name)}
+             "sensor": camera(manifest, width, height, camera_name, sampler)}
     materials = manifest["materials"]
     plys = {}
     for i, inst in enumerate(manifest["instances"]):

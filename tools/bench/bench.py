@@ -98,13 +98,14 @@ class Lucerna:
 class Mitsuba:
     def __init__(self, spec, scene):
         self.name, self.variant, self.scene = spec["name"], spec["variant"], scene
+        self.sampler = spec.get("sampler", "independent")
         self.seconds_per_spp = None
 
     def run(self, resolution, spp, seed, out):
         npy = Path(out).with_suffix(".npy")
         cmd = [sys.executable, str(WORKER), str(self.scene["scene_file"]), "--variant", self.variant,
-               "--resolution", f"{resolution[0]}x{resolution[1]}", "--spp", str(spp), "--seed", str(seed),
-               "--out", str(npy)]
+               "--sampler", self.sampler, "--resolution", f"{resolution[0]}x{resolution[1]}", "--spp", str(spp),
+               "--seed", str(seed), "--out", str(npy)]
         stolen = steal_share()
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
@@ -213,6 +214,10 @@ def report(result, out):
         ref = s["reference"]
         lines.append(f"- **{s['name']}** ({s['path']}, {s['resolution'][0]}x{s['resolution'][1]}): reference "
                      f"{ref['spp']} spp by lucerna, {ref['seconds']:.0f} s, its own noise relMSE {ref['relmse_noise']:.2e}.")
+    for spec in result["renderer_specs"]:
+        settings = {k: v for k, v in spec.items() if k not in ("name", "kind")}
+        lines.append(f"- renderer **{spec['name']}** ({spec['kind']}): "
+                     + (", ".join(f"{k} {v}" for k, v in settings.items() if v) or "its defaults") + ".")
     for skipped in result["skipped"]:
         lines.append(f"- skipped: {skipped}")
     lines += ["", "## Efficiency ratios at equal time", ""] + ratio_table(medians, scenes, renderers)
@@ -243,7 +248,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     result = {"machine": machine(), "repeats": repeats, "scenes": [], "rows": [], "skipped": [],
-              "renderers": [r["name"] for r in config["renderer"]]}
+              "renderers": [r["name"] for r in config["renderer"]], "renderer_specs": config["renderer"]}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for scene in config["scene"]:
