@@ -174,7 +174,8 @@ struct RenderArgs {
     /// Light selection for light sampling: uniform, power (default), contribution.
     #[arg(long)]
     light_select: Option<String>,
-    /// Measure area lights are sampled in: area (default) or solid-angle.
+    /// Measure area lights are sampled in: auto (default: spheres in the cone they subtend,
+    /// other shapes by area), area, or solid-angle (spherical triangles too).
     #[arg(long)]
     light_sampling: Option<String>,
     /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1 (default 1 and 1).

@@ -209,7 +209,11 @@ fn area_lights_by_area_and_by_solid_angle() {
         ("sphere close", sphere(false), Vec3::new(0.3, 0.85, -0.2)),
     ];
     for (name, light, origin) in &cases {
-        for sampling in [LightSampling::Area, LightSampling::SolidAngle] {
+        for sampling in [
+            LightSampling::Area,
+            LightSampling::SolidAngle,
+            LightSampling::Auto,
+        ] {
             let mut rng = Pcg32::new(7, name.len() as u64 * 2 + sampling as u64);
             let label = format!("{name}, {sampling:?}");
             let mut produced = 0;

@@ -50,6 +50,7 @@ const CONFIGURATIONS: &[&[(&str, &str)]] = &[
     &[("light-select", "uniform")],
     &[("light-select", "contribution")],
     &[("light-sampling", "solid-angle")],
+    &[("light-sampling", "area")],
     &[("sampler", "sobol")],
 ];
 

@@ -49,6 +49,12 @@ pub enum LightSampling {
     /// Uniformly in the solid angle they subtend (triangles: spherical triangles; spheres:
     /// the cone of directions), where that is numerically sound, else by area.
     SolidAngle,
+    /// Spheres in the cone they subtend, other shapes by area: the cone costs about what
+    /// an area sample does and never samples the sphere's hidden side (on the MIS plates'
+    /// spheres, half the relMSE at equal samples), while spherical triangles cost several
+    /// times an area sample and gain little for lights that are small from where they are
+    /// seen (the Cornell box's).
+    Auto,
 }
 
 /// Shadow rays and BSDF samples at the first vertex seen from the camera.
@@ -87,7 +93,7 @@ impl Default for Settings {
             rr: RussianRoulette::Throughput(0.1),
             max_depth: None,
             light_select: LightSelect::Power,
-            light_sampling: LightSampling::Area,
+            light_sampling: LightSampling::Auto,
             split: Split { nee: 1, bsdf: 1 },
             sampler: SamplerKind::Sobol,
             seed: 0,
@@ -195,12 +201,15 @@ impl LightSelect {
 }
 
 impl LightSampling {
-    /// Parses `area` or `solid-angle`.
+    /// Parses `area`, `solid-angle` or `auto`.
     pub fn parse(s: &str) -> Result<Self, String> {
         match s {
             "area" => Ok(Self::Area),
             "solid-angle" => Ok(Self::SolidAngle),
-            _ => Err(format!("unknown light sampling {s:?} (area, solid-angle)")),
+            "auto" => Ok(Self::Auto),
+            _ => Err(format!(
+                "unknown light sampling {s:?} (area, solid-angle, auto)"
+            )),
         }
     }
 
@@ -209,7 +218,20 @@ impl LightSampling {
         match self {
             Self::Area => "area",
             Self::SolidAngle => "solid-angle",
+            Self::Auto => "auto",
         }
+    }
+
+    /// Whether triangles are sampled as spherical triangles (where numerically sound).
+    #[inline]
+    pub fn triangles_by_solid_angle(self) -> bool {
+        self == Self::SolidAngle
+    }
+
+    /// Whether spheres are sampled in the cone they subtend (from outside them).
+    #[inline]
+    pub fn spheres_by_cone(self) -> bool {
+        self != Self::Area
     }
 }
 

@@ -219,7 +219,7 @@ impl Light {
     ) -> Option<LightSample> {
         match self {
             Self::Triangle(t) => {
-                if sampling == LightSampling::SolidAngle
+                if sampling.triangles_by_solid_angle()
                     && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
                 {
                     let wi = solid_angle::sample_spherical_triangle(p, &t.p, u)?;
@@ -244,7 +244,7 @@ impl Light {
                 Some(s)
             }
             Self::Sphere(sp) => {
-                if sampling == LightSampling::SolidAngle
+                if sampling.spheres_by_cone()
                     && let Some(one_minus_cos) = solid_angle::sphere_cone(p, sp.centre, sp.radius)
                 {
                     let n =
@@ -360,7 +360,7 @@ impl Light {
     pub fn pdf(&self, p: Vec3, wi: Vec3, dist: f32, sampling: LightSampling) -> f32 {
         match self {
             Self::Triangle(t) => {
-                if sampling == LightSampling::SolidAngle
+                if sampling.triangles_by_solid_angle()
                     && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
                 {
                     return 1.0 / omega;
@@ -373,7 +373,7 @@ impl Light {
                 }
             }
             Self::Sphere(sp) => {
-                if sampling == LightSampling::SolidAngle
+                if sampling.spheres_by_cone()
                     && let Some(one_minus_cos) = solid_angle::sphere_cone(p, sp.centre, sp.radius)
                 {
                     return solid_angle::sphere_cone_pdf(one_minus_cos);
@@ -454,7 +454,11 @@ mod tests {
             mean_radiance: Vec3::ONE,
         });
         for light in [tri.clone(), sphere] {
-            for sampling in [LightSampling::Area, LightSampling::SolidAngle] {
+            for sampling in [
+                LightSampling::Area,
+                LightSampling::SolidAngle,
+                LightSampling::Auto,
+            ] {
                 for u in [Vec2::new(0.3, 0.6), Vec2::new(0.9, 0.1)] {
                     let Some(s) = light.sample(Vec3::ZERO, None, sampling, u) else {
                         continue;
