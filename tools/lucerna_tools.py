@@ -53,6 +53,12 @@ def render(scene, out, resolution, **settings):
     return rgb(channels), header, channels
 
 
+def convert(scene, out):
+    """Writes lucerna's scene file of `scene` (glTF, USD or a scene file) to `out`: the form
+    tools edit and export to Mitsuba."""
+    subprocess.run([BINARY, "convert", str(scene), "-o", str(out)], check=True, stderr=subprocess.DEVNULL)
+
+
 def settings_of(header):
     return tomllib.loads(header["lucerna/settings"])
 

@@ -19,7 +19,6 @@ Needs numpy, mitsuba and OpenImageIO (tests/requirements.txt) and a release buil
 """
 import argparse
 import json
-import subprocess
 import sys
 import tempfile
 import time
@@ -52,7 +51,7 @@ def compare(spp, width, height, scene=CORNELL):
     mi.set_variant("scalar_rgb")
     with tempfile.TemporaryDirectory() as workdir:
         scene_file = Path(workdir) / "scene.lucerna"
-        subprocess.run([lt.BINARY, "convert", str(scene), "-o", str(scene_file)], check=True, stderr=subprocess.DEVNULL)
+        lt.convert(scene, scene_file)
         exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
         mitsuba_a, seconds_a = render_mitsuba(exported, spp, 1)
         mitsuba_b, seconds_b = render_mitsuba(exported, spp, 2)

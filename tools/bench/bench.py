@@ -199,7 +199,8 @@ def plot(medians, scene, renderers, ref_info, path):
 
 
 def report(result, out):
-    medians, scenes, renderers = result["medians"], [s["name"] for s in result["scenes"]], result["renderers"]
+    medians, scenes = result["medians"], [s["name"] for s in result["scenes"]]
+    renderers = [r["name"] for r in result["renderers"]]
     m = result["machine"]
     lines = ["# tools/bench: time against error", "",
              f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['os']}; shared (see the steal "
@@ -214,7 +215,7 @@ def report(result, out):
         ref = s["reference"]
         lines.append(f"- **{s['name']}** ({s['path']}, {s['resolution'][0]}x{s['resolution'][1]}): reference "
                      f"{ref['spp']} spp by lucerna, {ref['seconds']:.0f} s, its own noise relMSE {ref['relmse_noise']:.2e}.")
-    for spec in result["renderer_specs"]:
+    for spec in result["renderers"]:
         settings = {k: v for k, v in spec.items() if k not in ("name", "kind")}
         lines.append(f"- renderer **{spec['name']}** ({spec['kind']}): "
                      + (", ".join(f"{k} {v}" for k, v in settings.items() if v) or "its defaults") + ".")
@@ -248,7 +249,7 @@ def main():
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     result = {"machine": machine(), "repeats": repeats, "scenes": [], "rows": [], "skipped": [],
-              "renderers": [r["name"] for r in config["renderer"]], "renderer_specs": config["renderer"]}
+              "renderers": config["renderer"]}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         for scene in config["scene"]:
@@ -257,8 +258,7 @@ def main():
             scene = dict(scene, path=str(lt.ROOT / scene["path"]))
             resolution = tuple(scene["resolution"])
             scene["scene_file"] = tmp / f"{scene['name']}.lucerna"
-            subprocess.run([lt.BINARY, "convert", scene["path"], "-o", str(scene["scene_file"])], check=True,
-                           stderr=subprocess.DEVNULL)
+            lt.convert(scene["path"], scene["scene_file"])
             reference_spp = scene.get("reference_spp", config["reference_spp"])
             print(f"{scene['name']}: reference ({reference_spp} spp, cached under {lt.CACHE})", flush=True)
             ref, ref_info = lt.reference(scene["path"], resolution, reference_spp, filter="box")
@@ -292,11 +292,12 @@ def main():
                                      "resolution": list(resolution), "reference": ref_info})
     result["medians"] = median_rows(result["rows"])
     names = [s["name"] for s in result["scenes"]]
+    renderer_names = [r["name"] for r in result["renderers"]]
     for s in result["scenes"]:
-        plot(result["medians"], s["name"], result["renderers"], s["reference"], out / f"{s['name']}.png")
+        plot(result["medians"], s["name"], renderer_names, s["reference"], out / f"{s['name']}.png")
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=str) + "\n")
     print()
-    print("\n".join(["Efficiency ratios at equal time:"] + ratio_table(result["medians"], names, result["renderers"])))
+    print("\n".join(["Efficiency ratios at equal time:"] + ratio_table(result["medians"], names, renderer_names)))
     report(result, out)
     print(f"wrote {out / 'bench.md'}, {out / 'bench.json'} and the plots")
 

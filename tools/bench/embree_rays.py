@@ -15,7 +15,6 @@ The time includes Dr.Jit reading the rays and writing the answers, so it slightl
 understates Embree's own speed.
 """
 import argparse
-import subprocess
 import sys
 import tempfile
 import time
@@ -39,8 +38,7 @@ def main():
 
     with tempfile.TemporaryDirectory() as workdir:
         scene_file = Path(workdir) / "scene.lucerna"
-        subprocess.run([lt.BINARY, "convert", args.scene, "-o", str(scene_file)], check=True,
-                       stderr=subprocess.DEVNULL)
+        lt.convert(args.scene, scene_file)
         scene = mi.load_dict(mitsuba_export.scene_dict(scene_file, SIDE, SIDE, workdir))
 
     index = dr.arange(mi.UInt32, SIDE * SIDE)

@@ -39,8 +39,7 @@ def punctual_cornell(work):
     """The Cornell box with its panel dark, lit by a point light under the ceiling and a
     spot light: a scene whose only lights are delta lights."""
     path = work / "cornell.lucerna"
-    subprocess.run([lt.BINARY, "convert", str(CORNELL), "-o", str(path)], check=True,
-                   stderr=subprocess.DEVNULL)
+    lt.convert(CORNELL, path)
     scene = lt.SceneFile(path)
     for m in scene.manifest["materials"]:
         m["emissive"] = [0.0, 0.0, 0.0]
