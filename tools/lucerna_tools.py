@@ -5,6 +5,7 @@ Error metric (../shared/design.md): relMSE = mean over pixels and channels of
 (x - ref)^2 / (ref^2 + 0.01); efficiency = 1 / (seconds x relMSE).
 """
 import copy
+import functools
 import hashlib
 import json
 import os
@@ -75,18 +76,26 @@ def mape(x, ref):
     return float(np.mean(np.abs(x - ref) / (np.abs(ref) + 0.01)))
 
 
+@functools.cache
+def binary_digest():
+    """SHA-256 of the lucerna binary: references are keyed by it, so that a change of the
+    renderer (which may change the image it converges to) never serves an old reference."""
+    return hashlib.sha256(Path(BINARY).read_bytes()).hexdigest()
+
+
 def reference(scene, resolution, spp, **settings):
-    """A high-sample reference, cached under tools/.cache by scene contents, resolution,
-    sample count and settings. Returns (image, info) where info records the sample count,
-    the render seconds and the reference's own noise: its expected relMSE against the
-    true image.
+    """A high-sample reference, cached under tools/.cache by the lucerna binary, scene
+    contents, resolution, sample count and settings. Returns (image, info) where info
+    records the sample count, the render seconds and the reference's own noise: its
+    expected relMSE against the true image.
 
     The reference is the mean of two renders of half the samples each with different seeds
     (independent scrambles), so their difference measures its noise: with equal halves,
     E[relMSE(a, b)] is twice a half's noise and four times the mean's. (The variance layer
     would overstate it: it sees the samples as independent, not Sobol's stratification.)"""
     scene_bytes = Path(scene).read_bytes() if scene else b"default"
-    key = hashlib.sha256(scene_bytes + json.dumps([resolution, spp, sorted(settings.items())]).encode()).hexdigest()[:16]
+    key = hashlib.sha256(binary_digest().encode() + scene_bytes
+                         + json.dumps([resolution, spp, sorted(settings.items())]).encode()).hexdigest()[:16]
     CACHE.mkdir(parents=True, exist_ok=True)
     image_path = CACHE / f"ref-{key}.npy"
     meta = CACHE / f"ref-{key}.json"
