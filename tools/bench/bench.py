@@ -95,6 +95,17 @@ class Lucerna:
                        "spp": header["lucerna/spp"], "steal": stolen()}
 
 
+def worker_failure(done):
+    """Why a Mitsuba worker failed, in one line. Dr.Jit loads whichever libLLVM it finds; one
+    too old for its kernels (Debian 12's LLVM 14 and 15) aborts the process with an LLVM
+    ERROR, the last stderr line then being a kernel name."""
+    lines = done.stderr.strip().splitlines()
+    llvm = next((line for line in lines if line.startswith("LLVM ERROR")), None)
+    if llvm:
+        return f"Dr.Jit's LLVM backend cannot compile with this libLLVM (install a newer one: apt-get install libllvm19): {llvm}"
+    return lines[-1] if lines else f"exit status {done.returncode}"
+
+
 class Mitsuba:
     def __init__(self, spec, scene):
         self.name, self.variant, self.scene = spec["name"], spec["variant"], scene
@@ -109,7 +120,7 @@ class Mitsuba:
         stolen = steal_share()
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:
-            raise RuntimeError(f"{self.name}: {done.stderr.strip().splitlines()[-1] if done.stderr.strip() else done.returncode}")
+            raise RuntimeError(f"{self.name}: {worker_failure(done)}")
         timing = json.loads(done.stdout.strip().splitlines()[-1])
         timing["steal"] = stolen()
         # Running estimate of seconds per sample per pixel, for the next budget.
