@@ -280,8 +280,9 @@ def main():
                     try:  # calibration render: seconds per sample for the first budget
                         r.run(resolution, 4, 0, tmp / "calibration")
                     except RuntimeError as e:
-                        result["skipped"].append(f"{r.name} on {scene['name']}: {e}")
-                        print(f"  skipped {r.name}: {e}", flush=True)
+                        # The error names the renderer already.
+                        result["skipped"].append(f"{e} (scene {scene['name']})")
+                        print(f"  skipped: {e}", flush=True)
                         continue
                 renderers.append(r)
             rungs = [("time", b) for b in budgets] + [("spp", n) for n in spps]
