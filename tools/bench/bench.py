@@ -209,9 +209,14 @@ def plot(medians, scene, renderers, ref_info, path):
     plt.close(fig)
 
 
+def renderer_names(result):
+    """The renderers' names, in the configuration's order (the specs are in the result)."""
+    return [r["name"] for r in result["renderers"]]
+
+
 def report(result, out):
     medians, scenes = result["medians"], [s["name"] for s in result["scenes"]]
-    renderers = [r["name"] for r in result["renderers"]]
+    renderers = renderer_names(result)
     m = result["machine"]
     lines = ["# tools/bench: time against error", "",
              f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['os']}; shared (see the steal "
@@ -304,12 +309,12 @@ def main():
                                      "resolution": list(resolution), "reference": ref_info})
     result["medians"] = median_rows(result["rows"])
     names = [s["name"] for s in result["scenes"]]
-    renderer_names = [r["name"] for r in result["renderers"]]
+    names_of_renderers = renderer_names(result)
     for s in result["scenes"]:
-        plot(result["medians"], s["name"], renderer_names, s["reference"], out / f"{s['name']}.png")
+        plot(result["medians"], s["name"], names_of_renderers, s["reference"], out / f"{s['name']}.png")
     (out / "bench.json").write_text(json.dumps(result, indent=1, default=str) + "\n")
     print()
-    print("\n".join(["Efficiency ratios at equal time:"] + ratio_table(result["medians"], names, renderer_names)))
+    print("\n".join(["Efficiency ratios at equal time:"] + ratio_table(result["medians"], names, names_of_renderers)))
     report(result, out)
     print(f"wrote {out / 'bench.md'}, {out / 'bench.json'} and the plots")
 
