@@ -144,6 +144,16 @@ struct Walk<'l> {
     learning: Option<&'l mut Learning>,
 }
 
+/// A scattering vertex: the shading point, its BSDF, the direction back along the ray that
+/// found it (local frame), and the origin every ray leaving it starts from (computed once:
+/// its shadow rays and its continuation share it).
+struct Vertex<'v> {
+    it: &'v Interaction,
+    bsdf: &'v Bsdf,
+    wo: Vec3,
+    origin: Vec3,
+}
+
 /// How a path continues past a vertex.
 #[derive(Clone, Copy, Debug)]
 struct Continuation {
@@ -379,6 +389,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     rays.closest + rays.shadow,
                 );
             }
+            let vertex = Vertex {
+                it: &it,
+                bsdf: &bsdf,
+                wo,
+                origin: offset_ray_origin(it.p, it.ng),
+            };
             let vs = sampler.vertex(path.depth, path.branch);
             let first = path.depth == 0;
             let n_nee = if first { self.settings.split.nee } else { 1 };
@@ -393,9 +409,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                         (Vec2::new(p[0], p[1]), p[2])
                     };
                     rays.shadow += self.next_event(
-                        &it,
-                        &bsdf,
-                        wo,
+                        &vertex,
                         &path,
                         walk,
                         (n_nee, continuation.mis_count),
@@ -412,12 +426,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 let sample = if continuation.count == 1 {
                     vs
                 } else {
-                    let vertex = if first {
+                    let key = if first {
                         0
                     } else {
                         1 + path.branch * 4096 + path.depth
                     };
-                    let p = sampler.split_point(SplitKind::Bsdf, vertex, k);
+                    let p = sampler.split_point(SplitKind::Bsdf, key, k);
                     VertexSample {
                         bsdf: Vec2::new(p[0], p[1]),
                         lobe: p[2],
@@ -431,17 +445,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     walk.paths += 1;
                     walk.paths - 1
                 };
-                let Some(child) = self.scatter(
-                    &it,
-                    &bsdf,
-                    wo,
-                    &path,
-                    walk,
-                    &sample,
-                    &continuation,
-                    n_nee,
-                    branch,
-                ) else {
+                let Some(child) =
+                    self.scatter(&vertex, &path, walk, &sample, &continuation, n_nee, branch)
+                else {
                     continue;
                 };
                 if k + 1 == continuation.count {
@@ -506,14 +512,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         }
     }
 
-    /// Samples the BSDF at `it` for one continued path, applying the continuation's weight
-    /// and, where it still applies, Russian roulette; `None` if the path ends there.
+    /// Samples the BSDF at vertex `v` for one continued path, applying the continuation's
+    /// weight and, where it still applies, Russian roulette; `None` if the path ends there.
     #[allow(clippy::too_many_arguments)]
     fn scatter(
         &self,
-        it: &Interaction,
-        bsdf: &Bsdf,
-        wo: Vec3,
+        v: &Vertex,
         path: &PathState,
         walk: &Walk,
         vs: &VertexSample,
@@ -521,6 +525,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         n_nee: u32,
         branch: u32,
     ) -> Option<(Ray, PathState)> {
+        let Vertex { it, bsdf, wo, .. } = *v;
         let bs = bsdf.sample(wo, vs.lobe, vs.bsdf)?;
         let wi = it.frame.to_world(bs.wi);
         // Reflection must leave on the side of the surface the path arrived from.
@@ -563,17 +568,15 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             prev_nee_count: n_nee,
             lobes,
         };
-        Some((Ray::new(offset_ray_origin(it.p, it.ng), wi), next))
+        Some((Ray::new(v.origin, wi), next))
     }
 
-    /// One light sample at `it`: a light chosen by the selection strategy, a point on it,
-    /// a shadow ray. Returns the number of shadow rays traced.
+    /// One light sample at vertex `v`: a light chosen by the selection strategy, a point on
+    /// it, a shadow ray. Returns the number of shadow rays traced.
     #[allow(clippy::too_many_arguments)]
     fn next_event<R: Recorder>(
         &self,
-        it: &Interaction,
-        bsdf: &Bsdf,
-        wo: Vec3,
+        v: &Vertex,
         path: &PathState,
         walk: &mut Walk,
         (n_nee, n_bsdf): (u32, u32),
@@ -581,6 +584,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         u_select: f32,
         rec: &mut R,
     ) -> u64 {
+        let Vertex { it, bsdf, wo, .. } = *v;
         let world = self.world;
         let lights = &world.lights;
         let Some((index, p_select)) = lights.select(u_select, it.p, it.frame.n) else {
@@ -612,7 +616,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         if f == Vec3::ZERO {
             return 0;
         }
-        let origin = offset_ray_origin(it.p, it.ng);
+        let origin = v.origin;
         let shadow = match ls.target {
             Some(target) => Ray {
                 origin,
