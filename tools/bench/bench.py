@@ -109,14 +109,15 @@ def worker_failure(done):
 class Mitsuba:
     def __init__(self, spec, scene):
         self.name, self.variant, self.scene = spec["name"], spec["variant"], scene
-        self.sampler = spec.get("sampler", "independent")
+        # Without one, the worker's default (Mitsuba's own: independent).
+        self.sampler = spec.get("sampler")
         self.seconds_per_spp = None
 
     def run(self, resolution, spp, seed, out):
         npy = Path(out).with_suffix(".npy")
         cmd = [sys.executable, str(WORKER), str(self.scene["scene_file"]), "--variant", self.variant,
-               "--sampler", self.sampler, "--resolution", f"{resolution[0]}x{resolution[1]}", "--spp", str(spp),
-               "--seed", str(seed), "--out", str(npy)]
+               "--resolution", f"{resolution[0]}x{resolution[1]}", "--spp", str(spp), "--seed", str(seed),
+               "--out", str(npy)] + (["--sampler", self.sampler] if self.sampler else [])
         stolen = steal_share()
         done = subprocess.run(cmd, capture_output=True, text=True)
         if done.returncode != 0:

@@ -64,8 +64,9 @@ def main():
         # np.array forces evaluation: the LLVM variant computes lazily.
         frame = np.array(mi.render(scene, spp=spp, seed=args.seed * 1000 + k), dtype=np.float64)[:, :, :3]
         # The sampler may take more than asked (multijitter rounds up to a grid's size).
-        image += frame * sampler.sample_count()
-        taken += sampler.sample_count()
+        count = sampler.sample_count()
+        image += frame * count
+        taken += count
     seconds, cpu = time.perf_counter() - start, cpu_seconds() - cpu
     np.save(args.out, image / taken)
     # Mitsuba's warnings end in a colour reset without a newline: the JSON gets its own line.
