@@ -12,7 +12,8 @@ budget, log-log plots of error against time, and the machine it ran on.
 
 Mitsuba renders the scene exported from lucerna's own scene file (tools/mitsuba_export.py),
 each render in a process of its own (tools/bench/mitsuba_worker.py). Its sample count for a
-budget comes from its measured seconds per sample; the efficiency uses the seconds it took.
+budget comes from its measured seconds per sample (at first from calibration renders of at
+least half a second, then from its latest render); the efficiency uses the seconds it took.
 
     tools/bench/run [--quick] [--config tools/bench/bench.toml] [--out tools/bench/results]
 """
@@ -127,6 +128,18 @@ class Mitsuba:
         # Running estimate of seconds per sample per pixel, for the next budget.
         self.seconds_per_spp = timing["seconds"] / spp
         return np.load(npy), timing
+
+    def calibrate(self, resolution, out, seconds=0.5, max_spp=4096):
+        """Measures seconds per sample for the first budget, from a render of at least
+        `seconds`: a short one is dominated by each call's fixed cost (on the MIS plates, 4 spp
+        of llvm_ad_rgb suggested 271 spp for a 1 s budget, which took 0.36 s)."""
+        spp = 4
+        while True:
+            self.run(resolution, spp, 0, out)
+            taken = self.seconds_per_spp * spp
+            if taken >= seconds or spp >= max_spp:
+                return
+            spp = min(max_spp, max(2 * spp, round(1.2 * seconds / max(self.seconds_per_spp, 1e-9))))
 
     def render(self, resolution, seed, out, budget=None, spp=None):
         if budget:
@@ -283,8 +296,8 @@ def main():
             for spec in config["renderer"]:
                 r = Lucerna(spec, scene) if spec["kind"] == "lucerna" else Mitsuba(spec, scene)
                 if isinstance(r, Mitsuba):
-                    try:  # calibration render: seconds per sample for the first budget
-                        r.run(resolution, 4, 0, tmp / "calibration")
+                    try:
+                        r.calibrate(resolution, tmp / "calibration")
                     except RuntimeError as e:
                         # The error names the renderer already.
                         result["skipped"].append(f"{e} (scene {scene['name']})")
