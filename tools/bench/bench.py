@@ -135,9 +135,8 @@ class Mitsuba:
         of llvm_ad_rgb suggested 271 spp for a 1 s budget, which took 0.36 s)."""
         spp = 4
         while True:
-            self.run(resolution, spp, 0, out)
-            taken = self.seconds_per_spp * spp
-            if taken >= seconds or spp >= max_spp:
+            _, timing = self.run(resolution, spp, 0, out)
+            if timing["seconds"] >= seconds or spp >= max_spp:
                 return
             spp = min(max_spp, max(2 * spp, round(1.2 * seconds / max(self.seconds_per_spp, 1e-9))))
 
