@@ -42,6 +42,15 @@ def rgb(channels, layer=None):
     return np.stack([channels[n] for n in names], axis=-1)
 
 
+def run(cmd):
+    """Runs a lucerna command; a failure raises with lucerna's own message (file, element,
+    reason), not only its exit status."""
+    done = subprocess.run(cmd, capture_output=True, text=True)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(map(str, cmd))}: exit status {done.returncode}: "
+                           f"{done.stderr.strip() or 'no message'}")
+
+
 def render(scene, out, resolution, **settings):
     """Renders `scene` (None: the default scene) to `out` with settings given as keyword
     arguments (underscores for dashes: max_depth=10). Returns (beauty, header, channels)."""
@@ -49,7 +58,7 @@ def render(scene, out, resolution, **settings):
     cmd += ["-o", str(out), "-q", "--resolution", f"{resolution[0]}x{resolution[1]}"]
     for key, value in settings.items():
         cmd += [f"--{key.replace('_', '-')}", str(value)]
-    subprocess.run(cmd, check=True, stderr=subprocess.DEVNULL)
+    run(cmd)
     channels, header = read_exr(out)
     return rgb(channels), header, channels
 
@@ -57,7 +66,7 @@ def render(scene, out, resolution, **settings):
 def convert(scene, out):
     """Writes lucerna's scene file of `scene` (glTF, USD or a scene file) to `out`: the form
     tools edit and export to Mitsuba."""
-    subprocess.run([BINARY, "convert", str(scene), "-o", str(out)], check=True, stderr=subprocess.DEVNULL)
+    run([BINARY, "convert", str(scene), "-o", str(out)])
 
 
 def settings_of(header):
