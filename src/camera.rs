@@ -22,6 +22,8 @@ pub struct Camera {
     focus_distance: f32,
     width: u32,
     height: u32,
+    /// Film position (pixels) to NDC scale: 2 / width, 2 / height.
+    film_to_ndc: Vec2,
     /// World to camera space (x right, y up, z forward: OpenEXR's convention).
     pub world_to_camera: DMat4,
     /// World to OpenEXR NDC ((0, 0) top-left, (1, 1) bottom-right of the image).
@@ -150,6 +152,7 @@ impl Camera {
             focus_distance: (c.focus_distance * space.scale) as f32,
             width,
             height,
+            film_to_ndc: Vec2::new(2.0 / width as f32, 2.0 / height as f32),
             world_to_camera,
             world_to_ndc: projection * world_to_camera,
             to_world_length: (1.0 / space.scale) as f32,
@@ -176,9 +179,10 @@ impl Camera {
     #[inline]
     pub fn generate_ray(&self, film: Vec2, lens: Vec2) -> Ray {
         let ndc = Vec2::new(
-            2.0 * film.x / self.width as f32 - 1.0,
-            1.0 - 2.0 * film.y / self.height as f32,
+            film.x * self.film_to_ndc.x - 1.0,
+            1.0 - film.y * self.film_to_ndc.y,
         );
+        // Camera-space directions are scaled to z = 1: one unit along the viewing axis.
         let (origin_cam, dir_cam) = match self.kind {
             Kind::Perspective {
                 tan_half_x,
@@ -189,7 +193,7 @@ impl Camera {
                     let l = square_to_uniform_disk(lens) * self.lens_radius;
                     let focus = dir * self.focus_distance;
                     let o = Vec3::new(l.x, l.y, 0.0);
-                    (o, focus - o)
+                    (o, (focus - o) / self.focus_distance)
                 } else {
                     (Vec3::ZERO, dir)
                 }
@@ -203,10 +207,11 @@ impl Camera {
             ),
         };
         let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
-        let dir = to_world(dir_cam).normalize();
-        // Clipping distances are along the viewing axis: convert them to ray distances.
-        let axial = dir.dot(self.forward);
-        let (near, far) = (self.clip_near / axial, self.clip_far / axial);
+        let length = dir_cam.length();
+        let dir = to_world(dir_cam) * length.recip();
+        // Clipping distances are along the viewing axis: as dir_cam.z = 1, a unit of ray
+        // distance covers 1 / length of it.
+        let (near, far) = (self.clip_near * length, self.clip_far * length);
         Ray {
             origin: self.origin + to_world(origin_cam) + dir * near,
             dir,
@@ -219,5 +224,72 @@ impl Camera {
     #[inline]
     pub fn depth(&self, p: Vec3) -> f32 {
         (p - self.origin).dot(self.forward) * self.to_world_length
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A camera at (1, 2, 3) turned about two axes, in a render space that moves and scales.
+    fn camera(projection: Projection, aperture_radius: f64) -> Camera {
+        let c = scene::Camera {
+            name: "test".into(),
+            projection,
+            transform: DMat4::from_translation(DVec3::new(1.0, 2.0, 3.0))
+                * DMat4::from_rotation_y(0.4)
+                * DMat4::from_rotation_x(-0.3),
+            aperture_radius,
+            focus_distance: 5.0,
+            clip_near: 0.5,
+            clip_far: Some(20.0),
+        };
+        let space = RenderSpace::from_bounds(DVec3::splat(-4.0), DVec3::splat(6.0));
+        Camera::new(&c, &space, 64, 48)
+    }
+
+    /// Every ray has a unit direction, starts on the near clipping plane and ends on the far
+    /// one (distances along the viewing axis); with a lens, all rays through a film point
+    /// meet on the plane in focus, at the pinhole ray's point there.
+    #[test]
+    fn rays_span_the_clipping_range_and_meet_in_focus() {
+        let perspective = Projection::Perspective {
+            yfov: 0.8,
+            aspect: None,
+        };
+        let orthographic = Projection::Orthographic {
+            xmag: 2.0,
+            ymag: 1.5,
+        };
+        let film = [(0.0, 0.0), (63.9, 47.9), (10.3, 40.1), (32.0, 24.0)];
+        let lens = [(0.1, 0.9), (0.5, 0.5), (0.99, 0.02)];
+        for (projection, aperture) in [
+            (perspective.clone(), 0.0),
+            (perspective, 0.3),
+            (orthographic, 0.0),
+        ] {
+            let cam = camera(projection, aperture);
+            let axial = |p: Vec3| (p - cam.origin).dot(cam.forward);
+            let (near, far) = (cam.clip_near, cam.clip_far);
+            for &(fx, fy) in &film {
+                let film = Vec2::new(fx, fy);
+                let pinhole = cam.generate_ray(film, Vec2::splat(0.5));
+                for &(lx, ly) in &lens {
+                    let ray = cam.generate_ray(film, Vec2::new(lx, ly));
+                    let end = ray.origin + ray.dir * ray.tmax;
+                    assert!((ray.dir.length() - 1.0).abs() < 1e-6, "{ray:?}");
+                    assert!((axial(ray.origin) - near).abs() < 1e-5 * far, "{ray:?}");
+                    assert!((axial(end) - far).abs() < 1e-5 * far, "{ray:?}");
+                    if aperture > 0.0 {
+                        let in_focus = |r: &Ray| {
+                            let focus = cam.focus_distance;
+                            r.origin + r.dir * ((focus - axial(r.origin)) / r.dir.dot(cam.forward))
+                        };
+                        let miss = in_focus(&ray) - in_focus(&pinhole);
+                        assert!(miss.length() < 1e-5 * far, "{ray:?}: {miss}");
+                    }
+                }
+            }
+        }
     }
 }

@@ -41,7 +41,10 @@ impl RayShear {
         if dz < 0.0 {
             std::mem::swap(&mut ex, &mut ey);
         }
-        let (sx, sy, sz) = (d.dot(ex) / dz, d.dot(ey) / dz, 1.0 / dz);
+        // One reciprocal for the three ratios: watertightness needs every triangle tested
+        // with the same shear, not the shear's exact rounding.
+        let sz = 1.0 / dz;
+        let (sx, sy) = (d.dot(ex) * sz, d.dot(ey) * sz);
         Self {
             origin: ray.origin,
             row_x: ex - sx * ez,
