@@ -156,7 +156,12 @@ impl GltfPbr {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return [Vec3::ZERO; 2];
         }
-        let h = (wo + wi).normalize();
+        self.eval_lobes_at(wo, wi, (wo + wi).normalize())
+    }
+
+    /// [`GltfPbr::eval_lobes`] for wo and wi above the surface, with their half vector `h`.
+    #[inline]
+    fn eval_lobes_at(&self, wo: Vec3, wi: Vec3, h: Vec3) -> [Vec3; 2] {
         let v_h = wo.dot(h);
         let mut diffuse = self.diffuse_weight(v_h) * FRAC_1_PI;
         let mut glossy = Vec3::ZERO;
@@ -181,13 +186,27 @@ impl GltfPbr {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
-        let (pc, ps, pd) = self.lobe_probabilities(wo);
+        self.pdf_at(wo, wi, self.lobe_probabilities(wo), || {
+            (wo + wi).normalize()
+        })
+    }
+
+    /// [`GltfPbr::pdf`] for wo and wi above the surface, given the lobe probabilities at wo
+    /// and the half vector (computed only if a glossy lobe needs it).
+    #[inline]
+    fn pdf_at(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        (pc, ps, pd): (f32, f32, f32),
+        half: impl FnOnce() -> Vec3,
+    ) -> f32 {
         let mut pdf = pd * cosine_hemisphere_pdf(wi);
         let glossy_coat = pc > 0.0 && !self.coat_smooth();
         if self.smooth() && !glossy_coat {
             return pdf;
         }
-        let h = (wo + wi).normalize();
+        let h = half();
         if !self.smooth() {
             pdf += ps * self.ggx.reflection_pdf(wo, h);
         }
@@ -202,7 +221,8 @@ impl GltfPbr {
         if wo.z <= 0.0 {
             return None;
         }
-        let (pc, ps, _) = self.lobe_probabilities(wo);
+        let probabilities = self.lobe_probabilities(wo);
+        let (pc, ps, _) = probabilities;
         let (glossy, delta) = if u_lobe < pc {
             (Some(&self.coat_ggx), self.coat_smooth())
         } else if u_lobe < pc + ps {
@@ -215,14 +235,14 @@ impl GltfPbr {
         }
         let Some(ggx) = glossy else {
             let wi = square_to_cosine_hemisphere(u);
-            return self.finish(wo, wi, Lobe::Diffuse);
+            return self.finish(wo, wi, probabilities, Lobe::Diffuse);
         };
         let h = ggx.sample_visible_normal(wo, u);
         let wi = reflect(wo, h);
         if wi.z <= 0.0 {
             return None;
         }
-        self.finish(wo, wi, Lobe::Glossy)
+        self.finish(wo, wi, probabilities, Lobe::Glossy)
     }
 
     /// The mirror direction, reached by whichever smooth lobes (coat, specular) there are:
@@ -245,8 +265,22 @@ impl GltfPbr {
         }
     }
 
-    fn finish(&self, wo: Vec3, wi: Vec3, lobe: Lobe) -> Option<BsdfSample> {
-        BsdfSample::from_mixture(wi, self.eval(wo, wi), self.pdf(wo, wi), lobe)
+    /// The sample in direction `wi` of lobe `lobe`: f · cos θi and the mixture density,
+    /// sharing the half vector and the lobe probabilities at `wo`.
+    fn finish(
+        &self,
+        wo: Vec3,
+        wi: Vec3,
+        probabilities: (f32, f32, f32),
+        lobe: Lobe,
+    ) -> Option<BsdfSample> {
+        if wi.z <= 0.0 {
+            return None;
+        }
+        let h = (wo + wi).normalize();
+        let [diffuse, glossy] = self.eval_lobes_at(wo, wi, h);
+        let pdf = self.pdf_at(wo, wi, probabilities, || h);
+        BsdfSample::from_mixture(wi, diffuse + glossy, pdf, lobe)
     }
 
     /// True if some lobe is not a delta: false only for a smooth pure metal under no coat or
