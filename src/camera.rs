@@ -191,9 +191,10 @@ impl Camera {
                 let dir = Vec3::new(ndc.x * tan_half_x, ndc.y * tan_half_y, 1.0);
                 if self.lens_radius > 0.0 {
                     let l = square_to_uniform_disk(lens) * self.lens_radius;
-                    let focus = dir * self.focus_distance;
                     let o = Vec3::new(l.x, l.y, 0.0);
-                    (o, (focus - o) / self.focus_distance)
+                    // Towards the pinhole ray's point in focus (dir × focus distance), scaled
+                    // to z = 1.
+                    (o, dir - o / self.focus_distance)
                 } else {
                     (Vec3::ZERO, dir)
                 }
@@ -269,8 +270,8 @@ mod tests {
             (orthographic, 0.0),
         ] {
             let cam = camera(projection, aperture);
-            let axial = |p: Vec3| (p - cam.origin).dot(cam.forward);
-            let (near, far) = (cam.clip_near, cam.clip_far);
+            // World units, as the scene camera's.
+            let (near, far, focus) = (0.5, 20.0, 5.0);
             for &(fx, fy) in &film {
                 let film = Vec2::new(fx, fy);
                 let pinhole = cam.generate_ray(film, Vec2::splat(0.5));
@@ -278,14 +279,15 @@ mod tests {
                     let ray = cam.generate_ray(film, Vec2::new(lx, ly));
                     let end = ray.origin + ray.dir * ray.tmax;
                     assert!((ray.dir.length() - 1.0).abs() < 1e-6, "{ray:?}");
-                    assert!((axial(ray.origin) - near).abs() < 1e-5 * far, "{ray:?}");
-                    assert!((axial(end) - far).abs() < 1e-5 * far, "{ray:?}");
+                    assert!((cam.depth(ray.origin) - near).abs() < 1e-5 * far, "{ray:?}");
+                    assert!((cam.depth(end) - far).abs() < 1e-5 * far, "{ray:?}");
                     if aperture > 0.0 {
                         let in_focus = |r: &Ray| {
-                            let focus = cam.focus_distance;
-                            r.origin + r.dir * ((focus - axial(r.origin)) / r.dir.dot(cam.forward))
+                            let start = cam.depth(r.origin);
+                            let per_unit = cam.depth(r.origin + r.dir) - start;
+                            r.origin + r.dir * ((focus - start) / per_unit)
                         };
-                        let miss = in_focus(&ray) - in_focus(&pinhole);
+                        let miss = (in_focus(&ray) - in_focus(&pinhole)) * cam.to_world_length;
                         assert!(miss.length() < 1e-5 * far, "{ray:?}: {miss}");
                     }
                 }

@@ -186,27 +186,18 @@ impl GltfPbr {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
-        self.pdf_at(wo, wi, self.lobe_probabilities(wo), || {
-            (wo + wi).normalize()
-        })
+        self.pdf_at(wo, wi, self.lobe_probabilities(wo), (wo + wi).normalize())
     }
 
     /// [`GltfPbr::pdf`] for wo and wi above the surface, given the lobe probabilities at wo
-    /// and the half vector (computed only if a glossy lobe needs it).
+    /// and the half vector `h`.
     #[inline]
-    fn pdf_at(
-        &self,
-        wo: Vec3,
-        wi: Vec3,
-        (pc, ps, pd): (f32, f32, f32),
-        half: impl FnOnce() -> Vec3,
-    ) -> f32 {
+    fn pdf_at(&self, wo: Vec3, wi: Vec3, (pc, ps, pd): (f32, f32, f32), h: Vec3) -> f32 {
         let mut pdf = pd * cosine_hemisphere_pdf(wi);
         let glossy_coat = pc > 0.0 && !self.coat_smooth();
         if self.smooth() && !glossy_coat {
             return pdf;
         }
-        let h = half();
         if !self.smooth() {
             pdf += ps * self.ggx.reflection_pdf(wo, h);
         }
@@ -279,7 +270,7 @@ impl GltfPbr {
         }
         let h = (wo + wi).normalize();
         let [diffuse, glossy] = self.eval_lobes_at(wo, wi, h);
-        let pdf = self.pdf_at(wo, wi, probabilities, || h);
+        let pdf = self.pdf_at(wo, wi, probabilities, h);
         BsdfSample::from_mixture(wi, diffuse + glossy, pdf, lobe)
     }
 
