@@ -144,7 +144,7 @@ impl Bvh {
         let shear = RayShear::new(ray);
         let mut best: Option<(usize, PrimitiveHit)> = None;
         let mut best_prim = u32::MAX;
-        self.bvh.traverse(ray, |leaves, tmax| {
+        self.bvh.traverse::<true, _>(ray, |leaves, tmax| {
             let mut result = LeafResult::Miss;
             let mut tmax = tmax;
             for leaf in leaves {
@@ -178,7 +178,7 @@ impl Bvh {
     pub fn occluded<F: FnMut(u32, &PrimitiveHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
         let shear = RayShear::new(ray);
         let mut occluded = false;
-        self.bvh.traverse(ray, |leaves, _| {
+        self.bvh.traverse::<false, _>(ray, |leaves, _| {
             for leaf in leaves {
                 if self
                     .test(leaf, ray, &shear, ray.tmax, &mut accept)

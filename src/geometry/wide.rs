@@ -29,7 +29,9 @@ const NO_CHILD: Child = Child {
 };
 
 /// Four children's boxes, `bounds[axis]` the lower planes and `bounds[3 + axis]` the upper,
-/// one lane a child; unused lanes hold an empty box (+inf, -inf), which no ray hits.
+/// one lane a child. Unused lanes hold a box at infinity (both planes +inf): the slab
+/// test orders each axis's two distances by min and max, so an inverted empty box
+/// (+inf, -inf) would span every axis, but this one is entered at +inf or left at -inf.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
 struct Node {
@@ -46,9 +48,6 @@ const SLAB_ROBUSTNESS: f32 =
 struct NodeRay {
     origin: [Vec4; 3],
     inv_dir: [Vec4; 3],
-    /// Index into [`Node::bounds`] of the near and far plane along each axis.
-    near: [usize; 3],
-    far: [usize; 3],
 }
 
 impl NodeRay {
@@ -58,17 +57,10 @@ impl NodeRay {
         let d = Vec3A::from(ray.dir);
         let tiny = d.abs().cmplt(Vec3A::splat(1e-20));
         let inv = Vec3A::select(tiny, Vec3A::splat(1e20).copysign(d), d.recip());
-        // From the reciprocal's sign, so that -0.0 components pick near and far planes
-        // consistently with it.
-        let negative = inv.cmplt(Vec3A::ZERO).bitmask() as usize;
-        let near = |a: usize| a + 3 * ((negative >> a) & 1);
-        let far = |a: usize| a + 3 * (1 - ((negative >> a) & 1));
         let o = ray.origin;
         Self {
             origin: [Vec4::splat(o.x), Vec4::splat(o.y), Vec4::splat(o.z)],
             inv_dir: [Vec4::splat(inv.x), Vec4::splat(inv.y), Vec4::splat(inv.z)],
-            near: [near(0), near(1), near(2)],
-            far: [far(0), far(1), far(2)],
         }
     }
 
@@ -79,15 +71,13 @@ impl NodeRay {
     fn test(&self, node: &Node, tmax: f32) -> (Vec4, u32) {
         let b = &node.bounds;
         let t = |plane: usize, a: usize| (b[plane] - self.origin[a]) * self.inv_dir[a];
-        let near = t(self.near[0], 0)
-            .max(t(self.near[1], 1))
-            .max(t(self.near[2], 2))
-            .max(Vec4::ZERO);
-        let far = t(self.far[0], 0)
-            .min(t(self.far[1], 1))
-            .min(t(self.far[2], 2))
-            * SLAB_ROBUSTNESS;
-        let far = far.min(Vec4::splat(tmax));
+        let (x0, x1) = (t(0, 0), t(3, 0));
+        let (y0, y1) = (t(1, 1), t(4, 1));
+        let (z0, z1) = (t(2, 2), t(5, 2));
+        let near = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(Vec4::ZERO);
+        let far = x0.max(x1).min(y0.max(y1)).min(z0.max(z1)) * SLAB_ROBUSTNESS;
+        // A finite bound: a lane at infinity is entered at +inf, beyond every bound.
+        let far = far.min(Vec4::splat(tmax.min(f32::MAX)));
         (near, near.cmple(far).bitmask())
     }
 }
@@ -192,12 +182,16 @@ impl WideBvh {
         self.nodes.len() * std::mem::size_of::<Node>() + self.order.len() * 4
     }
 
-    /// Visits the leaves `ray` overlaps in `(0, tmax)`, nearest box first, calling
-    /// `leaf(range, bound)` with the leaf's range in [`WideBvh::order`] and the current
-    /// bound; a closer hit shrinks the bound and prunes the boxes beyond it. Returns the
-    /// final bound.
+    /// Visits the leaves `ray` overlaps in `(0, tmax)`, calling `leaf(range, bound)` with
+    /// the leaf's range in [`WideBvh::order`] and the current bound; a closer hit shrinks
+    /// the bound and prunes the boxes beyond it. Returns the final bound. With
+    /// `NEAREST_FIRST` the nearest box is entered first (closest hits); without, boxes go
+    /// in node order, which saves the sort where any hit ends the query (occlusion).
     #[inline(always)]
-    pub fn traverse<F: FnMut(std::ops::Range<usize>, f32) -> LeafResult>(
+    pub fn traverse<
+        const NEAREST_FIRST: bool,
+        F: FnMut(std::ops::Range<usize>, f32) -> LeafResult,
+    >(
         &self,
         ray: &Ray,
         mut leaf: F,
@@ -218,6 +212,19 @@ impl WideBvh {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
+                        current = node.children[first];
+                        continue;
+                    }
+                    if !NEAREST_FIRST {
+                        // Any order finds an occluder: visit the first, stack the rest.
+                        while mask != 0 {
+                            let c = mask.trailing_zeros() as usize;
+                            mask &= mask - 1;
+                            stack.push(Entry {
+                                child: node.children[c],
+                                t: 0.0,
+                            });
+                        }
                         current = node.children[first];
                         continue;
                     }
@@ -304,9 +311,9 @@ fn collapse(bvh2: &[obvhs::bvh2::node::Bvh2Node]) -> (Vec<Node>, Child) {
             Vec4::INFINITY,
             Vec4::INFINITY,
             Vec4::INFINITY,
-            Vec4::NEG_INFINITY,
-            Vec4::NEG_INFINITY,
-            Vec4::NEG_INFINITY,
+            Vec4::INFINITY,
+            Vec4::INFINITY,
+            Vec4::INFINITY,
         ],
         children: [NO_CHILD; 4],
     };
