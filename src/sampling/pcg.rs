@@ -42,7 +42,7 @@ impl Pcg32 {
 
 /// A 32-bit integer hash with good avalanche (Wellons' "lowbias32").
 #[inline]
-pub fn hash_u32(mut x: u32) -> u32 {
+pub const fn hash_u32(mut x: u32) -> u32 {
     x ^= x >> 16;
     x = x.wrapping_mul(0x7feb352d);
     x ^= x >> 15;

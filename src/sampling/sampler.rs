@@ -59,9 +59,11 @@ pub struct VertexSample {
 #[derive(Clone, Debug)]
 pub struct Sampler {
     kind: SamplerKind,
-    seed: u32,
+    /// The image seed, mixed once: every pixel's key starts from it.
+    seed_key: u64,
     pixel_seed: u32,
-    index: u32,
+    /// The sample's index within its Sobol seed, bit-reversed (as the scramble takes it).
+    index_rev: u32,
     /// A key of this pixel sample, seeding the points of split samples.
     sample_key: u32,
     rng: Pcg32,
@@ -84,9 +86,9 @@ impl Sampler {
     pub fn new(kind: SamplerKind, seed: u32) -> Self {
         Self {
             kind,
-            seed,
+            seed_key: mix_u64(seed as u64 ^ 0x5851f42d4c957f2d),
             pixel_seed: 0,
-            index: 0,
+            index_rev: 0,
             sample_key: 0,
             rng: Pcg32::new(0, 0),
         }
@@ -96,7 +98,7 @@ impl Sampler {
     #[inline]
     pub fn start(&mut self, x: u32, y: u32, index: u32) {
         let pixel = ((y as u64) << 32) | x as u64;
-        let key = mix_u64(pixel ^ mix_u64(self.seed as u64 ^ 0x5851f42d4c957f2d));
+        let key = mix_u64(pixel ^ self.seed_key);
         self.sample_key = mix_u64(key ^ ((index as u64) << 20)) as u32;
         match self.kind {
             SamplerKind::Independent => {
@@ -105,7 +107,7 @@ impl Sampler {
             SamplerKind::Sobol => {
                 // Sobol supports 2^16 samples per seed; later samples continue with a new seed.
                 self.pixel_seed = (key as u32) ^ hash_u32((key >> 32) as u32 ^ (index >> 16));
-                self.index = index & 0xffff;
+                self.index_rev = (index & 0xffff).reverse_bits();
             }
         }
     }
@@ -115,8 +117,8 @@ impl Sampler {
         match self.kind {
             SamplerKind::Independent => std::array::from_fn(|_| self.rng.next_f32()),
             SamplerKind::Sobol => {
-                let seed = self.pixel_seed ^ hash_u32(set.wrapping_mul(0x9e3779b9) ^ 0x68bc21eb);
-                sobol_4d(self.index, seed)
+                let seed = self.pixel_seed ^ set_key(set);
+                sobol_4d(self.index_rev, seed)
             }
         }
     }
@@ -173,7 +175,7 @@ impl Sampler {
     #[inline]
     pub fn split_point(&self, kind: SplitKind, vertex: u32, j: u32) -> [f32; 4] {
         let seed = self.sample_key ^ hash_u32(kind as u32 ^ vertex.wrapping_mul(0x2c1b3c6d));
-        sobol_4d(j & 0xffff, seed)
+        sobol_4d((j & 0xffff).reverse_bits(), seed)
     }
 }
 
@@ -195,13 +197,36 @@ static SOBOL_BYTES: std::sync::LazyLock<SobolBytes> = std::sync::LazyLock::new(|
     }
 });
 
-/// `sobol_burley::sample_4d(index, 0, seed)` (Burley 2020: Owen-scrambled, shuffled Sobol),
-/// with the Sobol matrix product read from two byte tables instead of a loop over the
-/// index's bits, whose data-dependent branches cost about a tenth of a render's time.
+/// The key set `set` adds to a pixel's Sobol seed; the camera's and the main path's sets
+/// (the first [`SET_KEYS`]) are read from a table.
 #[inline]
-fn sobol_4d(index: u32, seed: u32) -> [f32; 4] {
+fn set_key(set: u32) -> u32 {
+    const fn key(set: u32) -> u32 {
+        hash_u32(set.wrapping_mul(0x9e3779b9) ^ 0x68bc21eb)
+    }
+    const SET_KEYS: [u32; 8] = {
+        let mut keys = [0; 8];
+        let mut set = 0;
+        while set < keys.len() {
+            keys[set] = key(set as u32);
+            set += 1;
+        }
+        keys
+    };
+    SET_KEYS
+        .get(set as usize)
+        .copied()
+        .unwrap_or_else(|| key(set))
+}
+
+/// `sobol_burley::sample_4d(index, 0, seed)` (Burley 2020: Owen-scrambled, shuffled Sobol)
+/// of the index given bit-reversed (`index_rev`, so a sample reverses it once for all its
+/// sets), with the Sobol matrix product read from two byte tables instead of a loop over
+/// the index's bits, whose data-dependent branches cost about a tenth of a render's time.
+#[inline]
+fn sobol_4d(index_rev: u32, seed: u32) -> [f32; 4] {
     use sobol_burley::parts::{Int4, hash, hash_int4, owen_scramble_int4_rev, owen_scramble_rev};
-    let rev = owen_scramble_rev(index.reverse_bits(), hash(seed ^ 0x79c68e4a));
+    let rev = owen_scramble_rev(index_rev, hash(seed ^ 0x79c68e4a));
     let bytes = &*SOBOL_BYTES;
     let high = bytes.high[(rev >> 24) as usize];
     let low = bytes.low[((rev >> 16) & 0xff) as usize];
@@ -259,10 +284,10 @@ mod tests {
     #[test]
     fn byte_tables_give_sobol_burleys_points() {
         let mut rng = Pcg32::new(5, 1);
-        for index in (0..1 << 16).step_by(7).chain([0, 1, 0xffff]) {
+        for index in (0u32..1 << 16).step_by(7).chain([0, 1, 0xffff]) {
             let seed = rng.next_u32();
             assert_eq!(
-                sobol_4d(index, seed),
+                sobol_4d(index.reverse_bits(), seed),
                 sobol_burley::sample_4d(index, 0, seed),
                 "index {index}, seed {seed}"
             );
