@@ -8,7 +8,7 @@ use glam::{Mat3, Vec2, Vec3};
 use lucerna::geometry::quadric::{self, Quadric};
 use lucerna::geometry::ray::Ray;
 use lucerna::geometry::sphere;
-use lucerna::geometry::triangle::{RayShear, intersect};
+use lucerna::geometry::triangle::{RayShear, TriangleLanes, intersect};
 use lucerna::integrator::LightSampling;
 use lucerna::light::environment::{Environment, EnvironmentMap};
 use lucerna::light::{Light, QuadricLight, SphereLight, TriangleLight};
@@ -156,7 +156,8 @@ fn area_light_density(light: &Light, origin: Vec3, w: Vec3, sampling: LightSampl
     let ray = Ray::new(origin, w);
     let hit = match light {
         Light::Triangle(t) => {
-            intersect(&RayShear::new(&ray), t.p[0], t.p[1], t.p[2], f32::INFINITY)
+            let tri = TriangleLanes::new(t.p[0], t.p[1], t.p[2]);
+            intersect(&RayShear::new(&ray), &tri, f32::INFINITY)
                 .filter(|_| t.two_sided || t.n.dot(w) < 0.0)
         }
         Light::Sphere(s) => sphere::intersect(&ray, s.centre, s.radius, f32::INFINITY)

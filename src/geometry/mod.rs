@@ -12,7 +12,7 @@ pub mod wide;
 use glam::Vec3;
 use obvhs::aabb::Aabb;
 use ray::Ray;
-use triangle::RayShear;
+use triangle::{RayShear, TriangleLanes};
 use wide::{LeafResult, WideBvh};
 
 /// A primitive the BVH holds.
@@ -77,12 +77,30 @@ pub struct Hit {
 /// [`Hit::instance`] of a hit on geometry that is not placed through a shared BVH.
 pub const NOT_PLACED: u32 = u32::MAX;
 
+/// A primitive as a BVH leaf stores it: triangles laid out for the lane-wise test.
+#[derive(Clone, Copy, Debug)]
+enum LeafPrimitive {
+    Triangle(TriangleLanes),
+    Sphere { centre: Vec3, radius: f32 },
+    Quadric(quadric::Quadric),
+}
+
+impl From<Primitive> for LeafPrimitive {
+    fn from(p: Primitive) -> Self {
+        match p {
+            Primitive::Triangle([p0, p1, p2]) => Self::Triangle(TriangleLanes::new(p0, p1, p2)),
+            Primitive::Sphere { centre, radius } => Self::Sphere { centre, radius },
+            Primitive::Quadric(q) => Self::Quadric(q),
+        }
+    }
+}
+
 /// A BVH over primitives with per-primitive flags, answering closest-hit and occlusion
 /// queries.
 pub struct Bvh {
     bvh: WideBvh,
     /// Primitives in BVH leaf order, so leaves read them without indirection.
-    prims: Vec<Primitive>,
+    prims: Vec<LeafPrimitive>,
     flags: Vec<u8>,
 }
 
@@ -95,7 +113,11 @@ impl Bvh {
         let bvh = WideBvh::build(&aabbs);
         drop(aabbs);
         Self {
-            prims: bvh.order.iter().map(|&i| prims[i as usize]).collect(),
+            prims: bvh
+                .order
+                .iter()
+                .map(|&i| prims[i as usize].into())
+                .collect(),
             flags: bvh.order.iter().map(|&i| flags[i as usize]).collect(),
             bvh,
         }
@@ -104,7 +126,7 @@ impl Bvh {
     /// Bytes the structure holds: wide nodes, and per primitive its data, flags and index.
     pub fn bytes(&self) -> usize {
         use std::mem::size_of;
-        self.bvh.bytes() + self.prims.len() * (size_of::<Primitive>() + size_of::<u8>())
+        self.bvh.bytes() + self.prims.len() * (size_of::<LeafPrimitive>() + size_of::<u8>())
     }
 
     /// Tests one leaf primitive; `accept` is consulted only for alpha-tested ones.
@@ -118,9 +140,11 @@ impl Bvh {
         accept: &mut F,
     ) -> Option<PrimitiveHit> {
         let hit = match self.prims[leaf] {
-            Primitive::Triangle([p0, p1, p2]) => triangle::intersect(shear, p0, p1, p2, tmax)?,
-            Primitive::Sphere { centre, radius } => sphere::intersect(ray, centre, radius, tmax)?,
-            Primitive::Quadric(q) => q.intersect(ray, tmax)?,
+            LeafPrimitive::Triangle(ref t) => triangle::intersect(shear, t, tmax)?,
+            LeafPrimitive::Sphere { centre, radius } => {
+                sphere::intersect(ray, centre, radius, tmax)?
+            }
+            LeafPrimitive::Quadric(q) => q.intersect(ray, tmax)?,
         };
         let flags = self.flags[leaf];
         if flags != 0 {
@@ -281,7 +305,10 @@ mod tests {
                 .iter()
                 .enumerate()
                 .filter_map(|(i, t)| {
-                    Some((triangle::intersect(&shear, t[0], t[1], t[2], tmax)?, i))
+                    Some((
+                        triangle::intersect(&shear, &TriangleLanes::new(t[0], t[1], t[2]), tmax)?,
+                        i,
+                    ))
                 })
                 .min_by(|a, b| a.0.t.total_cmp(&b.0.t).then(a.1.cmp(&b.1)));
             let hit = bvh.intersect(&ray, |_, _| true);
@@ -313,7 +340,13 @@ mod tests {
             let shear = RayShear::new(&Ray::new(o, d));
             let best = tris
                 .iter()
-                .filter_map(|t| triangle::intersect(&shear, t[0], t[1], t[2], f32::INFINITY))
+                .filter_map(|t| {
+                    triangle::intersect(
+                        &shear,
+                        &TriangleLanes::new(t[0], t[1], t[2]),
+                        f32::INFINITY,
+                    )
+                })
                 .map(|h| h.t)
                 .fold(f32::INFINITY, f32::min);
             assert_eq!(hit.t, best);
@@ -355,7 +388,11 @@ mod tests {
                 .filter(|&p| accepted(p))
                 .filter_map(|p| {
                     let t = tris[p as usize];
-                    triangle::intersect(&shear, t[0], t[1], t[2], f32::INFINITY)
+                    triangle::intersect(
+                        &shear,
+                        &TriangleLanes::new(t[0], t[1], t[2]),
+                        f32::INFINITY,
+                    )
                 })
                 .map(|h| h.t)
                 .fold(f32::INFINITY, f32::min);
