@@ -44,24 +44,20 @@ impl RayShear {
     /// Precomputes the permutation and shear for `ray`.
     #[inline]
     pub fn new(ray: &Ray) -> Self {
-        let d = ray.dir;
-        let a = d.abs();
-        let kz = if a.x > a.y {
-            if a.x > a.z { 0 } else { 2 }
-        } else if a.y > a.z {
-            1
-        } else {
-            2
-        };
-        let (mut kx, mut ky) = ((kz + 1) % 3, (kz + 2) % 3);
+        let a = ray.dir.abs();
+        // The largest component's axis (the later axis on ties), without branches:
+        // ray directions are random, so a branch on them would often be mispredicted.
+        let (x_largest, y_over_z) = (a.x > a.y && a.x > a.z, a.x <= a.y && a.y > a.z);
+        let kz = 2 - 2 * x_largest as usize - y_over_z as usize;
+        // Read by index from arrays, not from the vectors (whose indexing is a match).
+        let (d, o) = (ray.dir.to_array(), ray.origin.to_array());
         // Swapping keeps the winding of triangles seen along the ray.
-        if d[kz] < 0.0 {
-            std::mem::swap(&mut kx, &mut ky);
-        }
+        let swap = (d[kz] < 0.0) as usize;
+        let (kx, ky) = ([1, 2, 0][kz], [2, 0, 1][kz]);
+        let (kx, ky) = ([kx, ky][swap], [ky, kx][swap]);
         // One reciprocal for the three ratios: watertightness needs every triangle tested
         // with the same shear, not the shear's exact rounding.
         let sz = 1.0 / d[kz];
-        let o = ray.origin;
         Self {
             axes: [kx, ky, kz],
             origin: [kx, ky, kz].map(|k| Vec4::splat(o[k])),
