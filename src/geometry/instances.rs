@@ -81,7 +81,7 @@ impl InstancedBvh {
         mut accept: F,
     ) -> Option<Hit> {
         let mut best: Option<Hit> = None;
-        self.top.traverse::<true, _>(ray, |leaves, mut tmax| {
+        self.top.traverse(ray, |leaves, mut tmax| {
             let mut result = LeafResult::Miss;
             for leaf in leaves {
                 let (placement, object_ray, shared) = self.enter(leaf, ray, tmax);
@@ -106,7 +106,7 @@ impl InstancedBvh {
         mut accept: F,
     ) -> bool {
         let mut occluded = false;
-        self.top.traverse::<false, _>(ray, |leaves, _| {
+        self.top.traverse(ray, |leaves, _| {
             for leaf in leaves {
                 let (placement, object_ray, shared) = self.enter(leaf, ray, ray.tmax);
                 if shared.occluded(&object_ray, |prim, h| {

@@ -168,7 +168,7 @@ impl Bvh {
         let shear = RayShear::new(ray);
         let mut best: Option<(usize, PrimitiveHit)> = None;
         let mut best_prim = u32::MAX;
-        self.bvh.traverse::<true, _>(ray, |leaves, tmax| {
+        self.bvh.traverse(ray, |leaves, tmax| {
             let mut result = LeafResult::Miss;
             let mut tmax = tmax;
             for leaf in leaves {
@@ -202,7 +202,7 @@ impl Bvh {
     pub fn occluded<F: FnMut(u32, &PrimitiveHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
         let shear = RayShear::new(ray);
         let mut occluded = false;
-        self.bvh.traverse::<false, _>(ray, |leaves, _| {
+        self.bvh.traverse(ray, |leaves, _| {
             for leaf in leaves {
                 if self
                     .test(leaf, ray, &shear, ray.tmax, &mut accept)

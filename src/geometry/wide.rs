@@ -182,16 +182,14 @@ impl WideBvh {
         self.nodes.len() * std::mem::size_of::<Node>() + self.order.len() * 4
     }
 
-    /// Visits the leaves `ray` overlaps in `(0, tmax)`, calling `leaf(range, bound)` with
-    /// the leaf's range in [`WideBvh::order`] and the current bound; a closer hit shrinks
-    /// the bound and prunes the boxes beyond it. Returns the final bound. With
-    /// `NEAREST_FIRST` the nearest box is entered first (closest hits); without, boxes go
-    /// in node order, which saves the sort where any hit ends the query (occlusion).
+    /// Visits the leaves `ray` overlaps in `(0, tmax)`, nearest box first, calling
+    /// `leaf(range, bound)` with the leaf's range in [`WideBvh::order`] and the current
+    /// bound; a closer hit shrinks the bound and prunes the boxes beyond it. Returns the
+    /// final bound. Occlusion queries take the same order: on the million-triangle sphere
+    /// field, node order traced shadow rays 8-15 % slower (it saved 4 % of the Cornell
+    /// box's occlusion instructions).
     #[inline(always)]
-    pub fn traverse<
-        const NEAREST_FIRST: bool,
-        F: FnMut(std::ops::Range<usize>, f32) -> LeafResult,
-    >(
+    pub fn traverse<F: FnMut(std::ops::Range<usize>, f32) -> LeafResult>(
         &self,
         ray: &Ray,
         mut leaf: F,
@@ -212,19 +210,6 @@ impl WideBvh {
                     let first = mask.trailing_zeros() as usize;
                     mask &= mask - 1;
                     if mask == 0 {
-                        current = node.children[first];
-                        continue;
-                    }
-                    if !NEAREST_FIRST {
-                        // Any order finds an occluder: visit the first, stack the rest.
-                        while mask != 0 {
-                            let c = mask.trailing_zeros() as usize;
-                            mask &= mask - 1;
-                            stack.push(Entry {
-                                child: node.children[c],
-                                t: 0.0,
-                            });
-                        }
                         current = node.children[first];
                         continue;
                     }
