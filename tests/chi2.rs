@@ -156,7 +156,7 @@ fn area_light_density(light: &Light, origin: Vec3, w: Vec3, sampling: LightSampl
     let ray = Ray::new(origin, w);
     let hit = match light {
         Light::Triangle(t) => {
-            let tri = TriangleLanes::new(t.p[0], t.p[1], t.p[2]);
+            let tri = TriangleLanes::new(t.p);
             intersect(&RayShear::new(&ray), &tri, f32::INFINITY)
                 .filter(|_| t.two_sided || t.n.dot(w) < 0.0)
         }

@@ -88,7 +88,7 @@ enum LeafPrimitive {
 impl From<Primitive> for LeafPrimitive {
     fn from(p: Primitive) -> Self {
         match p {
-            Primitive::Triangle([p0, p1, p2]) => Self::Triangle(TriangleLanes::new(p0, p1, p2)),
+            Primitive::Triangle(p) => Self::Triangle(TriangleLanes::new(p)),
             Primitive::Sphere { centre, radius } => Self::Sphere { centre, radius },
             Primitive::Quadric(q) => Self::Quadric(q),
         }
@@ -306,7 +306,7 @@ mod tests {
                 .enumerate()
                 .filter_map(|(i, t)| {
                     Some((
-                        triangle::intersect(&shear, &TriangleLanes::new(t[0], t[1], t[2]), tmax)?,
+                        triangle::intersect(&shear, &TriangleLanes::new(*t), tmax)?,
                         i,
                     ))
                 })
@@ -340,13 +340,7 @@ mod tests {
             let shear = RayShear::new(&Ray::new(o, d));
             let best = tris
                 .iter()
-                .filter_map(|t| {
-                    triangle::intersect(
-                        &shear,
-                        &TriangleLanes::new(t[0], t[1], t[2]),
-                        f32::INFINITY,
-                    )
-                })
+                .filter_map(|t| triangle::intersect(&shear, &TriangleLanes::new(*t), f32::INFINITY))
                 .map(|h| h.t)
                 .fold(f32::INFINITY, f32::min);
             assert_eq!(hit.t, best);
@@ -387,10 +381,9 @@ mod tests {
             let best = (0..tris.len() as u32)
                 .filter(|&p| accepted(p))
                 .filter_map(|p| {
-                    let t = tris[p as usize];
                     triangle::intersect(
                         &shear,
-                        &TriangleLanes::new(t[0], t[1], t[2]),
+                        &TriangleLanes::new(tris[p as usize]),
                         f32::INFINITY,
                     )
                 })

@@ -15,11 +15,11 @@ pub struct TriangleLanes {
 }
 
 impl TriangleLanes {
-    /// The triangle `p0 p1 p2`.
-    pub fn new(p0: Vec3, p1: Vec3, p2: Vec3) -> Self {
+    /// The triangle with vertices `p` (counter-clockwise from its front).
+    pub fn new(p: [Vec3; 3]) -> Self {
         let mut coords = [0.0; 10];
         for axis in 0..3 {
-            coords[3 * axis..3 * axis + 3].copy_from_slice(&[p0[axis], p1[axis], p2[axis]]);
+            coords[3 * axis..3 * axis + 3].copy_from_slice(&p.map(|v| v[axis]));
         }
         Self { coords }
     }
@@ -133,11 +133,7 @@ mod tests {
 
     fn shoot(o: Vec3, d: Vec3, p: [Vec3; 3]) -> Option<PrimitiveHit> {
         let ray = Ray::new(o, d);
-        intersect(
-            &RayShear::new(&ray),
-            &TriangleLanes::new(p[0], p[1], p[2]),
-            f32::INFINITY,
-        )
+        intersect(&RayShear::new(&ray), &TriangleLanes::new(p), f32::INFINITY)
     }
 
     #[test]
@@ -276,7 +272,7 @@ mod tests {
                     dir: d,
                     tmax,
                 }),
-                &TriangleLanes::new(tri[0], tri[1], tri[2]),
+                &TriangleLanes::new(tri),
                 tmax,
             );
             let scalar = scalar_watertight(o, d, tri, tmax);
