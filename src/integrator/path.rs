@@ -405,7 +405,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     let (u_light, u_select) = if n_nee == 1 {
                         (vs.light, vs.light_select)
                     } else {
-                        let p = sampler.split_point(SplitKind::Light, 0, j);
+                        let p = sampler.first_split_point(SplitKind::Light, j, n_nee);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
                     rays.shadow += self.next_event(
@@ -426,12 +426,18 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 let sample = if continuation.count == 1 {
                     vs
                 } else {
-                    let key = if first {
-                        0
+                    // The first vertex's split takes the same count at every sample;
+                    // efficiency-aware splitting's count varies.
+                    let p = if first && self.settings.split.bsdf > 1 {
+                        sampler.first_split_point(SplitKind::Bsdf, k, continuation.count)
                     } else {
-                        1 + path.branch * 4096 + path.depth
+                        let key = if first {
+                            0
+                        } else {
+                            1 + path.branch * 4096 + path.depth
+                        };
+                        sampler.split_point(SplitKind::Bsdf, key, k)
                     };
-                    let p = sampler.split_point(SplitKind::Bsdf, key, k);
                     VertexSample {
                         bsdf: Vec2::new(p[0], p[1]),
                         lobe: p[2],
