@@ -178,7 +178,8 @@ struct RenderArgs {
     /// other shapes by area), area, or solid-angle (spherical triangles too).
     #[arg(long)]
     light_sampling: Option<String>,
-    /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1 (default 1 and 1).
+    /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1 (default 1 and 1),
+    /// or auto (learned from the first samples of every pixel).
     #[arg(long)]
     split: Option<String>,
     /// Pixel filter: box, blackman-harris (width 1.5, default) or blackman-harris:WIDTH.
@@ -431,12 +432,13 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         || matches!(
             options.settings.rr,
             lucerna::integrator::RussianRoulette::Efficiency(_)
-        );
+        )
+        || options.settings.split == lucerna::integrator::SplitChoice::Auto;
     if args.resume && stateful {
         return Err(Error::bad_input(
             "",
             "--resume",
-            "adaptive sampling and rr = efficiency keep state an EXR does not hold; they cannot be resumed",
+            "adaptive sampling, rr = efficiency and split = auto keep state an EXR does not hold; they cannot be resumed",
         ));
     }
     let pool = thread_pool(args.threads)?;
@@ -605,6 +607,9 @@ fn render_frame(
     };
     if let Some(f) = frame {
         header.set("lucerna/frame", Attribute::Double(f));
+    }
+    if let Some(split) = stats.learned_split {
+        header.set("lucerna/split_learned", Attribute::Text(split.describe()));
     }
     if film.aovs.wants_crypto() {
         use lucerna::film::crypto::{Kind, header_attributes};

@@ -7,7 +7,8 @@ use crate::film::{Film, PixelAccumulator, SampleRecord, Window};
 use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
-use crate::integrator::{RussianRoulette, Settings};
+use crate::integrator::split::{self, FirstSplit, PixelParts, SampleParts, SplitStats};
+use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
 use crate::light::groups::LightGroups;
 use crate::plan::{PlanMode, RenderPlan};
 use crate::sampling::sampler::Sampler;
@@ -233,11 +234,12 @@ impl RenderOptions {
                 ));
             }
         }
-        let learned = matches!(self.settings.rr, RussianRoulette::Efficiency(_));
+        let learned = matches!(self.settings.rr, RussianRoulette::Efficiency(_))
+            || self.settings.split == SplitChoice::Auto;
         if (self.pass.is_some() || self.crop.is_some())
             && (learned || self.noise_threshold.is_some())
         {
-            return Err("crop and pass: adaptive sampling and rr = efficiency decide from the whole image and all its samples, so a split render would differ from the whole one".into());
+            return Err("crop and pass: adaptive sampling, rr = efficiency and split = auto decide from the whole image and all its samples, so a split render would differ from the whole one".into());
         }
         Ok(())
     }
@@ -299,6 +301,8 @@ pub struct RenderStats {
     pub discarded: u64,
     /// Stopped early by [`RenderOptions::interrupt`].
     pub interrupted: bool,
+    /// The split counts `split = auto` chose (once its learning samples were taken).
+    pub learned_split: Option<Split>,
 }
 
 impl RenderStats {
@@ -316,7 +320,9 @@ impl RenderStats {
             self.rays.closest as f64 / self.seconds / 1e6,
             self.rays.shadow as f64 / self.seconds / 1e6,
             self.discarded,
-        )
+        ) + &self.learned_split.map_or(String::new(), |s| {
+            format!(", split learned: {}", s.describe())
+        })
     }
 }
 
@@ -484,6 +490,12 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         }
         _ => None,
     };
+    // Learned splitting takes its first samples split two and two, then the counts chosen.
+    let mut first_split = match options.settings.split {
+        SplitChoice::Fixed(counts) => FirstSplit::fixed(counts),
+        SplitChoice::Auto => FirstSplit::learning(),
+    };
+    let mut learned_split = None;
     let pixels = film.width as u64 * film.height as u64;
     let bar = (options.progress && std::io::stderr().is_terminal()).then(|| {
         let (length, template) = match (options.time, adaptive) {
@@ -515,8 +527,16 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
     let mut done = resumed;
     while !interrupted() {
         let elapsed = start.elapsed().as_secs_f64();
+        let split_learning = options.settings.split == SplitChoice::Auto
+            && learned_split.is_none()
+            && done < uniform_spp;
         let (pass, learning) = if done < uniform_spp {
             let mut n = next_pass(done - resumed, uniform_spp - resumed, options.time, elapsed);
+            if split_learning {
+                n = split::LEARNING_SAMPLES
+                    .saturating_sub(done)
+                    .clamp(1, uniform_spp - done);
+            }
             // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
             // deciding with everything learned before it.
             let learning = ears.is_some() && done < LEARNING_SAMPLES;
@@ -553,6 +573,8 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
             samples: &pass,
             first_sample: range.start,
             learning,
+            split: first_split,
+            split_learning,
             rays: &counts,
             bar: bar.as_ref().filter(|_| options.time.is_none() && !adaptive),
         };
@@ -569,10 +591,19 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         };
         // In tile order, whatever the thread count: the next pass decides the same way.
         if let (Some(e), true) = (ears.as_mut(), learning) {
-            for l in learned.iter().flatten() {
+            for l in learned.iter().filter_map(|t| t.0.as_ref()) {
                 e.merge(l);
             }
             e.refresh();
+        }
+        if let (true, PassSamples::UpTo(total)) = (split_learning, &pass) {
+            let mut stats = SplitStats::default();
+            for s in learned.iter().filter_map(|t| t.1.as_ref()) {
+                stats.merge(s);
+            }
+            let counts = stats.choose();
+            first_split = FirstSplit::after_learning(counts, *total);
+            learned_split = Some(counts);
         }
         if let PassSamples::UpTo(total) = pass {
             done = total;
@@ -591,6 +622,7 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         rays: *counts.lock().expect("no thread panicked holding the lock"),
         discarded: film.discarded(),
         interrupted: interrupted(),
+        learned_split,
     };
     (film, stats)
 }
@@ -606,17 +638,21 @@ struct PassArgs<'a> {
     first_sample: u32,
     /// Whether efficiency-aware roulette learns in this pass.
     learning: bool,
+    /// How the first vertex splits, and whether this pass learns the counts.
+    split: FirstSplit,
+    split_learning: bool,
     rays: &'a Mutex<RayCounts>,
     /// Advanced by samples taken (fixed sample counts only).
     bar: Option<&'a indicatif::ProgressBar>,
 }
 
 /// Renders one pass over every tile with the kernel variant `<ROUTED, EMITTERS, DATA>`
-/// (see `plan::Kernel`); returns what each tile learned for efficiency-aware roulette.
+/// (see `plan::Kernel`); returns what each tile learned for efficiency-aware roulette and
+/// for learned splitting.
 fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
     film: &mut Film,
     args: &PassArgs,
-) -> Vec<Option<Learning>> {
+) -> Vec<(Option<Learning>, Option<SplitStats>)> {
     let PassArgs {
         world,
         options,
@@ -624,12 +660,14 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
         samples,
         first_sample,
         learning,
+        split,
+        split_learning,
         rays: counts,
         bar,
     } = *args;
     let router = &film.router;
     let crypto = film.aovs.wants_crypto();
-    let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears);
+    let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears, split);
     let window = film.window;
     let camera = &world.camera;
     let interrupt = options.interrupt.as_deref();
@@ -641,6 +679,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
             let mut pixel = PixelAccumulator::new(router.slots.len(), crypto);
             let mut rays = RayCounts::default();
             let mut tile_learning = learning.then(Learning::default);
+            let mut tile_split = split_learning.then(SplitStats::default);
             let mut taken = 0u64;
             for ty in 0..tile.height {
                 for tx in 0..tile.width {
@@ -654,6 +693,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                     }
                     let first = first_sample + taken_here;
                     pixel.clear();
+                    let mut pixel_parts = PixelParts::default();
                     let pixel_rays = rays.closest + rays.shadow;
                     for index in first..first + n {
                         sampler.start(x, y, index);
@@ -663,6 +703,10 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                             camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
                         record.clear();
                         let before = rays.closest + rays.shadow;
+                        let mut parts = SampleParts {
+                            rays: [before; 4],
+                            ..SampleParts::default()
+                        };
                         tracer.trace(
                             ray,
                             index_in_image,
@@ -670,7 +714,13 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                             &mut record,
                             &mut rays,
                             tile_learning.as_mut(),
+                            tile_split.is_some().then_some(&mut parts),
                         );
+                        if let Some(stats) = tile_split.as_mut() {
+                            parts.rays[3] = rays.closest + rays.shadow;
+                            stats.add_rays(&parts);
+                            pixel_parts.add(&parts);
+                        }
                         if let Some(l) = tile_learning.as_mut() {
                             l.pixel_sample(
                                 index_in_image as u32,
@@ -679,6 +729,9 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                             );
                         }
                         pixel.add(&mut record);
+                    }
+                    if let Some(stats) = tile_split.as_mut() {
+                        stats.add_pixel(&pixel_parts);
                     }
                     pixel.rays = rays.closest + rays.shadow - pixel_rays;
                     tile.add(in_tile, &pixel);
@@ -692,7 +745,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
             if let Some(bar) = bar {
                 bar.inc(taken);
             }
-            tile_learning
+            (tile_learning, tile_split)
         })
         .collect()
 }

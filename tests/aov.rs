@@ -7,8 +7,9 @@ use common::scenes::{render, render_aovs};
 use glam::{DVec3, Vec2, Vec3};
 use lucerna::film::aov::{ALL, Aov, AovSet, LOBES};
 use lucerna::ingest;
-use lucerna::integrator::Settings;
 use lucerna::integrator::path::{Contribution, FirstHit, PathTracer, RayCounts, Recorder, Source};
+use lucerna::integrator::split::FirstSplit;
+use lucerna::integrator::{Settings, Split};
 use lucerna::sampling::sampler::{Sampler, SamplerKind};
 use lucerna::scene::{BsdfModel, Light, LightKind, Scene};
 use lucerna::world::World;
@@ -223,7 +224,8 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
             sampler: SamplerKind::Independent,
             ..Default::default()
         };
-        let tracer = PathTracer::<true, false>::new(&world, &settings, None);
+        let no_split = FirstSplit::fixed(Split { nee: 1, bsdf: 1 });
+        let tracer = PathTracer::<true, false>::new(&world, &settings, None, no_split);
         let mut sampler = Sampler::new(settings.sampler, 3);
         let mut stats = DirectStats::default();
         let mut rays = RayCounts::default();
@@ -235,7 +237,7 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
                     let ray = world
                         .camera
                         .generate_ray(Vec2::new(x as f32, y as f32) + cs.film, cs.lens);
-                    tracer.trace(ray, 0, &mut sampler, &mut stats, &mut rays, None);
+                    tracer.trace(ray, 0, &mut sampler, &mut stats, &mut rays, None, None);
                     stats.end_sample();
                 }
             }

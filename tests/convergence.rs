@@ -1,6 +1,6 @@
 //! Every technique configuration converges to the same image.
 //!
-//! Each setting (each MIS heuristic, each Russian roulette mode, splitting on and off, each
+//! Each setting (each MIS heuristic, each Russian roulette mode, splitting fixed and learned, each
 //! light selection and light sampling strategy, each sampler) renders the Cornell box, the
 //! MIS plates (also under a sun with an angular size) and the indirect room at a small resolution; every 4×4-pixel block's mean
 //! (per colour channel) is compared with the same block of a reference rendered with the
@@ -47,6 +47,9 @@ const CONFIGURATIONS: &[&[(&str, &str)]] = &[
     &[("rr", "efficiency:1")],
     &[("split", "nee=4,bsdf=4")],
     &[("split", "nee=16,bsdf=1"), ("mis", "balance")],
+    &[("split", "auto")],
+    &[("split", "auto"), ("sampler", "sobol")],
+    &[("split", "nee=4,bsdf=2"), ("sampler", "sobol")],
     &[("light-select", "uniform")],
     &[("light-select", "contribution")],
     &[("light-sampling", "solid-angle")],

@@ -169,6 +169,9 @@ fn merge_and_split_refuse_what_does_not_fit() {
             vec!["--crop", "0,0,8,8", "--noise-threshold", "0.1"],
             "adaptive",
         ),
+        (vec!["--pass", "1/2", "--split", "auto"], "split = auto"),
+        (vec!["--split", "auto", "--rr", "efficiency"], "choose one"),
+        (vec!["--split", "auto", "--resume"], "cannot be resumed"),
     ] {
         let run = lucerna(&[&RENDER[..], &args[..], &["-o", &out]].concat());
         let stderr = String::from_utf8_lossy(&run.stderr);

@@ -5,6 +5,7 @@ pub mod ears;
 pub mod mis;
 pub mod path;
 pub mod settings;
+pub mod split;
 
 pub use mis::{Mis, Technique};
-pub use settings::{LightSampling, LightSelect, RussianRoulette, Settings, Split};
+pub use settings::{LightSampling, LightSelect, RussianRoulette, Settings, Split, SplitChoice};

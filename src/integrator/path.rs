@@ -15,6 +15,7 @@
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
 use super::mis::{Mis, Technique};
 use super::settings::{RussianRoulette, Settings};
+use super::split::{FirstSplit, SampleParts};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::{self, Bsdf, PerLobe};
@@ -142,6 +143,8 @@ struct Walk<'l> {
     paths: u32,
     /// Where efficiency-aware roulette records what this pass learns.
     learning: Option<&'l mut Learning>,
+    /// Where learned splitting records what this sample's parts brought back.
+    parts: Option<&'l mut SampleParts>,
 }
 
 /// A scattering vertex: the shading point, its BSDF, the direction back along the ray that
@@ -175,6 +178,8 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     settings: &'a Settings,
     /// Learned statistics for efficiency-aware roulette (rr=efficiency only).
     ears: Option<&'a Ears>,
+    /// How the first vertex splits in this pass.
+    split: FirstSplit,
 }
 
 impl PathState {
@@ -196,6 +201,9 @@ impl PathState {
             dist,
         } = e;
         if self.depth == 0 {
+            if let Some(parts) = walk.parts.as_deref_mut() {
+                parts.add(self.beta * le, 0, false);
+            }
             rec.contribution(Contribution {
                 value: self.beta * le,
                 depth: 0,
@@ -232,17 +240,26 @@ impl PathState {
 }
 
 impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> {
-    /// A path tracer for `world`; `ears` holds the statistics of efficiency-aware roulette.
-    pub fn new(world: &'a World, settings: &'a Settings, ears: Option<&'a Ears>) -> Self {
+    /// A path tracer for `world`; `ears` holds the statistics of efficiency-aware roulette,
+    /// `split` how the first vertex splits.
+    pub fn new(
+        world: &'a World,
+        settings: &'a Settings,
+        ears: Option<&'a Ears>,
+        split: FirstSplit,
+    ) -> Self {
         Self {
             world,
             settings,
             ears,
+            split,
         }
     }
 
     /// Traces the paths of camera ray `ray` for pixel `pixel` using `sampler`'s current
-    /// pixel sample; `learning` receives statistics for efficiency-aware roulette.
+    /// pixel sample; `learning` receives statistics for efficiency-aware roulette, `parts`
+    /// what the sample's parts bring back for learned splitting.
+    #[allow(clippy::too_many_arguments)]
     pub fn trace<R: Recorder>(
         &self,
         ray: Ray,
@@ -251,6 +268,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         rec: &mut R,
         rays: &mut RayCounts,
         learning: Option<&mut Learning>,
+        parts: Option<&mut SampleParts>,
     ) {
         let mut walk = Walk {
             mis: self.settings.mis,
@@ -259,6 +277,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             pixel,
             paths: 1,
             learning,
+            parts,
         };
         let camera = PathState {
             beta: Vec3::ONE,
@@ -397,17 +416,28 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             };
             let vs = sampler.vertex(path.depth, path.branch);
             let first = path.depth == 0;
-            let n_nee = if first { self.settings.split.nee } else { 1 };
+            let n_nee = if first { self.split.counts.nee } else { 1 };
             let continuation = self.continuation(&path, walk, cell, vs.rr);
+            let learning_split = first && walk.parts.is_some();
+            if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                parts.split = true;
+                parts.rays[1] = rays.closest + rays.shadow;
+            }
 
             if bsdf.has_non_delta() && !world.lights.is_empty() {
                 for j in 0..n_nee {
                     let (u_light, u_select) = if n_nee == 1 {
                         (vs.light, vs.light_select)
                     } else {
-                        let p = sampler.first_split_point(SplitKind::Light, j, n_nee);
+                        let point = self
+                            .split
+                            .point(SplitKind::Light, sampler.sample_index(), j);
+                        let p = sampler.first_split_point(SplitKind::Light, point);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
+                    if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                        parts.current = j as usize;
+                    }
                     rays.shadow += self.next_event(
                         &vertex,
                         &path,
@@ -420,16 +450,24 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 }
             }
 
+            if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                parts.rays[2] = rays.closest + rays.shadow;
+            }
+
             // Continue: the last path in this loop, the others as branches of their own.
             let mut next = None;
             for k in 0..continuation.count {
+                if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                    parts.current = k as usize;
+                }
                 let sample = if continuation.count == 1 {
                     vs
                 } else {
                     // The first vertex's split takes the same count at every sample;
                     // efficiency-aware splitting's count varies.
-                    let p = if first && self.settings.split.bsdf > 1 {
-                        sampler.first_split_point(SplitKind::Bsdf, k, continuation.count)
+                    let p = if first && self.split.counts.bsdf > 1 {
+                        let point = self.split.point(SplitKind::Bsdf, sampler.sample_index(), k);
+                        sampler.first_split_point(SplitKind::Bsdf, point)
                     } else {
                         let key = if first {
                             0
@@ -478,7 +516,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         cell: Option<u32>,
         u: f32,
     ) -> Continuation {
-        let split = self.settings.split.bsdf;
+        let split = self.split.counts.bsdf;
         if path.depth == 0 && split > 1 {
             return Continuation {
                 count: split,
@@ -672,6 +710,9 @@ fn record<R: Recorder>(
 ) {
     let weight = |h: Mis| h.weight(technique, own, other);
     let weighted = value * weight(walk.mis);
+    if let Some(parts) = walk.parts.as_deref_mut() {
+        parts.add(weighted, depth, technique == Technique::Nee);
+    }
     if let Some(learning) = walk.learning.as_deref_mut() {
         learning.gathered(weighted, depth);
     }

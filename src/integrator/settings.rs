@@ -64,6 +64,33 @@ pub struct Split {
     pub bsdf: u32,
 }
 
+/// How the first vertex splits: counts given, or learned from the first samples of every
+/// pixel (see `integrator::split`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SplitChoice {
+    Fixed(Split),
+    Auto,
+}
+
+impl SplitChoice {
+    /// Parses `auto` or `nee=N,bsdf=M`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        if s.trim() == "auto" {
+            Ok(Self::Auto)
+        } else {
+            Split::parse(s).map(Self::Fixed)
+        }
+    }
+
+    /// The textual form [`SplitChoice::parse`] reads.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Fixed(split) => split.describe(),
+            Self::Auto => "auto".into(),
+        }
+    }
+}
+
 /// Largest split count accepted.
 pub const MAX_SPLIT: u32 = 4096;
 
@@ -77,7 +104,7 @@ pub struct Settings {
     pub max_depth: Option<u32>,
     pub light_select: LightSelect,
     pub light_sampling: LightSampling,
-    pub split: Split,
+    pub split: SplitChoice,
     pub sampler: SamplerKind,
     pub seed: u32,
 }
@@ -94,7 +121,7 @@ impl Default for Settings {
             max_depth: None,
             light_select: LightSelect::Power,
             light_sampling: LightSampling::Auto,
-            split: Split { nee: 1, bsdf: 1 },
+            split: SplitChoice::Fixed(Split { nee: 1, bsdf: 1 }),
             sampler: SamplerKind::Sobol,
             seed: 0,
         }
@@ -294,7 +321,7 @@ impl Settings {
             }
             "light-select" => self.light_select = LightSelect::parse(value)?,
             "light-sampling" => self.light_sampling = LightSampling::parse(value)?,
-            "split" => self.split = Split::parse(value)?,
+            "split" => self.split = SplitChoice::parse(value)?,
             "sampler" => {
                 self.sampler = SamplerKind::parse(value)
                     .ok_or_else(|| format!("unknown sampler {value:?} (sobol, independent)"))?
@@ -328,6 +355,12 @@ impl Settings {
     pub fn validate(&self) -> Result<(), String> {
         if self.rr == RussianRoulette::Off && self.max_depth.is_none() {
             return Err("rr=off needs a finite max-depth (paths would never end)".into());
+        }
+        if self.split == SplitChoice::Auto && matches!(self.rr, RussianRoulette::Efficiency(_)) {
+            return Err(
+                "split=auto and rr=efficiency both learn how paths split at first; choose one"
+                    .into(),
+            );
         }
         Ok(())
     }
@@ -401,6 +434,7 @@ mod tests {
             ("light-select", "contribution"),
             ("light-sampling", "solid-angle"),
             ("split", "nee=4,bsdf=2"),
+            ("split", "auto"),
             ("sampler", "independent"),
             ("seed", "7"),
         ] {
@@ -419,6 +453,7 @@ mod tests {
         assert!(s.set("split", "nee=0").is_err() && s.set("colour", "red").is_err());
         s.set("rr", "efficiency").unwrap();
         assert_eq!(s.get("rr").unwrap(), "efficiency:1");
+        assert!(s.validate().is_err(), "split=auto with rr=efficiency");
         assert!(s.set("rr", "efficiency:0.5").is_err());
         s.set("rr", "off").unwrap();
         s.set("max-depth", "unlimited").unwrap();

@@ -186,23 +186,32 @@ impl Sampler {
         sobol_4d((j & 0xffff).reverse_bits(), seed)
     }
 
-    /// Point `j` of the `count` split samples of `kind` at the first vertex, where every
-    /// sample of the pixel splits `count` ways. With the Sobol sampler it is point
-    /// `index × count + j` of a sequence of the pixel's own, so the points of all the
-    /// pixel's samples together are stratified as the unsplit sets are across its samples;
-    /// points drawn per sample (as [`Sampler::split_point`] does) would be stratified only
-    /// within a sample and random from one sample to the next, which on the MIS plates
-    /// doubled the relMSE at equal samples with two shadow rays.
+    /// Point `point` of the pixel's sequence `stream` of split samples of `kind` at the first
+    /// vertex, where sample `index`'s j-th split takes point `index × count + j` of stream 0
+    /// (see `integrator::split::FirstSplit`). With the Sobol sampler each sequence is one
+    /// Owen-scrambled Sobol sequence per pixel, so the points of all the pixel's samples
+    /// together are stratified as the unsplit sets are across its samples; points drawn per
+    /// sample (as [`Sampler::split_point`] does) would be stratified only within a sample and
+    /// random from one sample to the next, which on the MIS plates doubled the relMSE at
+    /// equal samples with two shadow rays. The independent sampler draws them per sample.
     #[inline]
-    pub fn first_split_point(&self, kind: SplitKind, j: u32, count: u32) -> [f32; 4] {
+    pub fn first_split_point(&self, kind: SplitKind, (stream, point): (u32, u64)) -> [f32; 4] {
         match self.kind {
-            SamplerKind::Independent => self.split_point(kind, 0, j),
+            SamplerKind::Independent => self.split_point(kind, stream, point as u32),
             SamplerKind::Sobol => {
-                let point = self.index as u64 * count as u64 + j as u64;
                 let (seed, rev) = sobol_position(self.pixel_key, point);
-                sobol_4d(rev, seed ^ hash_u32(kind as u32))
+                sobol_4d(
+                    rev,
+                    seed ^ hash_u32(kind as u32 ^ stream.wrapping_mul(0x2c1b3c6d)),
+                )
             }
         }
+    }
+
+    /// The index of the current sample in its pixel.
+    #[inline]
+    pub fn sample_index(&self) -> u32 {
+        self.index
     }
 }
 
@@ -330,7 +339,7 @@ mod tests {
                 for index in 0..64 / count {
                     s.start(5, 7, index);
                     for j in 0..count {
-                        let p = s.first_split_point(kind, j, count);
+                        let p = s.first_split_point(kind, (0, (index * count + j) as u64));
                         let cells = [
                             (p[0] * 8.0) as usize + 8 * (p[1] * 8.0) as usize,
                             (p[0] * 64.0) as usize,
@@ -345,10 +354,11 @@ mod tests {
             }
         }
         s.start(5, 7, 0);
-        let light = s.first_split_point(SplitKind::Light, 0, 2);
-        assert_ne!(light, s.first_split_point(SplitKind::Bsdf, 0, 2));
+        let light = s.first_split_point(SplitKind::Light, (0, 0));
+        assert_ne!(light, s.first_split_point(SplitKind::Bsdf, (0, 0)));
+        assert_ne!(light, s.first_split_point(SplitKind::Light, (1, 0)));
         s.start(6, 7, 0);
-        assert_ne!(light, s.first_split_point(SplitKind::Light, 0, 2));
+        assert_ne!(light, s.first_split_point(SplitKind::Light, (0, 0)));
     }
     #[test]
     fn byte_tables_give_sobol_burleys_points() {

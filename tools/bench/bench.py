@@ -246,6 +246,8 @@ def report(result, out):
                      f"{ref['spp']} spp by lucerna, {ref['seconds']:.0f} s, its own noise relMSE {ref['relmse_noise']:.2e}.")
     for spec in result["renderers"]:
         settings = {k: v for k, v in spec.items() if k not in ("name", "kind")}
+        # lucerna's flags (a table) read as flags; Mitsuba's variant and sampler as they are.
+        settings.update({f"--{k}": v for k, v in settings.pop("settings", {}).items()})
         lines.append(f"- renderer **{spec['name']}** ({spec['kind']}): "
                      + (", ".join(f"{k} {v}" for k, v in settings.items() if v) or "its defaults") + ".")
     for skipped in result["skipped"]:
