@@ -703,10 +703,10 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                             camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
                         record.clear();
                         let before = rays.closest + rays.shadow;
-                        let mut parts = SampleParts {
+                        let mut parts = tile_split.is_some().then(|| SampleParts {
                             rays: [before; 4],
                             ..SampleParts::default()
-                        };
+                        });
                         tracer.trace(
                             ray,
                             index_in_image,
@@ -714,12 +714,12 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                             &mut record,
                             &mut rays,
                             tile_learning.as_mut(),
-                            tile_split.is_some().then_some(&mut parts),
+                            parts.as_mut(),
                         );
-                        if let Some(stats) = tile_split.as_mut() {
+                        if let (Some(stats), Some(parts)) = (tile_split.as_mut(), parts.as_mut()) {
                             parts.rays[3] = rays.closest + rays.shadow;
-                            stats.add_rays(&parts);
-                            pixel_parts.add(&parts);
+                            stats.add_rays(parts);
+                            pixel_parts.add(parts);
                         }
                         if let Some(l) = tile_learning.as_mut() {
                             l.pixel_sample(

@@ -147,6 +147,15 @@ struct Walk<'l> {
     parts: Option<&'l mut SampleParts>,
 }
 
+impl Walk<'_> {
+    /// The learning sample's parts, where the path is at its first vertex (the one that
+    /// splits); `None` elsewhere and outside learning.
+    #[inline]
+    fn first_vertex_parts(&mut self, first: bool) -> Option<&mut SampleParts> {
+        self.parts.as_deref_mut().filter(|_| first)
+    }
+}
+
 /// A scattering vertex: the shading point, its BSDF, the direction back along the ray that
 /// found it (local frame), and the origin every ray leaving it starts from (computed once:
 /// its shadow rays and its continuation share it).
@@ -418,8 +427,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             let first = path.depth == 0;
             let n_nee = if first { self.split.counts.nee } else { 1 };
             let continuation = self.continuation(&path, walk, cell, vs.rr);
-            let learning_split = first && walk.parts.is_some();
-            if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+            if let Some(parts) = walk.first_vertex_parts(first) {
                 parts.split = true;
                 parts.rays[1] = rays.closest + rays.shadow;
             }
@@ -435,7 +443,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                         let p = sampler.first_split_point(SplitKind::Light, point);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
-                    if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                    if let Some(parts) = walk.first_vertex_parts(first) {
                         parts.current = j as usize;
                     }
                     rays.shadow += self.next_event(
@@ -450,14 +458,14 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 }
             }
 
-            if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+            if let Some(parts) = walk.first_vertex_parts(first) {
                 parts.rays[2] = rays.closest + rays.shadow;
             }
 
             // Continue: the last path in this loop, the others as branches of their own.
             let mut next = None;
             for k in 0..continuation.count {
-                if learning_split && let Some(parts) = walk.parts.as_deref_mut() {
+                if let Some(parts) = walk.first_vertex_parts(first) {
                     parts.current = k as usize;
                 }
                 let sample = if continuation.count == 1 {
@@ -465,16 +473,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 } else {
                     // The first vertex's split takes the same count at every sample;
                     // efficiency-aware splitting's count varies.
-                    let p = if first && self.split.counts.bsdf > 1 {
-                        let point = self.split.point(SplitKind::Bsdf, sampler.sample_index(), k);
-                        sampler.first_split_point(SplitKind::Bsdf, point)
-                    } else {
-                        let key = if first {
-                            0
-                        } else {
-                            1 + path.branch * 4096 + path.depth
-                        };
-                        sampler.split_point(SplitKind::Bsdf, key, k)
+                    let p = match (first, self.split.counts.bsdf > 1) {
+                        (true, true) => {
+                            let index = sampler.sample_index();
+                            let point = self.split.point(SplitKind::Bsdf, index, k);
+                            sampler.first_split_point(SplitKind::Bsdf, point)
+                        }
+                        (true, false) => sampler.split_point(SplitKind::Bsdf, 0, k),
+                        (false, _) => {
+                            let key = 1 + path.branch * 4096 + path.depth;
+                            sampler.split_point(SplitKind::Bsdf, key, k)
+                        }
                     };
                     VertexSample {
                         bsdf: Vec2::new(p[0], p[1]),

@@ -114,7 +114,7 @@ impl Sampler {
                 self.rng = Pcg32::new(mix_u64(key ^ index as u64), key);
             }
             SamplerKind::Sobol => {
-                (self.pixel_seed, self.index_rev) = sobol_position(key, index);
+                (self.pixel_seed, self.index_rev) = sobol_position(key, index as u64);
             }
         }
     }
@@ -175,9 +175,9 @@ impl Sampler {
 }
 
 impl Sampler {
-    /// Point `j` of the split samples of `kind` at a vertex past the first, with key
-    /// `vertex`, where the number of splits varies from sample to sample (efficiency-aware
-    /// splitting): the j-th point of an Owen-scrambled Sobol sequence seeded per pixel
+    /// Point `j` of the split samples of `kind` at the vertex with key `vertex`, where the
+    /// number of splits varies from sample to sample (efficiency-aware splitting; key 0 at
+    /// the first vertex): the j-th point of an Owen-scrambled Sobol sequence seeded per pixel
     /// sample and vertex, so every point is uniform and the points of one vertex together
     /// are stratified (a (0, 2)-sequence in the first two numbers).
     #[inline]
@@ -219,8 +219,7 @@ impl Sampler {
 /// (Sobol supports 2^16 points per seed; later points continue with a new seed) and the
 /// point's index within it, bit-reversed.
 #[inline]
-fn sobol_position(pixel_key: u64, index: impl Into<u64>) -> (u32, u32) {
-    let index: u64 = index.into();
+fn sobol_position(pixel_key: u64, index: u64) -> (u32, u32) {
     let seed = (pixel_key as u32) ^ hash_u32((pixel_key >> 32) as u32 ^ (index >> 16) as u32);
     (seed, ((index & 0xffff) as u32).reverse_bits())
 }
