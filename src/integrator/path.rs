@@ -407,6 +407,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     }
                 }));
             }
+            // Light samples and continuations from a black surface would add nothing.
+            if bsdf.is_black() {
+                return;
+            }
             // The region efficiency-aware roulette keeps statistics for (only in that mode).
             let cell = self.ears.map(|_| ears::cell(it.p, it.ng));
             if let (Some(learning), Some(cell)) = (walk.learning.as_deref_mut(), cell) {

@@ -128,6 +128,19 @@ impl Bsdf {
         }
     }
 
+    /// True if the surface reflects nothing in any direction (a black Lambert or Phong
+    /// surface, as emitters often are): a path ends there, with no light samples or
+    /// continuations whose every contribution would be zero. A glTF surface always reflects
+    /// something (its Fresnel term is never zero at grazing angles).
+    #[inline]
+    pub fn is_black(&self) -> bool {
+        match self {
+            Self::Lambert(b) => b.albedo == Vec3::ZERO,
+            Self::Phong(b) => b.kd == Vec3::ZERO && b.ks == Vec3::ZERO,
+            Self::GltfPbr(_) => false,
+        }
+    }
+
     /// True if some lobe is not a delta, i.e. light sampling can contribute.
     #[inline]
     pub fn has_non_delta(&self) -> bool {
@@ -240,6 +253,55 @@ pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bs
                 pbr = pbr.with_specular_color(color);
             }
             Bsdf::GltfPbr(pbr)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `is_black` holds exactly for the surfaces that reflect nothing: their f · cos θi and
+    /// sample weights vanish in every direction, while every surface it rejects reflects
+    /// something in some direction (a black glTF surface at grazing angles, by Fresnel).
+    #[test]
+    fn black_surfaces_are_the_ones_that_reflect_nothing() {
+        let phong = |kd: Vec3, ks: Vec3| {
+            Bsdf::Phong(Phong {
+                kd,
+                ks,
+                exponent: 20.0,
+            })
+        };
+        let cases = [
+            Bsdf::Lambert(Lambert { albedo: Vec3::ZERO }),
+            Bsdf::Lambert(Lambert {
+                albedo: Vec3::new(0.0, 0.0, 0.1),
+            }),
+            phong(Vec3::ZERO, Vec3::ZERO),
+            phong(Vec3::ZERO, Vec3::splat(0.2)),
+            Bsdf::GltfPbr(GltfPbr::new(Vec3::ZERO, 0.0, 0.5, 1.5)),
+            Bsdf::GltfPbr(GltfPbr::new(Vec3::ZERO, 1.0, 0.5, 1.5)),
+        ];
+        let directions: Vec<Vec3> = (1..12)
+            .flat_map(|i| {
+                let z = i as f32 / 12.0;
+                let r = (1.0 - z * z).sqrt();
+                (0..8).map(move |k| {
+                    let phi = k as f32 * 0.785;
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                })
+            })
+            .collect();
+        for (i, bsdf) in cases.iter().enumerate() {
+            let reflects = directions.iter().any(|&wo| {
+                directions.iter().any(|&wi| bsdf.eval(wo, wi) != Vec3::ZERO)
+                    || [0.1, 0.5, 0.9].iter().any(|&u| {
+                        bsdf.sample(wo, u, Vec2::new(u, 1.0 - u))
+                            .is_some_and(|s| s.weight != Vec3::ZERO)
+                    })
+            });
+            assert_eq!(bsdf.is_black(), !reflects, "case {i}");
         }
     }
 }
