@@ -428,13 +428,7 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
     let mut options = args.options()?;
     let (stop, received) = watch_signals()?;
     options.interrupt = Some(stop);
-    let stateful = options.noise_threshold.is_some()
-        || matches!(
-            options.settings.rr,
-            lucerna::integrator::RussianRoulette::Efficiency(_)
-        )
-        || options.settings.split == lucerna::integrator::SplitChoice::Auto;
-    if args.resume && stateful {
+    if args.resume && options.decides_from_whole_image() {
         return Err(Error::bad_input(
             "",
             "--resume",

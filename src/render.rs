@@ -219,6 +219,15 @@ impl RenderOptions {
         }
     }
 
+    /// Whether the render decides from the whole image and all its samples, keeping state
+    /// an EXR does not hold (adaptive sampling, efficiency-aware roulette, learned
+    /// splitting): such a render cannot be cropped, split into passes or resumed.
+    pub fn decides_from_whole_image(&self) -> bool {
+        self.noise_threshold.is_some()
+            || matches!(self.settings.rr, RussianRoulette::Efficiency(_))
+            || self.settings.split == SplitChoice::Auto
+    }
+
     /// Rejects combinations a split render cannot honour: a pass must be a fixed range of
     /// samples, and a window must render exactly the pixels of the whole image (adaptive
     /// sampling and learned roulette decide from the whole image).
@@ -234,11 +243,7 @@ impl RenderOptions {
                 ));
             }
         }
-        let learned = matches!(self.settings.rr, RussianRoulette::Efficiency(_))
-            || self.settings.split == SplitChoice::Auto;
-        if (self.pass.is_some() || self.crop.is_some())
-            && (learned || self.noise_threshold.is_some())
-        {
+        if (self.pass.is_some() || self.crop.is_some()) && self.decides_from_whole_image() {
             return Err("crop and pass: adaptive sampling, rr = efficiency and split = auto decide from the whole image and all its samples, so a split render would differ from the whole one".into());
         }
         Ok(())

@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::cli::{lucerna, lucerna_ok, temp_dir};
+use common::cli::{header_text, lucerna, lucerna_ok, temp_dir};
 use common::gltf_builder::{Builder, png_rgba};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -215,17 +215,7 @@ fn a_scene_without_camera_is_framed_automatically() {
 }
 
 fn header_settings(exr: &Path) -> toml::Table {
-    let image = exr::prelude::read_first_flat_layer_from_file(exr).unwrap();
-    let text = match image
-        .layer_data
-        .attributes
-        .other
-        .get(&exr::prelude::Text::from("lucerna/settings"))
-    {
-        Some(exr::prelude::AttributeValue::Text(t)) => t.to_string(),
-        other => panic!("no settings in the header: {other:?}"),
-    };
-    text.parse().unwrap()
+    header_text(exr, "lucerna/settings").parse().unwrap()
 }
 
 #[test]

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::cli::{lucerna_ok, temp_dir};
+use common::cli::{header_text, lucerna_ok, temp_dir};
 use lucerna::film::aov::AovSet;
 use lucerna::film::filter::PixelFilter;
 use lucerna::ingest;
@@ -69,16 +69,10 @@ fn the_header_records_the_learned_counts() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    let image = exr::prelude::read_first_flat_layer_from_file(&out).unwrap();
-    let attributes = &image.layer_data.attributes.other;
-    let text = |name: &str| match attributes.get(&exr::prelude::Text::from(name)) {
-        Some(exr::prelude::AttributeValue::Text(t)) => t.to_string(),
-        other => panic!("{name}: {other:?}"),
-    };
-    let split = text("lucerna/split_learned");
+    let split = header_text(&out, "lucerna/split_learned");
     assert!(
         Split::parse(&split).is_ok() && split.starts_with("nee="),
         "{split}"
     );
-    assert!(text("lucerna/settings").contains("split = \"auto\""));
+    assert!(header_text(&out, "lucerna/settings").contains("split = \"auto\""));
 }

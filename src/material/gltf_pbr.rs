@@ -229,11 +229,7 @@ impl GltfPbr {
             return self.finish(wo, wi, probabilities, Lobe::Diffuse);
         };
         let h = ggx.sample_visible_normal(wo, u);
-        let wi = reflect(wo, h);
-        if wi.z <= 0.0 {
-            return None;
-        }
-        self.finish(wo, wi, probabilities, Lobe::Glossy)
+        self.finish(wo, reflect(wo, h), probabilities, Lobe::Glossy)
     }
 
     /// The mirror direction, reached by whichever smooth lobes (coat, specular) there are:
@@ -256,8 +252,8 @@ impl GltfPbr {
         }
     }
 
-    /// The sample in direction `wi` of lobe `lobe`: f · cos θi and the mixture density,
-    /// sharing the half vector and the lobe probabilities at `wo`.
+    /// The sample in direction `wi` of lobe `lobe` (none below the surface): f · cos θi and
+    /// the mixture density, sharing the half vector and the lobe probabilities at `wo`.
     fn finish(
         &self,
         wo: Vec3,

@@ -182,8 +182,10 @@ impl Sampler {
     /// are stratified (a (0, 2)-sequence in the first two numbers).
     #[inline]
     pub fn split_point(&self, kind: SplitKind, vertex: u32, j: u32) -> [f32; 4] {
-        let seed = self.sample_key ^ hash_u32(kind as u32 ^ vertex.wrapping_mul(0x2c1b3c6d));
-        sobol_4d((j & 0xffff).reverse_bits(), seed)
+        sobol_4d(
+            (j & 0xffff).reverse_bits(),
+            self.sample_key ^ split_key(kind, vertex),
+        )
     }
 
     /// Point `point` of the pixel's sequence `stream` of split samples of `kind` at the first
@@ -200,10 +202,7 @@ impl Sampler {
             SamplerKind::Independent => self.split_point(kind, stream, point as u32),
             SamplerKind::Sobol => {
                 let (seed, rev) = sobol_position(self.pixel_key, point);
-                sobol_4d(
-                    rev,
-                    seed ^ hash_u32(kind as u32 ^ stream.wrapping_mul(0x2c1b3c6d)),
-                )
+                sobol_4d(rev, seed ^ split_key(kind, stream))
             }
         }
     }
@@ -213,6 +212,12 @@ impl Sampler {
     pub fn sample_index(&self) -> u32 {
         self.index
     }
+}
+
+/// The key split samples of `kind` add to their seed at the vertex (or in the stream) `n`.
+#[inline]
+fn split_key(kind: SplitKind, n: u32) -> u32 {
+    hash_u32(kind as u32 ^ n.wrapping_mul(0x2c1b3c6d))
 }
 
 /// Where point `index` of a pixel's Sobol sequence lies: the pixel's seed for that point
@@ -359,6 +364,7 @@ mod tests {
         s.start(6, 7, 0);
         assert_ne!(light, s.first_split_point(SplitKind::Light, (0, 0)));
     }
+
     #[test]
     fn byte_tables_give_sobol_burleys_points() {
         let mut rng = Pcg32::new(5, 1);

@@ -1,6 +1,6 @@
 //! Running the `lucerna` binary from integration tests, and their scratch directories.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// Runs the binary with `args`.
@@ -27,4 +27,18 @@ pub fn temp_dir(name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// The text attribute `name` of the header of the EXR at `exr`; panics if it has none.
+pub fn header_text(exr: &Path, name: &str) -> String {
+    let image = exr::prelude::read_first_flat_layer_from_file(exr).unwrap();
+    match image
+        .layer_data
+        .attributes
+        .other
+        .get(&exr::prelude::Text::from(name))
+    {
+        Some(exr::prelude::AttributeValue::Text(t)) => t.to_string(),
+        other => panic!("no text {name} in the header: {other:?}"),
+    }
 }
