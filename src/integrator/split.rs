@@ -36,17 +36,18 @@ pub const MAX_LEARNED_SPLIT: u32 = 16;
 /// the pixel's split sequences (one sequence of each [`SplitKind`] per stream).
 ///
 /// With fixed counts, sample `index`'s j-th point is point
-/// `base + (index - from) × count + j` of stream 0: every sample's points follow the last's, and the points of all the
-/// pixel's samples together are one stratified sequence. The learning samples instead take
-/// their j-th point from stream j, at point `index`: the two points of a sample are then
-/// independent of each other (two points of one stratified sequence are not: their
+/// `from + (index - from) × count + j` of stream 0 (the samples before `from` learned and
+/// took one point each): every sample's points follow the last's, and the points of all
+/// the pixel's samples together are one stratified sequence. The learning samples instead
+/// take their j-th point from stream j, at point `index`: the two points of a sample are
+/// then independent of each other (two points of one stratified sequence are not: their
 /// difference would overstate the spread of one estimate), and each stream is stratified
 /// across the samples.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FirstSplit {
     pub counts: Split,
+    /// The first sample with these counts.
     from: u32,
-    base: u64,
     independent: bool,
 }
 
@@ -56,7 +57,6 @@ impl FirstSplit {
         Self {
             counts,
             from: 0,
-            base: 0,
             independent: false,
         }
     }
@@ -66,7 +66,6 @@ impl FirstSplit {
         Self {
             counts: LEARNING_SPLIT,
             from: 0,
-            base: 0,
             independent: true,
         }
     }
@@ -77,7 +76,6 @@ impl FirstSplit {
         Self {
             counts,
             from: learned,
-            base: learned as u64,
             independent: false,
         }
     }
@@ -94,7 +92,7 @@ impl FirstSplit {
         };
         (
             0,
-            self.base + index.saturating_sub(self.from) as u64 * count as u64 + j as u64,
+            self.from as u64 + index.saturating_sub(self.from) as u64 * count as u64 + j as u64,
         )
     }
 }
