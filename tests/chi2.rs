@@ -8,7 +8,7 @@ use glam::{Mat3, Vec2, Vec3};
 use lucerna::geometry::quadric::{self, Quadric};
 use lucerna::geometry::ray::Ray;
 use lucerna::geometry::sphere;
-use lucerna::geometry::triangle::{RayShear, TriangleLanes, intersect};
+use lucerna::geometry::triangle::{RayShear, TriangleBlock, intersect};
 use lucerna::integrator::LightSampling;
 use lucerna::light::environment::{Environment, EnvironmentMap};
 use lucerna::light::{Light, QuadricLight, SphereLight, TriangleLight};
@@ -156,8 +156,9 @@ fn area_light_density(light: &Light, origin: Vec3, w: Vec3, sampling: LightSampl
     let ray = Ray::new(origin, w);
     let hit = match light {
         Light::Triangle(t) => {
-            let tri = TriangleLanes::new(t.p);
+            let tri = TriangleBlock::new(&[t.p]);
             intersect(&RayShear::new(&ray), &tri, f32::INFINITY)
+                .map(|hits| hits.get(0))
                 .filter(|_| t.two_sided || t.n.dot(w) < 0.0)
         }
         Light::Sphere(s) => sphere::intersect(&ray, s.centre, s.radius, f32::INFINITY)

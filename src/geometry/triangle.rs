@@ -3,30 +3,55 @@
 
 use super::PrimitiveHit;
 use super::ray::Ray;
-use glam::{DVec3, Vec3, Vec4, Vec4Swizzles};
+use glam::{DVec3, Vec3, Vec4};
 
-/// A triangle as the intersection test reads it: the x, y and z coordinates of its three
-/// vertices, each axis's three in a row, so that one four-lane load reads a coordinate of
-/// all three vertices (lane i is vertex i; lane 3 reads the next row's first value, or the
-/// padding, and is ignored).
+/// Up to four triangles as the lane-wise test reads them (Embree's Triangle4 layout): lane
+/// i of `coords[v][axis]` is coordinate `axis` of vertex `v` of the block's i-th triangle. One
+/// test of four lanes decides all four triangles for about the cost of one. Lanes without a
+/// triangle hold NaN vertices, which no ray hits (every comparison with NaN fails).
 #[derive(Clone, Copy, Debug)]
-pub struct TriangleLanes {
-    coords: [f32; 10],
+pub struct TriangleBlock {
+    coords: [[Vec4; 3]; 3],
 }
 
-impl TriangleLanes {
-    /// The triangle with vertices `p` (counter-clockwise from its front).
-    pub fn new(p: [Vec3; 3]) -> Self {
-        let mut coords = [0.0; 10];
-        for axis in 0..3 {
-            coords[3 * axis..3 * axis + 3].copy_from_slice(&p.map(|v| v[axis]));
+impl TriangleBlock {
+    /// The block of `tris` (one to four, each counter-clockwise from its front).
+    pub fn new(tris: &[[Vec3; 3]]) -> Self {
+        assert!((1..=4).contains(&tris.len()));
+        let mut coords = [[Vec4::NAN; 3]; 3];
+        for (lane, tri) in tris.iter().enumerate() {
+            for (v, p) in tri.iter().enumerate() {
+                for axis in 0..3 {
+                    coords[v][axis][lane] = p[axis];
+                }
+            }
         }
         Self { coords }
     }
+}
 
+/// A ray's hits on the triangles of a [`TriangleBlock`], lane by lane.
+#[derive(Clone, Copy, Debug)]
+pub struct BlockHits {
+    /// Bit i is set when the ray hits lane i's triangle in `(0, tmax)`.
+    pub mask: u32,
+    pub t: [f32; 4],
+    pub b1: [f32; 4],
+    pub b2: [f32; 4],
+    /// Bit i is set when the ray arrives on lane i's front.
+    pub front: u32,
+}
+
+impl BlockHits {
+    /// Lane `lane`'s hit (meaningful when its bit in `mask` is set).
     #[inline(always)]
-    fn row(&self, axis: usize) -> Vec4 {
-        Vec4::from_slice(&self.coords[3 * axis..])
+    pub fn get(&self, lane: usize) -> PrimitiveHit {
+        PrimitiveHit {
+            t: self.t[lane],
+            b1: self.b1[lane],
+            b2: self.b2[lane],
+            front: self.front & (1 << lane) != 0,
+        }
     }
 }
 
@@ -66,55 +91,69 @@ impl RayShear {
     }
 }
 
-/// Intersects the ray described by `shear` with triangle `tri` in `(0, tmax)`. The three
-/// vertices go through each step together, lane by lane, with the scalar test's operations
-/// in its order (Woop et al.'s transformed vertices, edge functions and scaled distance):
-/// hits, distances and barycentrics are theirs to the bit.
+/// Intersects the ray described by `shear` with the triangles of `block` in `(0, tmax)`;
+/// `None` when it hits none. Each lane runs Woop et al.'s scalar test's operations in its
+/// order (transformed vertices, edge functions, scaled distance): hits, distances and
+/// barycentrics are the scalar test's to the bit.
 #[inline(always)]
-pub fn intersect(s: &RayShear, tri: &TriangleLanes, tmax: f32) -> Option<PrimitiveHit> {
+pub fn intersect(s: &RayShear, block: &TriangleBlock, tmax: f32) -> Option<BlockHits> {
     let [kx, ky, kz] = s.axes;
-    // Vertices relative to the origin, permuted and sheared: x = (ax, bx, cx), y likewise.
-    let z = tri.row(kz) - s.origin[2];
-    let x = (tri.row(kx) - s.origin[0]) - s.shear[0] * z;
-    let y = (tri.row(ky) - s.origin[1]) - s.shear[1] * z;
-    // Edge functions (u, v, w) = (cx by - cy bx, ax cy - ay cx, bx ay - by ax).
-    let mut uvw = x.zxyw() * y.yzxw() - y.zxyw() * x.yzxw();
+    // Vertex v relative to the origin, permuted and sheared, for the four triangles.
+    let vertex = |v: usize| {
+        let c = &block.coords[v];
+        let z = c[kz] - s.origin[2];
+        let x = (c[kx] - s.origin[0]) - s.shear[0] * z;
+        let y = (c[ky] - s.origin[1]) - s.shear[1] * z;
+        (x, y, z)
+    };
+    let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (vertex(0), vertex(1), vertex(2));
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
     // On an edge in single precision: decide it exactly in double precision.
-    if uvw.cmpeq(Vec4::ZERO).bitmask() & 7 != 0 {
-        let ([ax, bx, cx, _], [ay, by, cy, _]) = (x.to_array(), y.to_array());
-        let (ax, ay, bx, by, cx, cy) = (
-            ax as f64, ay as f64, bx as f64, by as f64, cx as f64, cy as f64,
-        );
-        uvw = Vec4::new(
-            (cx * by - cy * bx) as f32,
-            (ax * cy - ay * cx) as f32,
-            (bx * ay - by * ax) as f32,
-            0.0,
-        );
+    let on_edge = (u.cmpeq(Vec4::ZERO) | v.cmpeq(Vec4::ZERO) | w.cmpeq(Vec4::ZERO)).bitmask();
+    if on_edge != 0 {
+        (u, v, w) = exact_edge_functions(on_edge, [ax, ay, bx, by, cx, cy], [u, v, w]);
     }
-    // Inside when no edge function has a sign opposite to another's (NaN has neither).
-    if uvw.cmplt(Vec4::ZERO).bitmask() & 7 != 0 && uvw.cmpgt(Vec4::ZERO).bitmask() & 7 != 0 {
+    // Inside when no edge function has a sign opposite to another's. NaN fails both
+    // comparisons, so empty lanes and NaN vertices end here.
+    let zero = Vec4::ZERO;
+    let non_negative = u.cmpge(zero) & v.cmpge(zero) & w.cmpge(zero);
+    let non_positive = u.cmple(zero) & v.cmple(zero) & w.cmple(zero);
+    let inside = (non_negative | non_positive).bitmask();
+    if inside == 0 {
         return None;
     }
-    let [u, v, w, _] = uvw.to_array();
     let det = u + v + w;
-    if det == 0.0 {
-        return None;
-    }
-    let [az, bz, cz, _] = (s.shear[2] * z).to_array();
-    let t_scaled = u * az + v * bz + w * cz;
-    let inv_det = 1.0 / det;
+    let sz = s.shear[2];
+    let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+    let inv_det = Vec4::ONE / det;
     let t = t_scaled * inv_det;
     // Positive comparisons: NaN fails them.
-    if !(t > 0.0 && t < tmax) {
-        return None;
-    }
-    Some(PrimitiveHit {
-        t,
-        b1: v * inv_det,
-        b2: w * inv_det,
-        front: det > 0.0,
+    let valid = det.cmpne(Vec4::ZERO) & t.cmpgt(Vec4::ZERO) & t.cmplt(Vec4::splat(tmax));
+    let mask = inside & valid.bitmask();
+    (mask != 0).then(|| BlockHits {
+        mask,
+        t: t.to_array(),
+        b1: (v * inv_det).to_array(),
+        b2: (w * inv_det).to_array(),
+        front: det.cmpgt(Vec4::ZERO).bitmask(),
     })
+}
+
+/// The edge functions of the `lanes` whose single-precision ones have a zero, recomputed in
+/// double precision from the transformed vertices `[ax, ay, bx, by, cx, cy]`.
+#[cold]
+#[inline(never)]
+fn exact_edge_functions(lanes: u32, xy: [Vec4; 6], uvw: [Vec4; 3]) -> (Vec4, Vec4, Vec4) {
+    let [ax, ay, bx, by, cx, cy] = xy.map(|c| c.to_array().map(f64::from));
+    let [mut u, mut v, mut w] = uvw.map(|c| c.to_array());
+    for l in (0..4).filter(|l| lanes & (1 << l) != 0) {
+        u[l] = (cx[l] * by[l] - cy[l] * bx[l]) as f32;
+        v[l] = (ax[l] * cy[l] - ay[l] * cx[l]) as f32;
+        w[l] = (bx[l] * ay[l] - by[l] * ax[l]) as f32;
+    }
+    (Vec4::from(u), Vec4::from(v), Vec4::from(w))
 }
 
 /// Geometric normal (unnormalised) of a counter-clockwise triangle, computed in double
@@ -133,7 +172,12 @@ mod tests {
 
     fn shoot(o: Vec3, d: Vec3, p: [Vec3; 3]) -> Option<PrimitiveHit> {
         let ray = Ray::new(o, d);
-        intersect(&RayShear::new(&ray), &TriangleLanes::new(p), f32::INFINITY)
+        intersect(
+            &RayShear::new(&ray),
+            &TriangleBlock::new(&[p]),
+            f32::INFINITY,
+        )
+        .map(|h| h.get(0))
     }
 
     #[test]
@@ -238,17 +282,20 @@ mod tests {
     }
 
     /// The lane-wise test gives the scalar test's answer to the bit (hit, distance,
-    /// barycentrics, facing) for oblique rays in every octant: at random points, at
-    /// vertices and along edges (where the double-precision decision runs), and past the
-    /// bound. The rays aim at known points, and the hit lies there.
+    /// barycentrics, facing) on every lane of blocks of one to four triangles, for oblique
+    /// rays in every octant: at random points, at vertices and along edges (where the
+    /// double-precision decision runs), and past the bound. The rays aim at a known point of
+    /// one of the block's triangles, and the hit lies there.
     #[test]
     fn lanes_match_the_scalar_watertight_test_to_the_bit() {
         let mut rng = crate::sampling::pcg::Pcg32::new(17, 5);
         let mut unit = || rng.next_f32();
-        let (mut hits, mut exact_edges) = (0, 0);
+        let (mut hits, mut exact_edges, mut other_lanes) = (0, 0, 0);
         for k in 0..20000 {
             let mut point = || Vec3::new(unit(), unit(), unit()) * 4.0 - Vec3::splat(2.0);
-            let tri = [point(), point(), point()];
+            let lanes = 1 + (k / 4) % 4;
+            let tris: Vec<[Vec3; 3]> = (0..lanes).map(|_| [point(), point(), point()]).collect();
+            let aimed = (k / 16) % lanes;
             let o = point() * 3.0;
             // Aim at a random barycentric point, a vertex, or an edge's midpoint.
             let (b1, b2) = match k % 4 {
@@ -263,24 +310,42 @@ mod tests {
                 2 => (0.0, 0.0),
                 _ => (0.5, 0.0),
             };
+            let tri = tris[aimed];
             let target = tri[0] * (1.0 - b1 - b2) + tri[1] * b1 + tri[2] * b2;
             let d = target - o;
             let tmax = if k % 5 == 0 { 0.5 } else { f32::INFINITY };
-            let lanes = intersect(
-                &RayShear::new(&Ray {
-                    origin: o,
-                    dir: d,
-                    tmax,
-                }),
-                &TriangleLanes::new(tri),
+            let ray = Ray {
+                origin: o,
+                dir: d,
                 tmax,
-            );
-            let scalar = scalar_watertight(o, d, tri, tmax);
+            };
+            let block = intersect(&RayShear::new(&ray), &TriangleBlock::new(&tris), tmax);
             let bits = |h: Option<PrimitiveHit>| {
                 h.map(|h| (h.t.to_bits(), h.b1.to_bits(), h.b2.to_bits(), h.front))
             };
-            assert_eq!(bits(lanes), bits(scalar), "ray {o} {d}, triangle {tri:?}");
-            if let Some(h) = lanes {
+            for (lane, &tri) in tris.iter().enumerate() {
+                let lane_hit = block
+                    .filter(|b| b.mask & (1 << lane) != 0)
+                    .map(|b| b.get(lane));
+                let scalar = scalar_watertight(o, d, tri, tmax);
+                assert_eq!(
+                    bits(lane_hit),
+                    bits(scalar),
+                    "ray {o} {d}, triangle {tri:?}"
+                );
+                if lane != aimed {
+                    other_lanes += lane_hit.is_some() as u32;
+                }
+            }
+            assert_eq!(
+                block.map_or(0, |b| b.mask) >> lanes,
+                0,
+                "empty lanes never hit"
+            );
+            if let Some(h) = block
+                .filter(|b| b.mask & (1 << aimed) != 0)
+                .map(|b| b.get(aimed))
+            {
                 hits += 1;
                 exact_edges += (h.b1 == 0.0 || h.b2 == 0.0) as u32;
                 if k % 4 < 2 && tmax.is_infinite() {
@@ -294,8 +359,8 @@ mod tests {
             }
         }
         assert!(
-            hits > 10000 && exact_edges > 1000,
-            "{hits} hits, {exact_edges} on edges"
+            hits > 10000 && exact_edges > 1000 && other_lanes > 1000,
+            "{hits} hits, {exact_edges} on edges, {other_lanes} on lanes not aimed at"
         );
     }
 }

@@ -5,20 +5,23 @@
 //! traversal visits the hit children nearest first and skips stacked nodes farther than the
 //! closest hit so far, as Embree's single-ray kernels do.
 //!
-//! The structure knows only leaf ranges: what a leaf holds (triangles, placements) is the
-//! caller's, tested by a closure.
+//! The structure knows only leaves: what a leaf holds (triangles, placements) is the
+//! caller's, tested by a closure. As built, a leaf is a range of [`WideBvh::order`]; the
+//! caller may relabel each leaf with its own index and count (see
+//! [`WideBvh::relabel_leaves`]).
 
 use super::ray::Ray;
 use glam::{Vec3, Vec3A, Vec4};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 use std::mem::MaybeUninit;
 
-/// A node's child: an inner node, or a leaf of `count` primitives from `first` in leaf order.
+/// A node's child: an inner node, or a leaf of `count` primitives from `index` in leaf order
+/// (or as the caller relabelled it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 struct Child {
-    /// Node index (inner) or first primitive (leaf).
+    /// Node index (inner) or the leaf's index.
     index: u32,
-    /// Primitives of a leaf; 0 for an inner node.
+    /// The leaf's count (never 0); 0 for an inner node.
     count: u32,
 }
 
@@ -161,9 +164,10 @@ pub struct WideBvh {
 }
 
 impl WideBvh {
-    /// Builds the BVH over `aabbs` (render space; may be empty). Runs on the current rayon
-    /// pool.
-    pub fn build(aabbs: &[Aabb]) -> Self {
+    /// Builds the BVH over `aabbs` (render space; may be empty) with leaves of up to
+    /// `max_leaf` primitives, where the surface area heuristic prefers them with a node
+    /// visit costing `node_cost` leaf primitive tests. Runs on the current rayon pool.
+    pub fn build(aabbs: &[Aabb], max_leaf: u32, node_cost: f32) -> Self {
         if aabbs.is_empty() {
             return Self {
                 nodes: Vec::new(),
@@ -171,10 +175,31 @@ impl WideBvh {
                 order: Vec::new(),
             };
         }
-        let mut bvh2 = build_bvh2(aabbs, build_params(), &mut std::time::Duration::default());
+        let mut bvh2 = build_bvh2(
+            aabbs,
+            build_params(max_leaf, node_cost),
+            &mut std::time::Duration::default(),
+        );
         let order = std::mem::take(&mut bvh2.primitive_indices);
         let (nodes, root) = collapse(&bvh2.nodes);
         Self { nodes, root, order }
+    }
+
+    /// Gives every leaf the caller's label: `label(index, count)` of the leaf as built (a
+    /// range of [`WideBvh::order`]) returns the `(index, count)` that
+    /// [`WideBvh::traverse`] passes for it from then on; the count must not be 0. Leaves are
+    /// visited once each, in node order.
+    pub fn relabel_leaves(&mut self, mut label: impl FnMut(u32, u32) -> (u32, u32)) {
+        let mut relabel = |child: &mut Child| {
+            if child.count != 0 {
+                (child.index, child.count) = label(child.index, child.count);
+                assert_ne!(child.count, 0, "a leaf's count must not be 0");
+            }
+        };
+        relabel(&mut self.root);
+        for node in &mut self.nodes {
+            node.children.iter_mut().for_each(&mut relabel);
+        }
     }
 
     /// Bytes the nodes and the order hold.
@@ -183,17 +208,13 @@ impl WideBvh {
     }
 
     /// Visits the leaves `ray` overlaps in `(0, tmax)`, nearest box first, calling
-    /// `leaf(range, bound)` with the leaf's range in [`WideBvh::order`] and the current
-    /// bound; a closer hit shrinks the bound and prunes the boxes beyond it. Returns the
+    /// `leaf(index, count, bound)` with the leaf's label (as built, its range in
+    /// [`WideBvh::order`]) and the current bound; a closer hit shrinks the bound and prunes the boxes beyond it. Returns the
     /// final bound. Occlusion queries take the same order: on the million-triangle sphere
     /// field, node order traced shadow rays 8-15 % slower (it saved 4 % of the Cornell
     /// box's occlusion instructions).
     #[inline(always)]
-    pub fn traverse<F: FnMut(std::ops::Range<usize>, f32) -> LeafResult>(
-        &self,
-        ray: &Ray,
-        mut leaf: F,
-    ) -> f32 {
+    pub fn traverse<F: FnMut(u32, u32, f32) -> LeafResult>(&self, ray: &Ray, mut leaf: F) -> f32 {
         let mut tmax = ray.tmax;
         if self.root == NO_CHILD {
             return tmax;
@@ -246,8 +267,7 @@ impl WideBvh {
                     continue;
                 }
             } else {
-                let first = current.index as usize;
-                match leaf(first..first + current.count as usize, tmax) {
+                match leaf(current.index, current.count, tmax) {
                     LeafResult::Miss => {}
                     LeafResult::Closer(t) => tmax = t,
                     LeafResult::Stop => return tmax,
@@ -267,15 +287,13 @@ impl WideBvh {
     }
 }
 
-/// obvhs's build: PLOC with medium search, reinsertion, and leaves of up to two primitives
-/// where the surface area heuristic (a node visit costing as much as a primitive test)
-/// prefers them. Chosen by instructions per image (callgrind) over leaf sizes 1, 2, 4, 8
-/// and traversal costs 1, 2, 3 on the Cornell box, the indirect room, the MIS plates and
-/// the million-triangle sphere field: best or within 2 % of the best on each.
-fn build_params() -> BvhBuildParams {
+/// obvhs's build: PLOC with medium search, reinsertion, and leaves of up to `max_leaf`
+/// primitives where the surface area heuristic (a node visit costing `node_cost` primitive
+/// tests) prefers them.
+fn build_params(max_leaf: u32, node_cost: f32) -> BvhBuildParams {
     BvhBuildParams {
-        max_prims_per_leaf: 2,
-        collapse_traversal_cost: 1.0,
+        max_prims_per_leaf: max_leaf,
+        collapse_traversal_cost: node_cost,
         ..BvhBuildParams::medium_build()
     }
 }
