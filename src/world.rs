@@ -380,7 +380,7 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
     geometry += flat_prims * (size_of::<PrimRef>() + size_of::<u32>()) as u64;
     // The primitives and their flags as given to the build, its own state, and the result's
     // leaves (triangle blocks of one to four and shapes: about a copy of the primitives, their
-    // flags and an index each; 85 bytes a triangle with the nodes on the sphere field).
+    // flags and an index each; 80 bytes a triangle with the nodes on the sphere field).
     let per_primitive = 2 * (size_of::<Primitive>() as u64 + 1)
         + size_of::<u32>() as u64
         + BVH_BUILD_BYTES_PER_PRIMITIVE;
