@@ -210,9 +210,9 @@ impl WideBvh {
     /// Visits the leaves `ray` overlaps in `(0, tmax)`, nearest box first, calling
     /// `leaf(index, count, bound)` with the leaf's label (as built, its range in
     /// [`WideBvh::order`]) and the current bound; a closer hit shrinks the bound and prunes
-    /// the boxes beyond it. Returns the final bound. Occlusion queries take the same order: on the million-triangle sphere
-    /// field, node order traced shadow rays 8-15 % slower (it saved 4 % of the Cornell
-    /// box's occlusion instructions).
+    /// the boxes beyond it. Returns the final bound. Occlusion queries take the same order:
+    /// on the million-triangle sphere field, node order traced shadow rays 8-15 % slower (it
+    /// saved 4 % of the Cornell box's occlusion instructions).
     #[inline(always)]
     pub fn traverse<F: FnMut(u32, u32, f32) -> LeafResult>(&self, ray: &Ray, mut leaf: F) -> f32 {
         let mut tmax = ray.tmax;
