@@ -237,10 +237,7 @@ impl Bvh {
             let before = closest.tmax;
             for leaf in blocks {
                 if let Some(hits) = triangle::intersect(&shear, &leaf.block, closest.bound()) {
-                    let mut mask = hits.mask;
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
+                    for lane in hits.lanes() {
                         let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
                         closest.consider(hits.get(lane), prim, flags, &mut accept);
                     }
@@ -275,16 +272,9 @@ impl Bvh {
             let (blocks, shapes) = self.leaf(index, count);
             for leaf in blocks {
                 if let Some(hits) = triangle::intersect(&shear, &leaf.block, ray.tmax) {
-                    let mut mask = hits.mask;
-                    while mask != 0 {
-                        let lane = mask.trailing_zeros() as usize;
-                        mask &= mask - 1;
-                        if accepted(
-                            &hits.get(lane),
-                            leaf.prims[lane],
-                            leaf.flags[lane],
-                            &mut accept,
-                        ) {
+                    for lane in hits.lanes() {
+                        let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
+                        if accepted(&hits.get(lane), prim, flags, &mut accept) {
                             occluded = true;
                             return LeafResult::Stop;
                         }

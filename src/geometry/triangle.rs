@@ -5,6 +5,24 @@ use super::PrimitiveHit;
 use super::ray::Ray;
 use glam::{DVec3, Vec3, Vec4};
 
+/// The set bits of a lane mask, lowest first.
+#[derive(Clone, Copy, Debug)]
+pub struct Lanes(u32);
+
+impl Iterator for Lanes {
+    type Item = usize;
+
+    #[inline(always)]
+    fn next(&mut self) -> Option<usize> {
+        if self.0 == 0 {
+            return None;
+        }
+        let lane = self.0.trailing_zeros() as usize;
+        self.0 &= self.0 - 1;
+        Some(lane)
+    }
+}
+
 /// Up to four triangles as the lane-wise test reads them (Embree's Triangle4 layout): lane
 /// i of `coords[v][axis]` is coordinate `axis` of vertex `v` of the block's i-th triangle. One
 /// test of four lanes decides all four triangles for about the cost of one. Lanes without a
@@ -43,6 +61,12 @@ pub struct BlockHits {
 }
 
 impl BlockHits {
+    /// The lanes hit, in lane order.
+    #[inline(always)]
+    pub fn lanes(&self) -> Lanes {
+        Lanes(self.mask)
+    }
+
     /// Lane `lane`'s hit (meaningful when its bit in `mask` is set).
     #[inline(always)]
     pub fn get(&self, lane: usize) -> PrimitiveHit {
