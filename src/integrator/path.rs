@@ -123,13 +123,88 @@ struct PathState {
 
 /// An emitter a path ran into: radiance towards the path, light index, and where.
 #[derive(Clone, Copy, Debug)]
-struct Emitter {
-    le: Vec3,
-    light: usize,
+pub(crate) struct Emitter {
+    pub le: Vec3,
+    pub light: usize,
     /// Direction of the ray that found it and the distance along it (infinite for the
     /// environment).
-    dir: Vec3,
-    dist: f32,
+    pub dir: Vec3,
+    pub dist: f32,
+}
+
+/// The emitters a ray that left the scene along `dir` finds: the environment and the
+/// distant lights whose cone contains the direction.
+#[inline]
+pub(crate) fn emitters_at_infinity(world: &World, dir: Vec3, mut found: impl FnMut(Emitter)) {
+    if let (Some(env), Some(index)) = (&world.lights.environment, world.lights.environment_index) {
+        found(Emitter {
+            le: env.radiance(dir),
+            light: index as usize,
+            dir,
+            dist: f32::INFINITY,
+        });
+    }
+    let cones = &world.lights.distant_cones;
+    let dir = if cones.is_empty() {
+        dir
+    } else {
+        dir.normalize()
+    };
+    for &index in cones {
+        let le = world.lights.lights[index as usize].radiance_at_infinity(dir);
+        if le != Vec3::ZERO {
+            found(Emitter {
+                le,
+                light: index as usize,
+                dir,
+                dist: f32::INFINITY,
+            });
+        }
+    }
+}
+
+/// The emitter the surface point `it`, found by `ray` at distance `t`, is, if it emits
+/// towards the ray.
+#[inline]
+pub(crate) fn surface_emitter(
+    world: &World,
+    it: &Interaction,
+    ray: &Ray,
+    t: f32,
+) -> Option<Emitter> {
+    let le = world.surfaces.emitted(it);
+    if le == Vec3::ZERO {
+        return None;
+    }
+    world.light_index(it).map(|light| Emitter {
+        le,
+        light,
+        dir: ray.dir,
+        dist: t * ray.dir.length(),
+    })
+}
+
+/// Density with which light sampling at the vertex (`p`, `n`) produces the direction
+/// towards emitter `e` (selection probability times the light's density, for one shadow
+/// ray): the other technique's density in the MIS weight of a BSDF-sampled emitter hit.
+#[inline]
+pub(crate) fn light_density(
+    world: &World,
+    settings: &Settings,
+    p: Vec3,
+    n: Vec3,
+    e: &Emitter,
+) -> f32 {
+    let lights = &world.lights;
+    let select = lights.selection_probability(e.light, p, n);
+    let density = match &lights.lights[e.light] {
+        crate::light::Light::Environment => lights
+            .environment
+            .as_ref()
+            .map_or(0.0, |env| env.pdf(e.dir)),
+        l => l.pdf(p, e.dir, e.dist, settings.light_sampling),
+    };
+    select * density
 }
 
 /// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.
@@ -203,12 +278,7 @@ impl PathState {
         rec: &mut R,
         e: Emitter,
     ) {
-        let Emitter {
-            le,
-            light,
-            dir,
-            dist,
-        } = e;
+        let Emitter { le, light, .. } = e;
         if self.depth == 0 {
             if let Some(parts) = walk.parts.as_deref_mut() {
                 parts.add(self.beta * le, 0, false);
@@ -223,18 +293,11 @@ impl PathState {
             });
             return;
         }
-        let lights = &tracer.world.lights;
         let p_light = if self.prev_delta {
             0.0
         } else {
-            let select = lights.selection_probability(light, self.prev_p, self.prev_n);
-            let density = match &lights.lights[light] {
-                crate::light::Light::Environment => {
-                    lights.environment.as_ref().map_or(0.0, |e| e.pdf(dir))
-                }
-                l => l.pdf(self.prev_p, dir, dist, tracer.settings.light_sampling),
-            };
-            select * density * self.prev_nee_count as f32
+            light_density(tracer.world, tracer.settings, self.prev_p, self.prev_n, &e)
+                * self.prev_nee_count as f32
         };
         record(
             rec,
@@ -334,54 +397,16 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         loop {
             rays.closest += 1;
             let Some(hit) = world.intersect(&ray) else {
-                if !EMITTERS {
-                    return;
-                }
-                if let (Some(env), Some(index)) =
-                    (&world.lights.environment, world.lights.environment_index)
-                {
-                    let e = Emitter {
-                        le: env.radiance(ray.dir),
-                        light: index as usize,
-                        dir: ray.dir,
-                        dist: f32::INFINITY,
-                    };
-                    path.reached_emitter(self, walk, rec, e);
-                }
-                let cones = &world.lights.distant_cones;
-                let dir = if cones.is_empty() {
-                    ray.dir
-                } else {
-                    ray.dir.normalize()
-                };
-                for &index in cones {
-                    let le = world.lights.lights[index as usize].radiance_at_infinity(dir);
-                    if le != Vec3::ZERO {
-                        let e = Emitter {
-                            le,
-                            light: index as usize,
-                            dir,
-                            dist: f32::INFINITY,
-                        };
-                        path.reached_emitter(self, walk, rec, e);
-                    }
+                if EMITTERS {
+                    emitters_at_infinity(world, ray.dir, |e| {
+                        path.reached_emitter(self, walk, rec, e)
+                    });
                 }
                 return;
             };
             let it = world.interaction(&ray, &hit);
-            if EMITTERS {
-                let le = world.surfaces.emitted(&it);
-                if le != Vec3::ZERO
-                    && let Some(index) = world.light_index(&it)
-                {
-                    let e = Emitter {
-                        le,
-                        light: index,
-                        dir: ray.dir,
-                        dist: hit.t * ray.dir.length(),
-                    };
-                    path.reached_emitter(self, walk, rec, e);
-                }
+            if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
+                path.reached_emitter(self, walk, rec, e);
             }
             if path.depth >= max_depth {
                 return;
