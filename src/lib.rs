@@ -26,6 +26,8 @@ pub mod render;
 pub mod sampling;
 pub mod scene;
 pub mod sequence;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod simd;
 pub mod world;
 
 pub use error::{Error, ErrorKind, Result};

@@ -40,7 +40,7 @@ enum Command {
         /// AOVs of the request the plan is made for (as `render --aov`; default all).
         #[arg(long)]
         aov: Option<String>,
-        /// auto or general, as `render --plan`.
+        /// auto, scalar or general, as `render --plan`.
         #[arg(long)]
         plan: Option<String>,
     },
@@ -210,8 +210,10 @@ struct RenderArgs {
     /// or a finished render, to take more samples); without the file, start afresh.
     #[arg(long)]
     resume: bool,
-    /// auto (default): the integrator leaves out what the scene and the AOVs do not use;
-    /// general: every feature on (for benchmarks and comparisons).
+    /// auto (default): the integrator leaves out what the scene and the AOVs do not use,
+    /// and runs eight paths at a time in SIMD lanes where it can (AVX2); scalar: the same
+    /// without the packet kernel; general: every feature on (for benchmarks and
+    /// comparisons).
     #[arg(long)]
     plan: Option<String>,
     /// Largest memory the render may need, e.g. 8G or 512M (binary units), or `off`; a scene
@@ -501,7 +503,7 @@ fn render_frame(
     if let Some(path) = &args.env_map {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
-    if options.plan == PlanMode::Auto {
+    if options.plan != PlanMode::General {
         plan::strip_unused_attributes(&mut scene);
     }
     let limit = args.max_memory.or_else(memory::default_limit);
@@ -772,7 +774,7 @@ fn inspect_command(
         }
     }
     let mut scene = load_scene(Some(path), &load.options())?;
-    if options.plan == PlanMode::Auto {
+    if options.plan != PlanMode::General {
         plan::strip_unused_attributes(&mut scene);
     }
     let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();

@@ -7,7 +7,9 @@
 //! [`Kernel`]: the monomorphised variant of the path tracer that leaves out MIS and emitter
 //! lookups where nothing can be found by BSDF sampling, first-hit data where no data AOV is
 //! asked for, and AOV routing where the beauty is the only light layer. `--plan general`
-//! forces every feature on: the baseline that benchmarks and tests compare the plan with.
+//! forces every feature on: the baseline that benchmarks and tests compare the plan with;
+//! `--plan scalar` specialises as `auto` but keeps the scalar kernel where `auto` would
+//! choose the packet kernel.
 
 use crate::film::aov::{Aov, AovSet};
 use crate::material::microfacet::SMOOTH_ALPHA;
@@ -17,20 +19,26 @@ use std::fmt;
 /// Whether the integrator is specialised to the plan or runs with every feature on.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum PlanMode {
-    /// Specialised to what the scene and the request use (the default).
+    /// Specialised to what the scene and the request use, with the packet kernel where
+    /// it applies (the default).
     #[default]
     Auto,
-    /// Every feature on, whatever the scene: the reference for benchmarks and tests.
+    /// Specialised as `Auto`, but always the scalar kernel: the reference the packet
+    /// kernel is compared with.
+    Scalar,
+    /// Every feature on, whatever the scene, in the scalar kernel: the reference for
+    /// benchmarks and tests.
     General,
 }
 
 impl PlanMode {
-    /// Parses `auto` or `general`.
+    /// Parses `auto`, `scalar` or `general`.
     pub fn parse(s: &str) -> Result<Self, String> {
         match s {
             "auto" => Ok(Self::Auto),
+            "scalar" => Ok(Self::Scalar),
             "general" => Ok(Self::General),
-            _ => Err(format!("plan: auto or general, got {s:?}")),
+            _ => Err(format!("plan: auto, scalar or general, got {s:?}")),
         }
     }
 
@@ -38,6 +46,7 @@ impl PlanMode {
     pub fn name(self) -> &'static str {
         match self {
             Self::Auto => "auto",
+            Self::Scalar => "scalar",
             Self::General => "general",
         }
     }
@@ -279,14 +288,19 @@ pub struct Kernel {
     /// Contributions are routed by their tags to every light AOV; off when the beauty is
     /// the only light layer.
     pub routing: bool,
+    /// Eight paths at a time in SIMD lanes (`integrator::packet`): where neither routing
+    /// nor first-hit data is needed, the CPU has AVX2 and FMA, and roulette does not learn
+    /// (`rr = efficiency`). Passes that learn the first vertex's split stay scalar.
+    pub packet: bool,
 }
 
 impl Kernel {
-    /// Every feature on.
+    /// Every feature on, in the scalar kernel.
     pub const GENERAL: Self = Self {
         emitter_hits: true,
         first_hit_data: true,
         routing: true,
+        packet: false,
     };
 }
 
@@ -315,10 +329,16 @@ impl RenderPlan {
             .filter(|a| *a == Aov::Depth || crate::film::MEAN_DATA.contains(a))
             .collect();
         let light_layers = aovs.iter().filter(|a| a.is_light()).count();
+        let first_hit_data = !data_layers.is_empty() || aovs.wants_crypto();
+        let routing = light_layers > 1 || aovs.wants_light_groups();
         let specialised = Kernel {
             emitter_hits: features.lights.reachable_by_bsdf_sampling(),
-            first_hit_data: !data_layers.is_empty() || aovs.wants_crypto(),
-            routing: light_layers > 1 || aovs.wants_light_groups(),
+            first_hit_data,
+            routing,
+            packet: mode == PlanMode::Auto
+                && !first_hit_data
+                && !routing
+                && crate::integrator::packet_kernel_available(),
         };
         Self {
             mode,
@@ -329,7 +349,7 @@ impl RenderPlan {
             squares: squares || aovs.contains(Aov::Variance),
             data_layers,
             kernel: match mode {
-                PlanMode::Auto => specialised,
+                PlanMode::Auto | PlanMode::Scalar => specialised,
                 PlanMode::General => Kernel::GENERAL,
             },
         }
@@ -400,10 +420,15 @@ impl fmt::Display for RenderPlan {
         let k = &self.kernel;
         write!(
             f,
-            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}",
+            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}, {} kernel",
             on_off(k.emitter_hits),
             on_off(k.first_hit_data),
-            on_off(k.routing)
+            on_off(k.routing),
+            if k.packet {
+                "packet (8 lanes, AVX2)"
+            } else {
+                "scalar"
+            }
         )
     }
 }

@@ -285,12 +285,15 @@ impl RenderOptions {
 
     /// The render plan for `world` with these options.
     pub fn render_plan(&self, world: &World) -> RenderPlan {
-        RenderPlan::new(
+        let mut plan = RenderPlan::new(
             &world.features,
             &self.aovs,
             self.plan,
             self.noise_threshold.is_some(),
-        )
+        );
+        // Efficiency-aware roulette learns from, and decides at, every vertex: scalar only.
+        plan.kernel.packet &= !matches!(self.settings.rr, RussianRoulette::Efficiency(_));
+        plan
     }
 }
 
@@ -585,6 +588,15 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         };
         let k = plan.kernel;
         let learned = match (k.routing, k.emitter_hits, k.first_hit_data) {
+            #[cfg(target_arch = "x86_64")]
+            (false, emitters, false) if k.packet && !learning && !split_learning => {
+                if emitters {
+                    run_packet_pass::<true>(&mut film, &tracer_args);
+                } else {
+                    run_packet_pass::<false>(&mut film, &tracer_args);
+                }
+                Vec::new()
+            }
             (false, false, false) => run_pass::<false, false, false>(&mut film, &tracer_args),
             (false, false, true) => run_pass::<false, false, true>(&mut film, &tracer_args),
             (false, true, false) => run_pass::<false, true, false>(&mut film, &tracer_args),
@@ -753,6 +765,66 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
             (tile_learning, tile_split)
         })
         .collect()
+}
+
+/// Renders one pass over every tile with the packet kernel (see `plan::Kernel::packet`):
+/// the beauty only, and no learning.
+#[cfg(target_arch = "x86_64")]
+fn run_packet_pass<const EMITTERS: bool>(film: &mut Film, args: &PassArgs) {
+    use crate::film::TILE_SIZE;
+    use crate::integrator::packet::{PacketBuffers, PacketTracer, PixelWork};
+    let PassArgs {
+        world,
+        options,
+        samples,
+        first_sample,
+        split,
+        rays: counts,
+        bar,
+        ..
+    } = *args;
+    let tracer = PacketTracer::<EMITTERS>::new(world, &options.settings, split, &options.filter);
+    let window = film.window;
+    let interrupt = options.interrupt.as_deref();
+    film.tiles.par_iter_mut().for_each_init(
+        || {
+            let pixels = (TILE_SIZE * TILE_SIZE) as usize;
+            (PacketBuffers::new(pixels), Vec::with_capacity(pixels))
+        },
+        |(buffers, work), tile| {
+            work.clear();
+            for ty in 0..tile.height {
+                for tx in 0..tile.width {
+                    let (x, y) = (tile.x0 + tx, tile.y0 + ty);
+                    let in_tile = (ty * tile.width + tx) as usize;
+                    let taken = tile.samples_at(in_tile);
+                    let count = samples.at(window.index(x, y), taken);
+                    if count > 0 {
+                        buffers.pixels[in_tile].clear();
+                        work.push(PixelWork {
+                            in_tile,
+                            x,
+                            y,
+                            first: first_sample + taken,
+                            count,
+                        });
+                    }
+                }
+            }
+            let mut rays = RayCounts::default();
+            let taken = tracer.render(work, buffers, &mut rays, interrupt);
+            for w in work.iter() {
+                tile.add(w.in_tile, &buffers.pixels[w.in_tile]);
+            }
+            counts
+                .lock()
+                .expect("no thread panicked holding the lock")
+                .add(&rays);
+            if let Some(bar) = bar {
+                bar.inc(taken);
+            }
+        },
+    );
 }
 
 #[cfg(test)]

@@ -223,6 +223,23 @@ impl PixelAccumulator {
     }
 }
 
+impl PixelAccumulator {
+    /// Adds one sample of a render whose only light layer is the beauty (as the packet
+    /// kernel produces them): its value, whether the camera ray hit a surface, and the
+    /// contributions dropped for being non-finite.
+    #[inline]
+    pub fn add_sample(&mut self, value: Vec3, covered: bool, discarded: u64) {
+        let b = value.as_dvec3();
+        self.light[0] += b;
+        self.beauty_squares += b * b;
+        if covered {
+            self.coverage += 1.0;
+        }
+        self.samples += 1;
+        self.discarded += discarded;
+    }
+}
+
 /// One tile's accumulated sums.
 pub struct Tile {
     pub x0: u32,

@@ -47,6 +47,16 @@ pub struct GltfPbr {
     coat_ggx: Ggx,
 }
 
+/// What an uncoated [`GltfPbr`] is made of: base colour, metallic, GGX alpha and the
+/// dielectric's reflectance at normal incidence.
+#[derive(Clone, Copy, Debug)]
+pub struct UncoatedParts {
+    pub base: Vec3,
+    pub metallic: f32,
+    pub alpha: f32,
+    pub f0: Vec3,
+}
+
 /// Reflectance at normal incidence of the clear coat (ior 1.5, as KHR_materials_clearcoat
 /// and UsdPreviewSurface fix it).
 const COAT_F0: f32 = 0.04;
@@ -268,6 +278,17 @@ impl GltfPbr {
         let [diffuse, glossy] = self.eval_lobes_at(wo, wi, h);
         let pdf = self.pdf_at(wo, wi, probabilities, h);
         BsdfSample::from_mixture(wi, diffuse + glossy, pdf, lobe)
+    }
+
+    /// The parameters of a BRDF without a clear coat, which the packet kernel evaluates in
+    /// SIMD lanes (`material::lanes`); `None` for a coated one.
+    pub fn uncoated(&self) -> Option<UncoatedParts> {
+        (self.coat == 0.0).then_some(UncoatedParts {
+            base: self.base,
+            metallic: self.metallic,
+            alpha: self.ggx.alpha,
+            f0: self.f0,
+        })
     }
 
     /// True if some lobe is not a delta: false only for a smooth pure metal under no coat or

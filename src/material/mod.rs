@@ -8,6 +8,8 @@
 
 pub mod gltf_pbr;
 pub mod lambert;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lanes;
 pub mod microfacet;
 pub mod phong;
 

@@ -1,0 +1,724 @@
+//! The packet kernel: the path tracer of [`super::path`] run on eight paths at a time, one
+//! a SIMD lane (AVX2), for renders whose only light layer is the beauty. The render plan
+//! chooses it (see `plan::Kernel::packet`); `--plan scalar` keeps the scalar kernel.
+//!
+//! Why a second loop: a path vertex is a long chain of dependent steps (traversal, shading,
+//! light sampling), so one path at a time leaves most of a core idle and every
+//! data-dependent branch mispredicts for one path only. Eight paths in lanes evaluate their
+//! BSDFs, MIS weights, roulette and throughput as one instruction stream (Mitsuba 3's
+//! `llvm` variants and pbrt-v4's wavefront integrator do the same at larger widths). Ray
+//! queries, shading points and light samples still go through the scalar code lane by lane,
+//! so every scene the scalar kernel renders renders here too.
+//!
+//! The estimator is the scalar kernel's, sample for sample: every path takes the same
+//! random numbers (the sampler is a pure function of pixel, sample index, depth and
+//! branch), the same first-vertex split and the same roulette, so with the Sobol sampler an
+//! image differs from the scalar kernel's only by float rounding in the lanes (a rare path
+//! whose roulette or lobe choice falls the other side of a rounding then differs too);
+//! `tests/packet.rs` compares the two.
+//!
+//! Lanes are refilled as paths end: first with the branches a split first vertex left
+//! waiting, then with the next camera sample of the tile, so lanes stay busy whatever the
+//! path lengths. A camera sample's value is complete when its last path ends; it then goes
+//! to its pixel's accumulator as the scalar kernel's samples do.
+
+use super::mis::{Mis, Technique};
+use super::path::{Emitter, RayCounts, emitters_at_infinity, light_density, surface_emitter};
+use super::settings::Settings;
+use super::split::FirstSplit;
+use crate::film::PixelAccumulator;
+use crate::film::filter::PixelFilter;
+use crate::geometry::Hit;
+use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::material::lambert::Lambert;
+use crate::material::lanes::BsdfLanes;
+use crate::material::{self, Bsdf};
+use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
+use crate::simd::{F8, LANES, M8, V3};
+use crate::world::{Interaction, World};
+use glam::{Vec2, Vec3};
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// A pixel's share of a pass: where it lies and which of its samples to take.
+#[derive(Clone, Copy, Debug)]
+pub struct PixelWork {
+    /// Index in the tile, row-major.
+    pub in_tile: usize,
+    pub x: u32,
+    pub y: u32,
+    /// Index of its first sample, and how many.
+    pub first: u32,
+    pub count: u32,
+}
+
+/// A path between bounces: the ray it follows, its state as the scalar kernel keeps it,
+/// and the camera sample it belongs to.
+#[derive(Clone, Copy, Debug)]
+struct Path {
+    ray: Ray,
+    beta: Vec3,
+    depth: u32,
+    branch: u32,
+    prev_p: Vec3,
+    prev_n: Vec3,
+    prev_pdf: f32,
+    prev_delta: bool,
+    prev_nee_count: u32,
+    sample: u32,
+}
+
+const NO_PATH: Path = Path {
+    ray: Ray {
+        origin: Vec3::ZERO,
+        dir: Vec3::Z,
+        tmax: 0.0,
+    },
+    beta: Vec3::ZERO,
+    depth: 0,
+    branch: 0,
+    prev_p: Vec3::ZERO,
+    prev_n: Vec3::ZERO,
+    prev_pdf: 0.0,
+    prev_delta: true,
+    prev_nee_count: 1,
+    sample: 0,
+};
+
+/// A camera sample in flight: its pixel, its random numbers and what its paths have
+/// brought back so far.
+#[derive(Clone, Debug)]
+struct SampleSlot {
+    /// Index in the tile.
+    pixel: usize,
+    sampler: Sampler,
+    value: Vec3,
+    covered: bool,
+    /// Paths of the sample still running or waiting.
+    paths: u32,
+    rays: u64,
+    discarded: u64,
+}
+
+/// What a thread reuses from tile to tile: samples in flight, waiting paths, and the
+/// tile's pixel accumulators.
+pub struct PacketBuffers {
+    slots: Vec<SampleSlot>,
+    free: Vec<u32>,
+    waiting: Vec<Path>,
+    /// One accumulator per pixel of the tile (row-major), cleared by the caller.
+    pub pixels: Vec<PixelAccumulator>,
+}
+
+impl PacketBuffers {
+    /// Buffers for tiles of `pixels` pixels.
+    pub fn new(pixels: usize) -> Self {
+        Self {
+            slots: Vec::new(),
+            free: Vec::new(),
+            waiting: Vec::new(),
+            pixels: (0..pixels)
+                .map(|_| PixelAccumulator::new(1, false))
+                .collect(),
+        }
+    }
+}
+
+/// The set bits of a lane mask, lowest first.
+#[inline(always)]
+fn lanes_of(mut bits: u32) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (bits != 0).then(|| {
+            let lane = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            lane
+        })
+    })
+}
+
+/// The BSDF of lanes that do not scatter (never read).
+const NO_BSDF: Bsdf = Bsdf::Lambert(Lambert { albedo: Vec3::ZERO });
+
+/// The packet kernel over a world with given settings; `EMITTERS` as in
+/// [`super::path::PathTracer`].
+pub struct PacketTracer<'a, const EMITTERS: bool> {
+    world: &'a World,
+    settings: &'a Settings,
+    split: FirstSplit,
+    filter: &'a PixelFilter,
+    /// A sampler of the render's kind and seed, which camera samples start from.
+    sampler: Sampler,
+}
+
+/// The lanes that scatter at a bounce: their shading points, BSDFs and random numbers.
+struct Vertices {
+    its: [Option<Interaction>; LANES],
+    mask: u32,
+    ng: V3,
+    frame: [V3; 3],
+    wo: V3,
+    bsdf: BsdfLanes,
+    origin: [Vec3; LANES],
+    vs: [Option<VertexSample>; LANES],
+}
+
+impl Vertices {
+    #[inline(always)]
+    fn to_local(&self, v: V3) -> V3 {
+        let [s, t, n] = self.frame;
+        V3::new(v.dot(s), v.dot(t), v.dot(n))
+    }
+
+    #[inline(always)]
+    fn to_world(&self, v: V3) -> V3 {
+        let [s, t, n] = self.frame;
+        s * v.x + t * v.y + n * v.z
+    }
+}
+
+impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
+    /// The kernel for `world`; `split` says how the first vertex splits, `filter` places
+    /// camera samples.
+    pub fn new(
+        world: &'a World,
+        settings: &'a Settings,
+        split: FirstSplit,
+        filter: &'a PixelFilter,
+    ) -> Self {
+        Self {
+            world,
+            settings,
+            split,
+            filter,
+            sampler: Sampler::new(settings.sampler, settings.seed),
+        }
+    }
+
+    /// Takes the samples `work` lists, in pixel order, adding each finished sample to its
+    /// pixel's accumulator in `buffers`; stops starting pixels once `interrupt` is set.
+    /// Returns the samples taken. Panics where
+    /// [`super::packet_kernel_available`] is false.
+    pub fn render(
+        &self,
+        work: &[PixelWork],
+        buffers: &mut PacketBuffers,
+        rays: &mut RayCounts,
+        interrupt: Option<&AtomicBool>,
+    ) -> u64 {
+        assert!(
+            super::packet_kernel_available(),
+            "the packet kernel needs AVX2 and FMA"
+        );
+        // SAFETY: the CPU has AVX2 and FMA (checked above), which is all `render_lanes`
+        // and the `simd` types need.
+        unsafe { self.render_lanes(work, buffers, rays, interrupt) }
+    }
+
+    #[target_feature(enable = "avx2,fma")]
+    fn render_lanes(
+        &self,
+        work: &[PixelWork],
+        buffers: &mut PacketBuffers,
+        rays: &mut RayCounts,
+        interrupt: Option<&AtomicBool>,
+    ) -> u64 {
+        let mut lanes = [NO_PATH; LANES];
+        let mut active = 0u32;
+        let (mut item, mut next) = (0usize, 0u32);
+        let mut stopped = false;
+        let mut taken = 0u64;
+        loop {
+            let mut free = !active & 0xff;
+            while free != 0 {
+                let lane = free.trailing_zeros() as usize;
+                let path = match buffers.waiting.pop() {
+                    Some(p) => p,
+                    None => {
+                        // The next camera sample: the next of this pixel, or a new pixel.
+                        while !stopped && item < work.len() && next == work[item].count {
+                            (item, next) = (item + 1, 0);
+                            stopped = interrupt.is_some_and(|f| f.load(Ordering::Relaxed));
+                        }
+                        if stopped || item == work.len() {
+                            break;
+                        }
+                        next += 1;
+                        taken += 1;
+                        self.camera_path(&work[item], work[item].first + next - 1, buffers)
+                    }
+                };
+                lanes[lane] = path;
+                active |= 1 << lane;
+                free &= free - 1;
+            }
+            if active == 0 {
+                return taken;
+            }
+            self.bounce(&mut lanes, &mut active, buffers, rays);
+        }
+    }
+
+    /// Starts sample `index` of pixel `work`: its slot and its camera path.
+    #[inline(always)]
+    fn camera_path(&self, work: &PixelWork, index: u32, buffers: &mut PacketBuffers) -> Path {
+        let mut sampler = self.sampler.clone();
+        sampler.start(work.x, work.y, index);
+        let cs = sampler.camera();
+        let centre = Vec2::new(work.x as f32 + 0.5, work.y as f32 + 0.5);
+        let ray = self
+            .world
+            .camera
+            .generate_ray(centre + self.filter.sample(cs.film), cs.lens);
+        let slot = SampleSlot {
+            pixel: work.in_tile,
+            sampler,
+            value: Vec3::ZERO,
+            covered: false,
+            paths: 1,
+            rays: 0,
+            discarded: 0,
+        };
+        let sample = match buffers.free.pop() {
+            Some(i) => {
+                buffers.slots[i as usize] = slot;
+                i
+            }
+            None => {
+                buffers.slots.push(slot);
+                (buffers.slots.len() - 1) as u32
+            }
+        };
+        Path {
+            ray,
+            beta: Vec3::ONE,
+            prev_p: ray.origin,
+            sample,
+            ..NO_PATH
+        }
+    }
+
+    /// One path of sample slot `sample` ended: the sample goes to its pixel once it has no
+    /// path left.
+    #[inline(always)]
+    fn end_path(sample: u32, buffers: &mut PacketBuffers) {
+        let slot = &mut buffers.slots[sample as usize];
+        slot.paths -= 1;
+        if slot.paths == 0 {
+            let pixel = &mut buffers.pixels[slot.pixel];
+            pixel.add_sample(slot.value, slot.covered, slot.discarded);
+            pixel.rays += slot.rays;
+            buffers.free.push(sample);
+        }
+    }
+
+    /// Adds a contribution to its sample; a non-finite one is dropped and counted, as the
+    /// scalar kernel's record does.
+    #[inline(always)]
+    fn contribute(slot: &mut SampleSlot, value: Vec3) {
+        if value.is_finite() {
+            slot.value += value;
+        } else {
+            slot.discarded += 1;
+        }
+    }
+
+    /// The path reached emitter `e`: seen directly, or found by BSDF sampling and weighted
+    /// against light sampling (as `path::PathState::reached_emitter`).
+    #[inline(always)]
+    fn reached_emitter(&self, path: &Path, e: Emitter, slot: &mut SampleSlot) {
+        let value = path.beta * e.le;
+        if path.depth == 0 {
+            Self::contribute(slot, value);
+            return;
+        }
+        let p_light = if path.prev_delta {
+            0.0
+        } else {
+            light_density(self.world, self.settings, path.prev_p, path.prev_n, &e)
+                * path.prev_nee_count as f32
+        };
+        let w = self
+            .settings
+            .mis
+            .weight(Technique::Bsdf, path.prev_pdf, p_light);
+        Self::contribute(slot, value * w);
+    }
+
+    /// Traces the active lanes' rays and takes their paths one bounce on: emitters found,
+    /// light samples at the new vertices, and the continuations (into the same lane, or
+    /// waiting for one when the first vertex splits).
+    #[inline(always)]
+    fn bounce(
+        &self,
+        lanes: &mut [Path; LANES],
+        active: &mut u32,
+        buffers: &mut PacketBuffers,
+        rays: &mut RayCounts,
+    ) {
+        let world = self.world;
+        let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
+        let mut hits: [Option<Hit>; LANES] = [None; LANES];
+        for lane in lanes_of(*active) {
+            hits[lane] = world.intersect(&lanes[lane].ray);
+        }
+        rays.closest += active.count_ones() as u64;
+        let mut its: [Option<Interaction>; LANES] = [None; LANES];
+        let mut bsdfs = [NO_BSDF; LANES];
+        let mut scatter = 0u32;
+        for lane in lanes_of(*active) {
+            let path = &lanes[lane];
+            let slot = &mut buffers.slots[path.sample as usize];
+            slot.rays += 1;
+            let Some(hit) = hits[lane] else {
+                if EMITTERS {
+                    emitters_at_infinity(world, path.ray.dir, |e| {
+                        self.reached_emitter(path, e, slot)
+                    });
+                }
+                *active &= !(1 << lane);
+                Self::end_path(path.sample, buffers);
+                continue;
+            };
+            let it = world.interaction(&path.ray, &hit);
+            if EMITTERS && let Some(e) = surface_emitter(world, &it, &path.ray, hit.t) {
+                self.reached_emitter(path, e, slot);
+            }
+            let bsdf = (path.depth < max_depth).then(|| {
+                let surfaces = &world.surfaces;
+                material::bsdf(
+                    &surfaces.materials[it.material as usize],
+                    &surfaces.textures,
+                    &it.attrs,
+                )
+            });
+            // Coverage, as the scalar kernel's first hit records it.
+            if path.depth == 0 && path.branch == 0 && bsdf.is_some() {
+                slot.covered = true;
+            }
+            match bsdf {
+                Some(b) if !b.is_black() => {
+                    its[lane] = Some(it);
+                    bsdfs[lane] = b;
+                    scatter |= 1 << lane;
+                }
+                _ => {
+                    *active &= !(1 << lane);
+                    Self::end_path(path.sample, buffers);
+                }
+            }
+        }
+        if scatter == 0 {
+            return;
+        }
+        let v = self.vertices(lanes, its, bsdfs, scatter, buffers);
+        self.light_samples(lanes, &v, buffers, rays);
+        self.continue_paths(lanes, active, &v, buffers);
+    }
+
+    /// The scattering lanes' shading points in lanes, their BSDFs and random numbers.
+    #[inline(always)]
+    fn vertices(
+        &self,
+        lanes: &[Path; LANES],
+        its: [Option<Interaction>; LANES],
+        bsdfs: [Bsdf; LANES],
+        mask: u32,
+        buffers: &mut PacketBuffers,
+    ) -> Vertices {
+        let mut ng = [Vec3::Z; LANES];
+        let mut frame = [[Vec3::X; LANES], [Vec3::Y; LANES], [Vec3::Z; LANES]];
+        let mut dir = [Vec3::Z; LANES];
+        let mut origin = [Vec3::ZERO; LANES];
+        let mut vs = [None; LANES];
+        for lane in lanes_of(mask) {
+            let it = its[lane]
+                .as_ref()
+                .expect("a scattering lane has a shading point");
+            let path = &lanes[lane];
+            (ng[lane], dir[lane]) = (it.ng, path.ray.dir);
+            (frame[0][lane], frame[1][lane], frame[2][lane]) = (it.frame.s, it.frame.t, it.frame.n);
+            origin[lane] = offset_ray_origin(it.p, it.ng);
+            let sampler = &mut buffers.slots[path.sample as usize].sampler;
+            vs[lane] = Some(sampler.vertex(path.depth, path.branch));
+        }
+        let frame = frame.map(|f| V3::from_lanes(&f));
+        let mut v = Vertices {
+            its,
+            mask,
+            ng: V3::from_lanes(&ng),
+            frame,
+            wo: V3::ZERO,
+            bsdf: BsdfLanes::new(bsdfs, mask),
+            origin,
+            vs,
+        };
+        v.wo = v.to_local(-V3::from_lanes(&dir));
+        v
+    }
+
+    /// Shadow rays towards the lights from every scattering lane (the first vertex's split
+    /// count of them at depth 0, one deeper), each weighted by MIS against BSDF sampling.
+    #[inline(always)]
+    fn light_samples(
+        &self,
+        lanes: &[Path; LANES],
+        v: &Vertices,
+        buffers: &mut PacketBuffers,
+        rays: &mut RayCounts,
+    ) {
+        let world = self.world;
+        let lights = &world.lights;
+        if lights.is_empty() {
+            return;
+        }
+        let split = self.split.counts;
+        let nee_lanes = lanes_of(v.mask)
+            .filter(|&l| v.bsdf.lane(l).has_non_delta())
+            .fold(0u32, |m, l| m | 1 << l);
+        let counts = |lane: usize| {
+            let first = lanes[lane].depth == 0;
+            (
+                if first { split.nee } else { 1 },
+                if first && split.bsdf > 1 {
+                    split.bsdf
+                } else {
+                    1
+                },
+            )
+        };
+        let rounds = lanes_of(nee_lanes).map(|l| counts(l).0).max().unwrap_or(0);
+        let mut n_nee = [1.0f32; LANES];
+        let mut n_bsdf = [1.0f32; LANES];
+        for lane in lanes_of(nee_lanes) {
+            let (n, b) = counts(lane);
+            (n_nee[lane], n_bsdf[lane]) = (n as f32, b as f32);
+        }
+        let (n_nee, n_bsdf) = (F8::from_array(n_nee), F8::from_array(n_bsdf));
+        let beta = V3::from_lanes(&lanes.map(|p| p.beta));
+        for j in 0..rounds {
+            let mut sampled = 0u32;
+            let (mut wi, mut radiance) = ([Vec3::Z; LANES], [Vec3::ZERO; LANES]);
+            let (mut p_light, mut delta) = ([1.0f32; LANES], 0u32);
+            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); LANES];
+            for lane in lanes_of(nee_lanes).filter(|&l| j < counts(l).0) {
+                let it = v.its[lane]
+                    .as_ref()
+                    .expect("a scattering lane has a shading point");
+                let path = &lanes[lane];
+                let vs = v.vs[lane]
+                    .as_ref()
+                    .expect("a scattering lane has its numbers");
+                let (u_light, u_select) = if counts(lane).0 == 1 {
+                    (vs.light, vs.light_select)
+                } else {
+                    let sampler = &buffers.slots[path.sample as usize].sampler;
+                    let point = self
+                        .split
+                        .point(SplitKind::Light, sampler.sample_index(), j);
+                    let p = sampler.first_split_point(SplitKind::Light, point);
+                    (Vec2::new(p[0], p[1]), p[2])
+                };
+                let Some((index, p_select)) = lights.select(u_select, it.p, it.frame.n) else {
+                    continue;
+                };
+                let Some(ls) = lights.lights[index].sample(
+                    it.p,
+                    lights.environment.as_ref(),
+                    self.settings.light_sampling,
+                    u_light,
+                ) else {
+                    continue;
+                };
+                let mut l = ls.radiance;
+                if let Some((prim, b)) = ls.area_point {
+                    l *= world.surfaces.emission_at(prim, b);
+                }
+                if l == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0 {
+                    continue;
+                }
+                (wi[lane], radiance[lane], p_light[lane]) = (ls.wi, l, p_select * ls.pdf);
+                let origin = v.origin[lane];
+                shadow[lane] = match ls.target {
+                    Some(target) => Ray {
+                        origin,
+                        dir: target - origin,
+                        tmax: 1.0,
+                    },
+                    None => Ray::new(origin, ls.wi),
+                };
+                if ls.delta {
+                    delta |= 1 << lane;
+                }
+                sampled |= 1 << lane;
+            }
+            if sampled == 0 {
+                continue;
+            }
+            let wi_local = v.to_local(V3::from_lanes(&wi));
+            // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
+            let (f, pdf) = unsafe { v.bsdf.eval_pdf(v.wo, wi_local, sampled) };
+            let zero = F8::ZERO;
+            sampled &= (f.x.ne(zero) | f.y.ne(zero) | f.z.ne(zero)).bits();
+            let mut lit = 0u32;
+            for lane in lanes_of(sampled) {
+                buffers.slots[lanes[lane].sample as usize].rays += 1;
+                if !world.occluded(&shadow[lane]) {
+                    lit |= 1 << lane;
+                }
+            }
+            rays.shadow += sampled.count_ones() as u64;
+            if lit == 0 {
+                continue;
+            }
+            let p_light = F8::from_array(p_light);
+            let no_bsdf = if EMITTERS {
+                M8::from_bits(delta)
+            } else {
+                M8::all()
+            };
+            let p_bsdf = F8::select(no_bsdf, zero, pdf);
+            let own = p_light * n_nee;
+            let value = (beta * f) * V3::from_lanes(&radiance) / own;
+            let w = mis_weights(self.settings.mis, Technique::Nee, own, p_bsdf * n_bsdf, lit);
+            let value = value * w;
+            for lane in lanes_of(lit) {
+                Self::contribute(
+                    &mut buffers.slots[lanes[lane].sample as usize],
+                    value.lane(lane),
+                );
+            }
+        }
+    }
+
+    /// Samples the BSDF at every scattering lane for its continuations (the first vertex's
+    /// split count at depth 0), with Russian roulette: the first continuation stays in its
+    /// lane, the others wait for a lane; lanes whose paths end are freed.
+    #[inline(always)]
+    fn continue_paths(
+        &self,
+        lanes: &mut [Path; LANES],
+        active: &mut u32,
+        v: &Vertices,
+        buffers: &mut PacketBuffers,
+    ) {
+        let split = self.split.counts;
+        let count = |path: &Path| {
+            if path.depth == 0 && split.bsdf > 1 {
+                split.bsdf
+            } else {
+                1
+            }
+        };
+        let parents = *lanes;
+        let rounds = lanes_of(v.mask)
+            .map(|l| count(&parents[l]))
+            .max()
+            .unwrap_or(0);
+        let beta = V3::from_lanes(&parents.map(|p| p.beta));
+        let mut continued = 0u32;
+        for k in 0..rounds {
+            let round = lanes_of(v.mask)
+                .filter(|&l| k < count(&parents[l]))
+                .fold(0u32, |m, l| m | 1 << l);
+            let mut u = [[0.0f32; 4]; LANES];
+            let mut weight = [1.0f32; LANES];
+            for lane in lanes_of(round) {
+                let path = &parents[lane];
+                let n = count(path);
+                weight[lane] = 1.0 / n as f32;
+                u[lane] = if n == 1 {
+                    let vs = v.vs[lane]
+                        .as_ref()
+                        .expect("a scattering lane has its numbers");
+                    [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
+                } else {
+                    let sampler = &buffers.slots[path.sample as usize].sampler;
+                    let point = self.split.point(SplitKind::Bsdf, sampler.sample_index(), k);
+                    sampler.first_split_point(SplitKind::Bsdf, point)
+                };
+            }
+            let lane_u = |i: usize| F8::from_array(u.map(|u| u[i]));
+            // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
+            let s = unsafe {
+                v.bsdf
+                    .sample(v.wo, lane_u(2), [lane_u(0), lane_u(1)], round)
+            };
+            let wi = v.to_world(s.wi);
+            let ok = (s.valid & wi.dot(v.ng).gt(F8::ZERO)).bits() & round;
+            let new_beta = beta * s.weight * F8::from_array(weight);
+            let (bx, by, bz) = (
+                new_beta.x.to_array(),
+                new_beta.y.to_array(),
+                new_beta.z.to_array(),
+            );
+            let delta = s.delta.bits();
+            let (pdf, u_rr) = (s.pdf.to_array(), lane_u(3).to_array());
+            for lane in lanes_of(ok) {
+                let parent = &parents[lane];
+                let mut b = Vec3::new(bx[lane], by[lane], bz[lane]);
+                let survival = self
+                    .settings
+                    .rr
+                    .survival(crate::color::luminance(b), parent.depth + 1);
+                if survival < 1.0 {
+                    if !(u_rr[lane] < survival) {
+                        continue;
+                    }
+                    b /= survival;
+                }
+                if !(b.max_element() > 0.0) {
+                    continue;
+                }
+                let it = v.its[lane]
+                    .as_ref()
+                    .expect("a scattering lane has a shading point");
+                let child = Path {
+                    ray: Ray::new(v.origin[lane], wi.lane(lane)),
+                    beta: b,
+                    depth: parent.depth + 1,
+                    branch: if k == 0 { parent.branch } else { k },
+                    prev_p: it.p,
+                    prev_n: it.frame.n,
+                    prev_pdf: pdf[lane] * count(parent) as f32,
+                    prev_delta: delta & (1 << lane) != 0,
+                    prev_nee_count: if parent.depth == 0 { split.nee } else { 1 },
+                    sample: parent.sample,
+                };
+                if k == 0 {
+                    lanes[lane] = child;
+                    continued |= 1 << lane;
+                } else {
+                    buffers.slots[parent.sample as usize].paths += 1;
+                    buffers.waiting.push(child);
+                }
+            }
+        }
+        for lane in lanes_of(v.mask & !continued) {
+            *active &= !(1 << lane);
+            Self::end_path(parents[lane].sample, buffers);
+        }
+    }
+}
+
+/// MIS weights of `technique` for the lanes of `lanes` (densities times sample counts):
+/// the balance and default power heuristics in lanes, the others lane by lane.
+#[inline(always)]
+fn mis_weights(mis: Mis, technique: Technique, own: F8, other: F8, lanes: u32) -> F8 {
+    let zero = F8::ZERO;
+    let w = match mis {
+        Mis::Balance => own / (own + other),
+        Mis::Power(2.0) => {
+            let q = other / own;
+            F8::ONE / (F8::ONE + q * q)
+        }
+        _ => {
+            let (o, t) = (own.to_array(), other.to_array());
+            let mut w = [0.0; LANES];
+            for lane in lanes_of(lanes) {
+                w[lane] = mis.weight(technique, o[lane], t[lane]);
+            }
+            return F8::from_array(w);
+        }
+    };
+    let w = F8::select(other.gt(zero), w, F8::ONE);
+    F8::select(own.gt(zero), w, zero)
+}

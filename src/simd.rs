@@ -1,0 +1,488 @@
+//! Eight-lane values for the packet kernel (`integrator::packet`): `F8` (f32), `U8` (u32),
+//! `M8` (a lane mask) and `V3` (three `F8`s, a vector per lane), on AVX2 and FMA.
+//!
+//! Invariant: these types are only used inside functions compiled with
+//! `#[target_feature(enable = "avx2,fma")]`, which the render loop enters after
+//! `is_x86_feature_detected!` found both (every x86-64 CPU since 2013-2015). Their methods
+//! are `#[inline(always)]`, so the intrinsics inline into those functions and compile to
+//! single AVX instructions; called anywhere else they would be undefined behaviour on a CPU
+//! without AVX2, which is why the module is private to the crate.
+
+use core::arch::x86_64::*;
+use glam::Vec3;
+use std::ops::{Add, AddAssign, BitAnd, BitOr, BitXor, Div, Mul, MulAssign, Neg, Not, Sub};
+
+/// Number of lanes.
+pub const LANES: usize = 8;
+
+/// Eight f32 lanes.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct F8(__m256);
+
+/// Eight u32 lanes.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct U8(__m256i);
+
+/// A mask over the eight lanes: each lane all ones (set) or all zeros.
+#[derive(Clone, Copy, Debug)]
+#[repr(transparent)]
+pub struct M8(__m256);
+
+// SAFETY (every `unsafe` block of this module): the intrinsics need AVX, AVX2 or FMA, which
+// the module's invariant guarantees; the pointer arguments point into arrays of 8 lanes.
+
+macro_rules! binary {
+    ($trait:ident, $method:ident, $ty:ident, $intrinsic:ident) => {
+        impl $trait for $ty {
+            type Output = $ty;
+            #[inline(always)]
+            fn $method(self, o: $ty) -> $ty {
+                unsafe { $ty($intrinsic(self.0, o.0)) }
+            }
+        }
+    };
+}
+
+binary!(Add, add, F8, _mm256_add_ps);
+binary!(Sub, sub, F8, _mm256_sub_ps);
+binary!(Mul, mul, F8, _mm256_mul_ps);
+binary!(Div, div, F8, _mm256_div_ps);
+binary!(BitAnd, bitand, M8, _mm256_and_ps);
+binary!(BitOr, bitor, M8, _mm256_or_ps);
+binary!(BitXor, bitxor, M8, _mm256_xor_ps);
+binary!(Add, add, U8, _mm256_add_epi32);
+binary!(Sub, sub, U8, _mm256_sub_epi32);
+binary!(BitAnd, bitand, U8, _mm256_and_si256);
+binary!(BitOr, bitor, U8, _mm256_or_si256);
+binary!(BitXor, bitxor, U8, _mm256_xor_si256);
+
+impl Mul<f32> for F8 {
+    type Output = F8;
+    #[inline(always)]
+    fn mul(self, o: f32) -> F8 {
+        self * F8::splat(o)
+    }
+}
+
+impl Add<f32> for F8 {
+    type Output = F8;
+    #[inline(always)]
+    fn add(self, o: f32) -> F8 {
+        self + F8::splat(o)
+    }
+}
+
+impl Sub<f32> for F8 {
+    type Output = F8;
+    #[inline(always)]
+    fn sub(self, o: f32) -> F8 {
+        self - F8::splat(o)
+    }
+}
+
+impl Neg for F8 {
+    type Output = F8;
+    #[inline(always)]
+    fn neg(self) -> F8 {
+        unsafe { F8(_mm256_xor_ps(self.0, _mm256_set1_ps(-0.0))) }
+    }
+}
+
+impl AddAssign for F8 {
+    #[inline(always)]
+    fn add_assign(&mut self, o: F8) {
+        *self = *self + o;
+    }
+}
+
+impl MulAssign for F8 {
+    #[inline(always)]
+    fn mul_assign(&mut self, o: F8) {
+        *self = *self * o;
+    }
+}
+
+impl Not for M8 {
+    type Output = M8;
+    #[inline(always)]
+    fn not(self) -> M8 {
+        unsafe {
+            M8(_mm256_xor_ps(
+                self.0,
+                _mm256_castsi256_ps(_mm256_set1_epi32(-1)),
+            ))
+        }
+    }
+}
+
+impl F8 {
+    pub const ZERO: F8 = F8::from_array([0.0; 8]);
+    pub const ONE: F8 = F8::from_array([1.0; 8]);
+
+    /// The same value in every lane.
+    #[inline(always)]
+    pub fn splat(x: f32) -> F8 {
+        unsafe { F8(_mm256_set1_ps(x)) }
+    }
+
+    /// Lanes from an array (lane i = `a[i]`).
+    #[inline(always)]
+    pub const fn from_array(a: [f32; 8]) -> F8 {
+        // SAFETY: __m256 and [f32; 8] have the same size, and every bit pattern is valid.
+        unsafe { std::mem::transmute::<[f32; 8], F8>(a) }
+    }
+
+    /// The lanes as an array.
+    #[inline(always)]
+    pub fn to_array(self) -> [f32; 8] {
+        // SAFETY: as in `from_array`.
+        unsafe { std::mem::transmute::<F8, [f32; 8]>(self) }
+    }
+
+    #[inline(always)]
+    pub fn min(self, o: F8) -> F8 {
+        unsafe { F8(_mm256_min_ps(self.0, o.0)) }
+    }
+
+    #[inline(always)]
+    pub fn max(self, o: F8) -> F8 {
+        unsafe { F8(_mm256_max_ps(self.0, o.0)) }
+    }
+
+    /// Square root (correctly rounded, as f32::sqrt).
+    #[inline(always)]
+    pub fn sqrt(self) -> F8 {
+        unsafe { F8(_mm256_sqrt_ps(self.0)) }
+    }
+
+    #[inline(always)]
+    pub fn abs(self) -> F8 {
+        unsafe { F8(_mm256_andnot_ps(_mm256_set1_ps(-0.0), self.0)) }
+    }
+
+    /// Nearest integer, ties to even.
+    #[inline(always)]
+    pub fn round(self) -> F8 {
+        unsafe {
+            F8(_mm256_round_ps::<
+                { _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC },
+            >(self.0))
+        }
+    }
+
+    /// Lanes of `a` where `m` is set, of `b` elsewhere.
+    #[inline(always)]
+    pub fn select(m: M8, a: F8, b: F8) -> F8 {
+        unsafe { F8(_mm256_blendv_ps(b.0, a.0, m.0)) }
+    }
+
+    #[inline(always)]
+    pub fn lt(self, o: F8) -> M8 {
+        unsafe { M8(_mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0)) }
+    }
+
+    #[inline(always)]
+    pub fn le(self, o: F8) -> M8 {
+        unsafe { M8(_mm256_cmp_ps::<_CMP_LE_OQ>(self.0, o.0)) }
+    }
+
+    #[inline(always)]
+    pub fn gt(self, o: F8) -> M8 {
+        unsafe { M8(_mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0)) }
+    }
+
+    #[inline(always)]
+    pub fn eq(self, o: F8) -> M8 {
+        unsafe { M8(_mm256_cmp_ps::<_CMP_EQ_OQ>(self.0, o.0)) }
+    }
+
+    /// Not equal, or either is NaN (as `!=` on f32).
+    #[inline(always)]
+    pub fn ne(self, o: F8) -> M8 {
+        unsafe { M8(_mm256_cmp_ps::<_CMP_NEQ_UQ>(self.0, o.0)) }
+    }
+
+    /// Truncates towards zero into signed integers (lanes out of range become i32::MIN).
+    #[inline(always)]
+    pub fn to_i32(self) -> U8 {
+        unsafe { U8(_mm256_cvttps_epi32(self.0)) }
+    }
+
+    /// Sine and cosine of each lane: `sampling::warp::sin_cos`'s operations lane by lane,
+    /// so the result is the scalar function's to the bit (the two kernels then sample the
+    /// same directions).
+    #[inline(always)]
+    pub fn sin_cos(self) -> (F8, F8) {
+        use crate::sampling::warp::sin_cos_constants::*;
+        let q = (self * std::f32::consts::FRAC_2_PI).round();
+        let r = ((self - q * PI_2_HIGH) - q * PI_2_MID) - q * PI_2_LOW;
+        let r2 = r * r;
+        let sin_poly = ((r2 * SIN[0] + SIN[1]) * r2 + SIN[2]) * (r2 * r) + r;
+        let cos_poly = ((r2 * COS[0] + COS[1]) * r2 + COS[2]) * (r2 * r2) + (F8::ONE - r2 * 0.5);
+        // Quadrant q mod 4: (sin, cos) of x = q π/2 + r.
+        let quadrant = q.to_i32();
+        let swap = (quadrant & U8::splat(1)).eq(U8::splat(1));
+        let sin_negative = (quadrant & U8::splat(2)).eq(U8::splat(2));
+        let cos_negative = ((quadrant + U8::splat(1)) & U8::splat(2)).eq(U8::splat(2));
+        let s = F8::select(swap, cos_poly, sin_poly);
+        let c = F8::select(swap, sin_poly, cos_poly);
+        (
+            F8::select(sin_negative, -s, s),
+            F8::select(cos_negative, -c, c),
+        )
+    }
+}
+
+impl M8 {
+    /// No lane set.
+    #[inline(always)]
+    pub fn none() -> M8 {
+        unsafe { M8(_mm256_setzero_ps()) }
+    }
+
+    /// Every lane set.
+    #[inline(always)]
+    pub fn all() -> M8 {
+        !M8::none()
+    }
+
+    /// The mask whose lane i is bit i of `bits`.
+    #[inline(always)]
+    pub fn from_bits(bits: u32) -> M8 {
+        let lanes = U8::from_array([1, 2, 4, 8, 16, 32, 64, 128]);
+        (U8::splat(bits) & lanes).eq(lanes)
+    }
+
+    /// Bit i set where lane i is set.
+    #[inline(always)]
+    pub fn bits(self) -> u32 {
+        unsafe { _mm256_movemask_ps(self.0) as u32 }
+    }
+
+    #[inline(always)]
+    pub fn any(self) -> bool {
+        self.bits() != 0
+    }
+
+    /// Set lanes of `self` that are not set in `o`.
+    #[inline(always)]
+    pub fn and_not(self, o: M8) -> M8 {
+        unsafe { M8(_mm256_andnot_ps(o.0, self.0)) }
+    }
+}
+
+impl U8 {
+    /// The same value in every lane.
+    #[inline(always)]
+    pub fn splat(x: u32) -> U8 {
+        unsafe { U8(_mm256_set1_epi32(x as i32)) }
+    }
+
+    /// Lanes from an array.
+    #[inline(always)]
+    pub const fn from_array(a: [u32; 8]) -> U8 {
+        // SAFETY: __m256i and [u32; 8] have the same size, and every bit pattern is valid.
+        unsafe { std::mem::transmute::<[u32; 8], U8>(a) }
+    }
+
+    #[inline(always)]
+    pub fn eq(self, o: U8) -> M8 {
+        unsafe { M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(self.0, o.0))) }
+    }
+}
+
+/// A vector per lane.
+#[derive(Clone, Copy, Debug)]
+pub struct V3 {
+    pub x: F8,
+    pub y: F8,
+    pub z: F8,
+}
+
+impl V3 {
+    pub const ZERO: V3 = V3 {
+        x: F8::ZERO,
+        y: F8::ZERO,
+        z: F8::ZERO,
+    };
+
+    #[inline(always)]
+    pub fn new(x: F8, y: F8, z: F8) -> V3 {
+        V3 { x, y, z }
+    }
+
+    /// The same value in every component.
+    #[inline(always)]
+    pub fn broadcast(x: F8) -> V3 {
+        V3::new(x, x, x)
+    }
+
+    /// Lanes from eight vectors.
+    #[inline(always)]
+    pub fn from_lanes(v: &[Vec3; 8]) -> V3 {
+        V3::new(
+            F8::from_array(v.map(|v| v.x)),
+            F8::from_array(v.map(|v| v.y)),
+            F8::from_array(v.map(|v| v.z)),
+        )
+    }
+
+    /// Lane `lane` as a vector.
+    #[inline(always)]
+    pub fn lane(&self, lane: usize) -> Vec3 {
+        Vec3::new(
+            self.x.to_array()[lane],
+            self.y.to_array()[lane],
+            self.z.to_array()[lane],
+        )
+    }
+
+    /// The dot product, in glam's order of operations (so that it rounds as the scalar
+    /// kernel's does).
+    #[inline(always)]
+    pub fn dot(self, o: V3) -> F8 {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+
+    #[inline(always)]
+    pub fn length_squared(self) -> F8 {
+        self.dot(self)
+    }
+
+    /// The unit vector (NaN lanes where the length is 0).
+    #[inline(always)]
+    pub fn normalize(self) -> V3 {
+        self * (F8::ONE / self.length_squared().sqrt())
+    }
+
+    /// Lanes of `a` where `m` is set, of `b` elsewhere.
+    #[inline(always)]
+    pub fn select(m: M8, a: V3, b: V3) -> V3 {
+        V3::new(
+            F8::select(m, a.x, b.x),
+            F8::select(m, a.y, b.y),
+            F8::select(m, a.z, b.z),
+        )
+    }
+}
+
+impl Add for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn add(self, o: V3) -> V3 {
+        V3::new(self.x + o.x, self.y + o.y, self.z + o.z)
+    }
+}
+
+impl Sub for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn sub(self, o: V3) -> V3 {
+        V3::new(self.x - o.x, self.y - o.y, self.z - o.z)
+    }
+}
+
+impl Neg for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn neg(self) -> V3 {
+        V3::new(-self.x, -self.y, -self.z)
+    }
+}
+
+impl Mul for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn mul(self, o: V3) -> V3 {
+        V3::new(self.x * o.x, self.y * o.y, self.z * o.z)
+    }
+}
+
+impl Mul<F8> for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn mul(self, s: F8) -> V3 {
+        V3::new(self.x * s, self.y * s, self.z * s)
+    }
+}
+
+impl Div<F8> for V3 {
+    type Output = V3;
+    #[inline(always)]
+    fn div(self, s: F8) -> V3 {
+        V3::new(self.x / s, self.y / s, self.z / s)
+    }
+}
+
+impl AddAssign for V3 {
+    #[inline(always)]
+    fn add_assign(&mut self, o: V3) {
+        *self = *self + o;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs `f` where the CPU has AVX2 and FMA (the module's invariant); skips elsewhere.
+    fn with_avx2(f: impl FnOnce()) {
+        if is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma") {
+            f();
+        } else {
+            eprintln!("no AVX2 and FMA here: skipped");
+        }
+    }
+
+    /// The lanes' sine and cosine are the scalar `warp::sin_cos`'s to the bit.
+    #[test]
+    fn sin_cos_is_the_scalar_functions() {
+        with_avx2(|| {
+            for i in 0..20_000 {
+                let base = -40.0 + i as f32 * (80.0 / 20_000.0);
+                let x = F8::from_array(std::array::from_fn(|l| base + l as f32 * 5e-4));
+                let (s, c) = x.sin_cos();
+                for l in 0..8 {
+                    let (es, ec) = crate::sampling::warp::sin_cos(x.to_array()[l]);
+                    assert_eq!(s.to_array()[l].to_bits(), es.to_bits());
+                    assert_eq!(c.to_array()[l].to_bits(), ec.to_bits());
+                }
+            }
+        });
+    }
+
+    #[test]
+    fn masks_and_selects() {
+        with_avx2(|| {
+            let a = F8::from_array([0.0, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0, f32::NAN]);
+            let m = a.lt(F8::splat(3.0));
+            assert_eq!(m.bits(), 0b0000_0111);
+            assert_eq!((!m).bits(), 0b1111_1000);
+            assert_eq!(a.ne(a).bits(), 0b1000_0000);
+            assert_eq!(M8::from_bits(0b1010_0101).bits(), 0b1010_0101);
+            let s = F8::select(m, F8::ONE, F8::ZERO).to_array();
+            assert_eq!(s, [1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]);
+            let u = U8::from_array([1, 2, 3, 4, 5, 6, 7, 0xffff_ffff]);
+            assert_eq!(u.eq(U8::splat(3)).bits(), 0b0000_0100);
+            assert_eq!(
+                F8::from_array([-1.5, 2.7, 0.5, -0.5, 3.0, 0.0, 9.9, -7.2])
+                    .round()
+                    .to_i32()
+                    .eq(U8::from_array([
+                        u32::MAX - 1,
+                        3,
+                        0,
+                        0,
+                        3,
+                        0,
+                        10,
+                        u32::MAX - 6
+                    ]))
+                    .bits(),
+                0xff
+            );
+        });
+    }
+}
