@@ -322,11 +322,11 @@ impl V3 {
     /// Lanes from eight vectors.
     #[inline(always)]
     pub fn from_lanes(v: &[Vec3; 8]) -> V3 {
-        V3::new(
-            F8::from_array(v.map(|v| v.x)),
-            F8::from_array(v.map(|v| v.y)),
-            F8::from_array(v.map(|v| v.z)),
-        )
+        let (mut x, mut y, mut z) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
+        for lane in 0..LANES {
+            (x[lane], y[lane], z[lane]) = (v[lane].x, v[lane].y, v[lane].z);
+        }
+        V3::new(F8::from_array(x), F8::from_array(y), F8::from_array(z))
     }
 
     /// Lane `lane` as a vector.

@@ -28,7 +28,6 @@ use super::settings::Settings;
 use super::split::FirstSplit;
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
-use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
@@ -356,7 +355,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     ) {
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
-        let mut hits: [Option<Hit>; LANES] = [None; LANES];
+        let mut hits = [None; LANES];
         for lane in lanes_of(*active) {
             hits[lane] = world.intersect(&lanes[lane].ray);
         }
@@ -440,7 +439,11 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let sampler = &mut buffers.slots[path.sample as usize].sampler;
             vs[lane] = Some(sampler.vertex(path.depth, path.branch));
         }
-        let frame = frame.map(|f| V3::from_lanes(&f));
+        let frame = [
+            V3::from_lanes(&frame[0]),
+            V3::from_lanes(&frame[1]),
+            V3::from_lanes(&frame[2]),
+        ];
         let mut v = Vertices {
             its,
             mask,
@@ -493,7 +496,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             (n_nee[lane], n_bsdf[lane]) = (n as f32, b as f32);
         }
         let (n_nee, n_bsdf) = (F8::from_array(n_nee), F8::from_array(n_bsdf));
-        let beta = V3::from_lanes(&lanes.map(|p| p.beta));
+        let beta = betas(lanes);
         for j in 0..rounds {
             let mut sampled = 0u32;
             let (mut wi, mut radiance) = ([Vec3::Z; LANES], [Vec3::ZERO; LANES]);
@@ -613,7 +616,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             .map(|l| count(&parents[l]))
             .max()
             .unwrap_or(0);
-        let beta = V3::from_lanes(&parents.map(|p| p.beta));
+        let beta = betas(&parents);
         let mut continued = 0u32;
         for k in 0..rounds {
             let round = lanes_of(v.mask)
@@ -636,7 +639,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     sampler.first_split_point(SplitKind::Bsdf, point)
                 };
             }
-            let lane_u = |i: usize| F8::from_array(u.map(|u| u[i]));
+            let lane_u = |i: usize| {
+                let mut x = [0.0; LANES];
+                for (x, u) in x.iter_mut().zip(&u) {
+                    *x = u[i];
+                }
+                F8::from_array(x)
+            };
             // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
             let s = unsafe {
                 v.bsdf
@@ -697,6 +706,16 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             Self::end_path(parents[lane].sample, buffers);
         }
     }
+}
+
+/// The paths' throughputs in lanes.
+#[inline(always)]
+fn betas(paths: &[Path; LANES]) -> V3 {
+    let mut beta = [Vec3::ZERO; LANES];
+    for (b, p) in beta.iter_mut().zip(paths) {
+        *b = p.beta;
+    }
+    V3::from_lanes(&beta)
 }
 
 /// MIS weights of `technique` for the lanes of `lanes` (densities times sample counts):

@@ -340,11 +340,12 @@ impl BsdfLanes {
                 None => valid &= !bit,
             }
         }
-        let [wx, wy, wz, gx, gy, gz, pdf] = arrays.map(F8::from_array);
+        let [wx, wy, wz, gx, gy, gz, pdf] = arrays;
+        let f = F8::from_array;
         SampleLanes {
-            wi: V3::new(wx, wy, wz),
-            weight: V3::new(gx, gy, gz),
-            pdf,
+            wi: V3::new(f(wx), f(wy), f(wz)),
+            weight: V3::new(f(gx), f(gy), f(gz)),
+            pdf: f(pdf),
             delta: M8::from_bits(delta),
             valid: M8::from_bits(valid),
         }
