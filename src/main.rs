@@ -40,7 +40,7 @@ enum Command {
         /// AOVs of the request the plan is made for (as `render --aov`; default all).
         #[arg(long)]
         aov: Option<String>,
-        /// auto, scalar or general, as `render --plan`.
+        /// auto, packet, scalar or general, as `render --plan`.
         #[arg(long)]
         plan: Option<String>,
     },
@@ -211,9 +211,9 @@ struct RenderArgs {
     #[arg(long)]
     resume: bool,
     /// auto (default): the integrator leaves out what the scene and the AOVs do not use,
-    /// and runs eight paths at a time in SIMD lanes where it can (AVX2); scalar: the same
-    /// without the packet kernel; general: every feature on (for benchmarks and
-    /// comparisons).
+    /// and runs eight paths at a time in SIMD lanes (AVX2) where that pays; packet, scalar:
+    /// the same with the packet kernel wherever it can run, or never; general: every
+    /// feature on (for benchmarks and comparisons).
     #[arg(long)]
     plan: Option<String>,
     /// Largest memory the render may need, e.g. 8G or 512M (binary units), or `off`; a scene

@@ -169,16 +169,29 @@ fn plans_of_small_scenes_are_as_expected() {
     // The request: AOVs decide the film and the kernel's data and routing.
     let scene = cornell();
     let beauty = plan_for(&scene, "", PlanMode::Auto);
+    // All Lambert: the packet kernel does not pay, unless asked for.
     assert_eq!(
         beauty.kernel,
         Kernel {
             emitter_hits: true,
             first_hit_data: false,
             routing: false,
-            packet: lucerna::integrator::packet_kernel_available(),
+            packet: false,
         }
     );
+    let available = lucerna::integrator::packet_kernel_available();
+    assert_eq!(
+        plan_for(&scene, "", PlanMode::Packet).kernel.packet,
+        available
+    );
     assert!(!plan_for(&scene, "", PlanMode::Scalar).kernel.packet);
+    let plates = shipped("scenes/mis-plates/mis-plates.glb");
+    assert_eq!(SceneFeatures::of(&plates).microfacet_materials, 4);
+    assert_eq!(
+        plan_for(&plates, "", PlanMode::Auto).kernel.packet,
+        available
+    );
+    assert!(!plan_for(&plates, "albedo", PlanMode::Auto).kernel.packet);
     assert_eq!((beauty.light_layers, beauty.squares), (1, false));
     let albedo = plan_for(&scene, "albedo", PlanMode::Auto);
     assert!(albedo.kernel.first_hit_data && !albedo.kernel.routing && !albedo.kernel.packet);
@@ -287,7 +300,7 @@ fn packet_kernel_renders_the_scalar_kernels_image() {
                     }
                 })
             };
-            let (packet, packet_stats) = run(PlanMode::Auto, "1");
+            let (packet, packet_stats) = run(PlanMode::Packet, "1");
             let (scalar, scalar_stats) = run(PlanMode::Scalar, "1");
             let (a, b) = (packet.planes(Aov::Beauty), scalar.planes(Aov::Beauty));
             for c in 0..3 {
@@ -320,8 +333,8 @@ fn packet_kernel_is_deterministic_and_unbiased() {
         o.settings.sampler = SamplerKind::Independent;
         o.set("split", "nee=2,bsdf=3").unwrap();
     };
-    let (two, _) = render_with(cornell(), "variance", PlanMode::Auto, 2, configure);
-    let (one, _) = render_with(cornell(), "variance", PlanMode::Auto, 1, configure);
+    let (two, _) = render_with(cornell(), "variance", PlanMode::Packet, 2, configure);
+    let (one, _) = render_with(cornell(), "variance", PlanMode::Packet, 1, configure);
     for aov in two.aovs.iter() {
         assert!(two.planes(aov) == one.planes(aov), "{}", aov.name());
     }
@@ -348,11 +361,17 @@ fn predicted_rel_mse(film: &Film) -> f64 {
 }
 
 /// Adaptive sampling stops where its target is met, samples pixels unevenly, and its
-/// decisions do not depend on the thread count.
+/// decisions do not depend on the thread count, in the scalar and the packet kernel.
 #[test]
 fn adaptive_sampling_meets_its_noise_target() {
+    for mode in [PlanMode::Auto, PlanMode::Packet] {
+        adaptive_sampling_meets_its_noise_target_in(mode);
+    }
+}
+
+fn adaptive_sampling_meets_its_noise_target_in(mode: PlanMode) {
     let threshold = 0.05f32;
-    let (film, stats) = render_with(cornell(), "variance,spp", PlanMode::Auto, 2, |o| {
+    let (film, stats) = render_with(cornell(), "variance,spp", mode, 2, |o| {
         o.noise_threshold = Some(threshold);
     });
     let predicted = predicted_rel_mse(&film);
@@ -371,7 +390,7 @@ fn adaptive_sampling_meets_its_noise_target() {
     assert!(hi >= 2.0 * lo, "samples range over {lo}..{hi}");
     assert_eq!(stats.spp as f32, hi);
 
-    let (one_thread, _) = render_with(cornell(), "variance,spp", PlanMode::Auto, 1, |o| {
+    let (one_thread, _) = render_with(cornell(), "variance,spp", mode, 1, |o| {
         o.noise_threshold = Some(threshold);
     });
     for aov in film.aovs.iter() {
