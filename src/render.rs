@@ -755,13 +755,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                     taken += n as u64;
                 }
             }
-            counts
-                .lock()
-                .expect("no thread panicked holding the lock")
-                .add(&rays);
-            if let Some(bar) = bar {
-                bar.inc(taken);
-            }
+            tile_done(counts, &rays, bar, taken);
             (tile_learning, tile_split)
         })
         .collect()
@@ -816,15 +810,26 @@ fn run_packet_pass<const EMITTERS: bool>(film: &mut Film, args: &PassArgs) {
             for w in work.iter() {
                 tile.add(w.in_tile, &buffers.pixels[w.in_tile]);
             }
-            counts
-                .lock()
-                .expect("no thread panicked holding the lock")
-                .add(&rays);
-            if let Some(bar) = bar {
-                bar.inc(taken);
-            }
+            tile_done(counts, &rays, bar, taken);
         },
     );
+}
+
+/// Adds a finished tile's ray counts to the render's and its `taken` samples to the
+/// progress bar.
+fn tile_done(
+    counts: &Mutex<RayCounts>,
+    rays: &RayCounts,
+    bar: Option<&indicatif::ProgressBar>,
+    taken: u64,
+) {
+    counts
+        .lock()
+        .expect("no thread panicked holding the lock")
+        .add(rays);
+    if let Some(bar) = bar {
+        bar.inc(taken);
+    }
 }
 
 #[cfg(test)]

@@ -23,7 +23,9 @@
 //! to its pixel's accumulator as the scalar kernel's samples do.
 
 use super::mis::{Mis, Technique};
-use super::path::{Emitter, RayCounts, emitters_at_infinity, light_density, surface_emitter};
+use super::path::{
+    Emitter, PathState, RayCounts, emitters_at_infinity, sample_light, surface_emitter,
+};
 use super::settings::Settings;
 use super::split::FirstSplit;
 use crate::film::PixelAccumulator;
@@ -55,31 +57,28 @@ pub struct PixelWork {
 #[derive(Clone, Copy, Debug)]
 struct Path {
     ray: Ray,
-    beta: Vec3,
-    depth: u32,
-    branch: u32,
-    prev_p: Vec3,
-    prev_n: Vec3,
-    prev_pdf: f32,
-    prev_delta: bool,
-    prev_nee_count: u32,
+    state: PathState,
     sample: u32,
 }
 
+/// What idle lanes hold (never read).
 const NO_PATH: Path = Path {
     ray: Ray {
         origin: Vec3::ZERO,
         dir: Vec3::Z,
         tmax: 0.0,
     },
-    beta: Vec3::ZERO,
-    depth: 0,
-    branch: 0,
-    prev_p: Vec3::ZERO,
-    prev_n: Vec3::ZERO,
-    prev_pdf: 0.0,
-    prev_delta: true,
-    prev_nee_count: 1,
+    state: PathState {
+        beta: Vec3::ZERO,
+        depth: 0,
+        branch: 0,
+        prev_p: Vec3::ZERO,
+        prev_n: Vec3::ZERO,
+        prev_pdf: 0.0,
+        prev_delta: true,
+        prev_nee_count: 1,
+        lobes: [Vec3::ZERO; 3],
+    },
     sample: 0,
 };
 
@@ -288,10 +287,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         };
         Path {
             ray,
-            beta: Vec3::ONE,
-            prev_p: ray.origin,
+            state: PathState::camera(ray.origin),
             sample,
-            ..NO_PATH
         }
     }
 
@@ -323,18 +320,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     /// The path reached emitter `e`: seen directly, or found by BSDF sampling and weighted
     /// against light sampling (as `path::PathState::reached_emitter`).
     #[inline(always)]
-    fn reached_emitter(&self, path: &Path, e: Emitter, slot: &mut SampleSlot) {
+    fn reached_emitter(&self, path: &PathState, e: Emitter, slot: &mut SampleSlot) {
         let value = path.beta * e.le;
         if path.depth == 0 {
             Self::contribute(slot, value);
             return;
         }
-        let p_light = if path.prev_delta {
-            0.0
-        } else {
-            light_density(self.world, self.settings, path.prev_p, path.prev_n, &e)
-                * path.prev_nee_count as f32
-        };
+        let p_light = path.light_density(self.world, self.settings, &e);
         let w = self
             .settings
             .mis
@@ -370,7 +362,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let Some(hit) = hits[lane] else {
                 if EMITTERS {
                     emitters_at_infinity(world, path.ray.dir, |e| {
-                        self.reached_emitter(path, e, slot)
+                        self.reached_emitter(&path.state, e, slot)
                     });
                 }
                 *active &= !(1 << lane);
@@ -379,9 +371,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             };
             let it = world.interaction(&path.ray, &hit);
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &path.ray, hit.t) {
-                self.reached_emitter(path, e, slot);
+                self.reached_emitter(&path.state, e, slot);
             }
-            let bsdf = (path.depth < max_depth).then(|| {
+            let bsdf = (path.state.depth < max_depth).then(|| {
                 let surfaces = &world.surfaces;
                 material::bsdf(
                     &surfaces.materials[it.material as usize],
@@ -390,7 +382,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 )
             });
             // Coverage, as the scalar kernel's first hit records it.
-            if path.depth == 0 && path.branch == 0 && bsdf.is_some() {
+            if path.state.depth == 0 && path.state.branch == 0 && bsdf.is_some() {
                 slot.covered = true;
             }
             match bsdf {
@@ -437,7 +429,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             (frame[0][lane], frame[1][lane], frame[2][lane]) = (it.frame.s, it.frame.t, it.frame.n);
             origin[lane] = offset_ray_origin(it.p, it.ng);
             let sampler = &mut buffers.slots[path.sample as usize].sampler;
-            vs[lane] = Some(sampler.vertex(path.depth, path.branch));
+            vs[lane] = Some(sampler.vertex(path.state.depth, path.state.branch));
         }
         let frame = [
             V3::from_lanes(&frame[0]),
@@ -478,7 +470,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             .filter(|&l| v.bsdf.lane(l).has_non_delta())
             .fold(0u32, |m, l| m | 1 << l);
         let counts = |lane: usize| {
-            let first = lanes[lane].depth == 0;
+            let first = lanes[lane].state.depth == 0;
             (
                 if first { split.nee } else { 1 },
                 if first && split.bsdf > 1 {
@@ -520,25 +512,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     let p = sampler.first_split_point(SplitKind::Light, point);
                     (Vec2::new(p[0], p[1]), p[2])
                 };
-                let Some((index, p_select)) = lights.select(u_select, it.p, it.frame.n) else {
+                let Some((_, p_select, ls)) =
+                    sample_light(world, self.settings, it, u_select, u_light)
+                else {
                     continue;
                 };
-                let Some(ls) = lights.lights[index].sample(
-                    it.p,
-                    lights.environment.as_ref(),
-                    self.settings.light_sampling,
-                    u_light,
-                ) else {
-                    continue;
-                };
-                let mut l = ls.radiance;
-                if let Some((prim, b)) = ls.area_point {
-                    l *= world.surfaces.emission_at(prim, b);
-                }
-                if l == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0 {
-                    continue;
-                }
-                (wi[lane], radiance[lane], p_light[lane]) = (ls.wi, l, p_select * ls.pdf);
+                (wi[lane], radiance[lane], p_light[lane]) = (ls.wi, ls.radiance, p_select * ls.pdf);
                 let origin = v.origin[lane];
                 shadow[lane] = match ls.target {
                     Some(target) => Ray {
@@ -605,7 +584,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     ) {
         let split = self.split.counts;
         let count = |path: &Path| {
-            if path.depth == 0 && split.bsdf > 1 {
+            if path.state.depth == 0 && split.bsdf > 1 {
                 split.bsdf
             } else {
                 1
@@ -667,7 +646,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 let survival = self
                     .settings
                     .rr
-                    .survival(crate::color::luminance(b), parent.depth + 1);
+                    .survival(crate::color::luminance(b), parent.state.depth + 1);
                 if survival < 1.0 {
                     if !(u_rr[lane] < survival) {
                         continue;
@@ -682,14 +661,21 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     .expect("a scattering lane has a shading point");
                 let child = Path {
                     ray: Ray::new(v.origin[lane], wi.lane(lane)),
-                    beta: b,
-                    depth: parent.depth + 1,
-                    branch: if k == 0 { parent.branch } else { k },
-                    prev_p: it.p,
-                    prev_n: it.frame.n,
-                    prev_pdf: pdf[lane] * count(parent) as f32,
-                    prev_delta: delta & (1 << lane) != 0,
-                    prev_nee_count: if parent.depth == 0 { split.nee } else { 1 },
+                    state: PathState {
+                        beta: b,
+                        depth: parent.state.depth + 1,
+                        branch: if k == 0 { parent.state.branch } else { k },
+                        prev_p: it.p,
+                        prev_n: it.frame.n,
+                        prev_pdf: pdf[lane] * count(parent) as f32,
+                        prev_delta: delta & (1 << lane) != 0,
+                        prev_nee_count: if parent.state.depth == 0 {
+                            split.nee
+                        } else {
+                            1
+                        },
+                        lobes: parent.state.lobes,
+                    },
                     sample: parent.sample,
                 };
                 if k == 0 {
@@ -713,7 +699,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
 fn betas(paths: &[Path; LANES]) -> V3 {
     let mut beta = [Vec3::ZERO; LANES];
     for (b, p) in beta.iter_mut().zip(paths) {
-        *b = p.beta;
+        *b = p.state.beta;
     }
     V3::from_lanes(&beta)
 }

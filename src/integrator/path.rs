@@ -18,6 +18,7 @@ use super::settings::{RussianRoulette, Settings};
 use super::split::{FirstSplit, SampleParts};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::light::LightSample;
 use crate::material::{self, Bsdf, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::world::{Interaction, World};
@@ -100,25 +101,25 @@ impl RayCounts {
 
 /// The state a path carries from vertex to vertex.
 #[derive(Clone, Copy, Debug)]
-struct PathState {
+pub(crate) struct PathState {
     /// Throughput: product of BSDF weights and roulette or splitting factors so far.
-    beta: Vec3,
+    pub(crate) beta: Vec3,
     /// Scattering events so far.
-    depth: u32,
+    pub(crate) depth: u32,
     /// Sample-dimension namespace of this path (0: the main path; branches get their own).
-    branch: u32,
+    pub(crate) branch: u32,
     /// The vertex the current ray left: where light selection and light densities are
     /// evaluated for MIS when the ray finds an emitter.
-    prev_p: Vec3,
-    prev_n: Vec3,
+    pub(crate) prev_p: Vec3,
+    pub(crate) prev_n: Vec3,
     /// Density of the BSDF sample that led here times the BSDF sample count there, and
     /// whether it came from a delta lobe.
-    prev_pdf: f32,
-    prev_delta: bool,
+    pub(crate) prev_pdf: f32,
+    pub(crate) prev_delta: bool,
     /// Shadow rays sent from the previous vertex (light sampling's sample count there).
-    prev_nee_count: u32,
+    pub(crate) prev_nee_count: u32,
     /// Lobe shares of the first scattering event (once there was one, and if wanted).
-    lobes: PerLobe,
+    pub(crate) lobes: PerLobe,
 }
 
 /// An emitter a path ran into: radiance towards the path, light index, and where.
@@ -184,27 +185,31 @@ pub(crate) fn surface_emitter(
     })
 }
 
-/// Density with which light sampling at the vertex (`p`, `n`) produces the direction
-/// towards emitter `e` (selection probability times the light's density, for one shadow
-/// ray): the other technique's density in the MIS weight of a BSDF-sampled emitter hit.
+/// A light sample for shading point `it`: a light chosen with `u_select` (its index and
+/// selection probability) and a point on it from `u_light`, its radiance including the
+/// emitter's surface emission; `None` where it cannot contribute (no light, zero radiance,
+/// or below the surface).
 #[inline]
-pub(crate) fn light_density(
+pub(crate) fn sample_light(
     world: &World,
     settings: &Settings,
-    p: Vec3,
-    n: Vec3,
-    e: &Emitter,
-) -> f32 {
+    it: &Interaction,
+    u_select: f32,
+    u_light: Vec2,
+) -> Option<(usize, f32, LightSample)> {
     let lights = &world.lights;
-    let select = lights.selection_probability(e.light, p, n);
-    let density = match &lights.lights[e.light] {
-        crate::light::Light::Environment => lights
-            .environment
-            .as_ref()
-            .map_or(0.0, |env| env.pdf(e.dir)),
-        l => l.pdf(p, e.dir, e.dist, settings.light_sampling),
-    };
-    select * density
+    let (index, p_select) = lights.select(u_select, it.p, it.frame.n)?;
+    let mut ls = lights.lights[index].sample(
+        it.p,
+        lights.environment.as_ref(),
+        settings.light_sampling,
+        u_light,
+    )?;
+    if let Some((prim, b)) = ls.area_point {
+        ls.radiance *= world.surfaces.emission_at(prim, b);
+    }
+    let useless = ls.radiance == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0;
+    (!useless).then_some((index, p_select, ls))
 }
 
 /// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.
@@ -267,6 +272,42 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
 }
 
 impl PathState {
+    /// The state of a camera path whose ray starts at `origin`.
+    pub(crate) fn camera(origin: Vec3) -> Self {
+        Self {
+            beta: Vec3::ONE,
+            depth: 0,
+            branch: 0,
+            prev_p: origin,
+            prev_n: Vec3::ZERO,
+            prev_pdf: 0.0,
+            prev_delta: true,
+            prev_nee_count: 1,
+            lobes: [Vec3::ZERO; 3],
+        }
+    }
+
+    /// Density with which light sampling at the previous vertex (its shadow rays
+    /// together) produces the direction towards emitter `e`, which BSDF sampling found: the
+    /// other technique's density in its MIS weight (0 after a delta lobe, which light
+    /// sampling cannot follow).
+    #[inline]
+    pub(crate) fn light_density(&self, world: &World, settings: &Settings, e: &Emitter) -> f32 {
+        if self.prev_delta {
+            return 0.0;
+        }
+        let lights = &world.lights;
+        let select = lights.selection_probability(e.light, self.prev_p, self.prev_n);
+        let density = match &lights.lights[e.light] {
+            crate::light::Light::Environment => lights
+                .environment
+                .as_ref()
+                .map_or(0.0, |env| env.pdf(e.dir)),
+            l => l.pdf(self.prev_p, e.dir, e.dist, settings.light_sampling),
+        };
+        select * density * self.prev_nee_count as f32
+    }
+
     /// The path reached emitter `e`: seen directly by the camera, or found by BSDF
     /// sampling and weighted against light sampling's density there (unless a delta lobe
     /// led here, which light sampling cannot follow).
@@ -293,12 +334,7 @@ impl PathState {
             });
             return;
         }
-        let p_light = if self.prev_delta {
-            0.0
-        } else {
-            light_density(tracer.world, tracer.settings, self.prev_p, self.prev_n, &e)
-                * self.prev_nee_count as f32
-        };
+        let p_light = self.light_density(tracer.world, tracer.settings, &e);
         record(
             rec,
             walk,
@@ -351,17 +387,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             learning,
             parts,
         };
-        let camera = PathState {
-            beta: Vec3::ONE,
-            depth: 0,
-            branch: 0,
-            prev_p: ray.origin,
-            prev_n: Vec3::ZERO,
-            prev_pdf: 0.0,
-            prev_delta: true,
-            prev_nee_count: 1,
-            lobes: [Vec3::ZERO; 3],
-        };
+        let camera = PathState::camera(ray.origin);
         self.trace_from(ray, camera, &mut walk, sampler, rec, rays);
     }
 
@@ -668,25 +694,11 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
     ) -> u64 {
         let Vertex { it, bsdf, wo, .. } = *v;
         let world = self.world;
-        let lights = &world.lights;
-        let Some((index, p_select)) = lights.select(u_select, it.p, it.frame.n) else {
+        let Some((index, p_select, ls)) = sample_light(world, self.settings, it, u_select, u_light)
+        else {
             return 0;
         };
-        let Some(ls) = lights.lights[index].sample(
-            it.p,
-            lights.environment.as_ref(),
-            self.settings.light_sampling,
-            u_light,
-        ) else {
-            return 0;
-        };
-        let mut radiance = ls.radiance;
-        if let Some((prim, b)) = ls.area_point {
-            radiance *= world.surfaces.emission_at(prim, b);
-        }
-        if radiance == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0 {
-            return 0;
-        }
+        let radiance = ls.radiance;
         let wi = it.frame.to_local(ls.wi);
         // At the first vertex the lobe layers need f split by lobe: evaluated once, split.
         let (f, lobes) = if walk.lobes && path.depth == 0 {
