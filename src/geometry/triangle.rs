@@ -9,6 +9,14 @@ use glam::{DVec3, Vec3, Vec4};
 #[derive(Clone, Copy, Debug)]
 pub struct Lanes(u32);
 
+impl Lanes {
+    /// The set bits of `mask`.
+    #[inline(always)]
+    pub fn new(mask: u32) -> Self {
+        Self(mask)
+    }
+}
+
 impl Iterator for Lanes {
     type Item = usize;
 
