@@ -863,6 +863,10 @@ fn inspect_command(
         &options.aovs,
         options.plan,
         false,
+        matches!(
+            options.settings.rr,
+            lucerna::integrator::RussianRoulette::Efficiency(_)
+        ),
     );
     println!("{plan}");
     Ok(ExitCode::SUCCESS)

@@ -335,8 +335,16 @@ pub struct RenderPlan {
 
 impl RenderPlan {
     /// The plan for a scene with `features` rendered with `aovs`; `squares` says whether
-    /// sums of squares are needed besides the variance AOV (adaptive sampling needs them).
-    pub fn new(features: &SceneFeatures, aovs: &AovSet, mode: PlanMode, squares: bool) -> Self {
+    /// sums of squares are needed besides the variance AOV (adaptive sampling needs them),
+    /// `roulette_learns` whether roulette learns from every vertex (`rr = efficiency`,
+    /// which only the scalar kernel does).
+    pub fn new(
+        features: &SceneFeatures,
+        aovs: &AovSet,
+        mode: PlanMode,
+        squares: bool,
+        roulette_learns: bool,
+    ) -> Self {
         let data_layers: Vec<Aov> = aovs
             .iter()
             .filter(|a| *a == Aov::Depth || crate::film::MEAN_DATA.contains(a))
@@ -352,6 +360,7 @@ impl RenderPlan {
                 || mode == PlanMode::Auto && features.microfacet_materials > 0)
                 && !first_hit_data
                 && !routing
+                && !roulette_learns
                 && crate::integrator::packet_kernel_available(),
         };
         Self {

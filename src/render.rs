@@ -285,15 +285,13 @@ impl RenderOptions {
 
     /// The render plan for `world` with these options.
     pub fn render_plan(&self, world: &World) -> RenderPlan {
-        let mut plan = RenderPlan::new(
+        RenderPlan::new(
             &world.features,
             &self.aovs,
             self.plan,
             self.noise_threshold.is_some(),
-        );
-        // Efficiency-aware roulette learns from, and decides at, every vertex: scalar only.
-        plan.kernel.packet &= !matches!(self.settings.rr, RussianRoulette::Efficiency(_));
-        plan
+            matches!(self.settings.rr, RussianRoulette::Efficiency(_)),
+        )
     }
 }
 

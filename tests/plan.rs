@@ -95,6 +95,7 @@ fn plan_for(scene: &Scene, aovs: &str, mode: PlanMode) -> RenderPlan {
         &AovSet::parse(aovs).unwrap(),
         mode,
         false,
+        false,
     )
 }
 

@@ -196,6 +196,21 @@ impl PixelAccumulator {
         self.discarded = 0;
     }
 
+    /// Adds one sample of a render whose only light layer is the beauty (as the packet
+    /// kernel produces them): its value, whether the camera ray hit a surface, and the
+    /// contributions dropped for being non-finite.
+    #[inline]
+    pub fn add_sample(&mut self, value: Vec3, covered: bool, discarded: u64) {
+        let b = value.as_dvec3();
+        self.light[0] += b;
+        self.beauty_squares += b * b;
+        if covered {
+            self.coverage += 1.0;
+        }
+        self.samples += 1;
+        self.discarded += discarded;
+    }
+
     /// Adds one sample and takes its discarded-contribution count.
     #[inline]
     pub fn add<const ROUTED: bool>(&mut self, rec: &mut SampleRecord<ROUTED>) {
@@ -220,23 +235,6 @@ impl PixelAccumulator {
         self.samples += 1;
         self.discarded += rec.discarded;
         rec.discarded = 0;
-    }
-}
-
-impl PixelAccumulator {
-    /// Adds one sample of a render whose only light layer is the beauty (as the packet
-    /// kernel produces them): its value, whether the camera ray hit a surface, and the
-    /// contributions dropped for being non-finite.
-    #[inline]
-    pub fn add_sample(&mut self, value: Vec3, covered: bool, discarded: u64) {
-        let b = value.as_dvec3();
-        self.light[0] += b;
-        self.beauty_squares += b * b;
-        if covered {
-            self.coverage += 1.0;
-        }
-        self.samples += 1;
-        self.discarded += discarded;
     }
 }
 

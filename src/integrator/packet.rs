@@ -150,6 +150,15 @@ struct Vertices {
 }
 
 impl Vertices {
+    /// The shading point and random numbers of scattering lane `lane`.
+    #[inline(always)]
+    fn lane(&self, lane: usize) -> (&Interaction, &VertexSample) {
+        match (&self.its[lane], &self.vs[lane]) {
+            (Some(it), Some(vs)) => (it, vs),
+            _ => unreachable!("lane {lane} does not scatter"),
+        }
+    }
+
     #[inline(always)]
     fn to_local(&self, v: V3) -> V3 {
         let [s, t, n] = self.frame;
@@ -339,10 +348,6 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     ) {
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
-        let mut hits = [None; LANES];
-        for lane in Lanes::new(*active) {
-            hits[lane] = world.intersect(&lanes[lane].ray);
-        }
         rays.closest += active.count_ones() as u64;
         let mut its: [Option<Interaction>; LANES] = [None; LANES];
         let mut bsdfs = [NO_BSDF; LANES];
@@ -351,7 +356,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let path = &lanes[lane];
             let slot = &mut buffers.slots[path.sample as usize];
             slot.rays += 1;
-            let Some(hit) = hits[lane] else {
+            let Some(hit) = world.intersect(&path.ray) else {
                 if EMITTERS {
                     emitters_at_infinity(world, path.ray.dir, |e| {
                         self.reached_emitter(&path.state, e, slot)
@@ -457,30 +462,19 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         if lights.is_empty() {
             return;
         }
-        let split = self.split.counts;
         let nee_lanes = Lanes::new(v.mask)
             .filter(|&l| v.bsdf.lane(l).has_non_delta())
             .fold(0u32, |m, l| m | 1 << l);
-        let counts = |lane: usize| {
-            let first = lanes[lane].state.depth == 0;
-            (
-                if first { split.nee } else { 1 },
-                if first && split.bsdf > 1 {
-                    split.bsdf
-                } else {
-                    1
-                },
-            )
-        };
+        let counts = |lane: usize| self.split.at(lanes[lane].state.depth);
         let rounds = Lanes::new(nee_lanes)
-            .map(|l| counts(l).0)
+            .map(|l| counts(l).nee)
             .max()
             .unwrap_or(0);
         let mut n_nee = [1.0f32; LANES];
         let mut n_bsdf = [1.0f32; LANES];
         for lane in Lanes::new(nee_lanes) {
-            let (n, b) = counts(lane);
-            (n_nee[lane], n_bsdf[lane]) = (n as f32, b as f32);
+            let n = counts(lane);
+            (n_nee[lane], n_bsdf[lane]) = (n.nee as f32, n.bsdf as f32);
         }
         let (n_nee, n_bsdf) = (F8::from_array(n_nee), F8::from_array(n_bsdf));
         let beta = betas(lanes);
@@ -489,15 +483,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let (mut wi, mut radiance) = ([Vec3::Z; LANES], [Vec3::ZERO; LANES]);
             let (mut p_light, mut delta) = ([1.0f32; LANES], 0u32);
             let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); LANES];
-            for lane in Lanes::new(nee_lanes).filter(|&l| j < counts(l).0) {
-                let it = v.its[lane]
-                    .as_ref()
-                    .expect("a scattering lane has a shading point");
+            for lane in Lanes::new(nee_lanes).filter(|&l| j < counts(l).nee) {
+                let (it, vs) = v.lane(lane);
                 let path = &lanes[lane];
-                let vs = v.vs[lane]
-                    .as_ref()
-                    .expect("a scattering lane has its numbers");
-                let (u_light, u_select) = if counts(lane).0 == 1 {
+                let (u_light, u_select) = if counts(lane).nee == 1 {
                     (vs.light, vs.light_select)
                 } else {
                     let sampler = &buffers.slots[path.sample as usize].sampler;
@@ -577,14 +566,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         v: &Vertices,
         buffers: &mut PacketBuffers,
     ) {
-        let split = self.split.counts;
-        let count = |path: &Path| {
-            if path.state.depth == 0 && split.bsdf > 1 {
-                split.bsdf
-            } else {
-                1
-            }
-        };
+        let count = |path: &Path| self.split.at(path.state.depth).bsdf;
         let parents = *lanes;
         let rounds = Lanes::new(v.mask)
             .map(|l| count(&parents[l]))
@@ -603,9 +585,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 let n = count(path);
                 weight[lane] = 1.0 / n as f32;
                 u[lane] = if n == 1 {
-                    let vs = v.vs[lane]
-                        .as_ref()
-                        .expect("a scattering lane has its numbers");
+                    let vs = v.lane(lane).1;
                     [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
                 } else {
                     let sampler = &buffers.slots[path.sample as usize].sampler;
@@ -651,9 +631,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 if !(b.max_element() > 0.0) {
                     continue;
                 }
-                let it = v.its[lane]
-                    .as_ref()
-                    .expect("a scattering lane has a shading point");
+                let it = v.lane(lane).0;
                 let child = Path {
                     ray: Ray::new(v.origin[lane], wi.lane(lane)),
                     state: PathState {
@@ -664,11 +642,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                         prev_n: it.frame.n,
                         prev_pdf: pdf[lane] * count(parent) as f32,
                         prev_delta: delta & (1 << lane) != 0,
-                        prev_nee_count: if parent.state.depth == 0 {
-                            split.nee
-                        } else {
-                            1
-                        },
+                        prev_nee_count: self.split.at(parent.state.depth).nee,
                         lobes: parent.state.lobes,
                     },
                     sample: parent.sample,

@@ -480,7 +480,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             };
             let vs = sampler.vertex(path.depth, path.branch);
             let first = path.depth == 0;
-            let n_nee = if first { self.split.counts.nee } else { 1 };
+            let n_nee = self.split.at(path.depth).nee;
             let continuation = self.continuation(&path, walk, cell, vs.rr);
             if let Some(parts) = walk.first_vertex_parts(first) {
                 parts.split = true;
@@ -580,8 +580,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         cell: Option<u32>,
         u: f32,
     ) -> Continuation {
-        let split = self.split.counts.bsdf;
-        if path.depth == 0 && split > 1 {
+        let split = self.split.at(path.depth).bsdf;
+        if split > 1 {
             return Continuation {
                 count: split,
                 weight: 1.0 / split as f32,

@@ -80,6 +80,17 @@ impl FirstSplit {
         }
     }
 
+    /// Shadow rays and BSDF samples at a vertex `depth` scattering events down a path: the
+    /// split counts at the first vertex, one of each deeper.
+    #[inline]
+    pub fn at(&self, depth: u32) -> Split {
+        if depth == 0 {
+            self.counts
+        } else {
+            Split { nee: 1, bsdf: 1 }
+        }
+    }
+
     /// The stream and the index in it of point `j` of sample `index` for `kind`.
     #[inline]
     pub fn point(&self, kind: SplitKind, index: u32, j: u32) -> (u32, u64) {

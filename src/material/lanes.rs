@@ -6,6 +6,7 @@
 //! scalar kernel's. `tests` checks that over random directions.
 
 use super::{Bsdf, Lobe};
+use crate::geometry::triangle::Lanes;
 use crate::simd::{F8, LANES, M8, V3};
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
@@ -52,7 +53,7 @@ fn schlick(f0: V3, cos: F8) -> V3 {
     f0 + (V3::broadcast(F8::ONE) - f0) * w
 }
 
-/// Rec. 709 luminance of each lane.
+/// `color::luminance` of each lane.
 #[inline(always)]
 fn luminance(c: V3) -> F8 {
     c.x * 0.2126 + c.y * 0.7152 + c.z * 0.0722
@@ -60,7 +61,7 @@ fn luminance(c: V3) -> F8 {
 
 /// `square_to_cosine_hemisphere` (concentric disk, lifted to the hemisphere) in lanes.
 #[inline(always)]
-pub fn cosine_hemisphere(u: [F8; 2]) -> V3 {
+fn cosine_hemisphere(u: [F8; 2]) -> V3 {
     let ox = u[0] * 2.0 - 1.0;
     let oy = u[1] * 2.0 - 1.0;
     let x_major = ox.abs().gt(oy.abs());
@@ -248,7 +249,7 @@ impl BsdfLanes {
             f.z.to_array(),
             pdf.to_array(),
         );
-        for lane in (0..LANES).filter(|l| scalar & (1 << l) != 0) {
+        for lane in Lanes::new(scalar) {
             let (o, i) = (wo.lane(lane), wi.lane(lane));
             let v = self.bsdfs[lane].eval(o, i);
             (fx[lane], fy[lane], fz[lane]) = (v.x, v.y, v.z);
@@ -272,7 +273,7 @@ impl BsdfLanes {
             weight: self.base,
             pdf: cosine_pdf,
             delta: M8::none(),
-            valid: wo_above & cosine_pdf.gt(F8::ZERO),
+            valid: self.lambert & wo_above & cosine_pdf.gt(F8::ZERO),
         };
         if (self.pbr & M8::from_bits(lanes)).any() {
             let probabilities = self.lobe_probabilities(wo);
@@ -300,10 +301,8 @@ impl BsdfLanes {
                 weight: V3::select(self.pbr, pbr.weight, s.weight),
                 pdf: F8::select(self.pbr, pbr.pdf, s.pdf),
                 delta: self.pbr & pbr.delta,
-                valid: self.pbr & pbr.valid | self.lambert & s.valid,
+                valid: self.pbr & pbr.valid | s.valid,
             };
-        } else {
-            s.valid = s.valid & self.lambert;
         }
         let scalar = self.scalar & lanes;
         if scalar == 0 {
@@ -320,7 +319,7 @@ impl BsdfLanes {
         ];
         let (mut delta, mut valid) = (s.delta.bits(), s.valid.bits());
         let (ul, u0, u1) = (u_lobe.to_array(), u[0].to_array(), u[1].to_array());
-        for lane in (0..LANES).filter(|l| scalar & (1 << l) != 0) {
+        for lane in Lanes::new(scalar) {
             let bit = 1 << lane;
             match self.bsdfs[lane].sample(wo.lane(lane), ul[lane], Vec2::new(u0[lane], u1[lane])) {
                 Some(b) => {
@@ -378,7 +377,7 @@ mod tests {
     /// glTF surface).
     #[test]
     fn lanes_agree_with_the_scalar_bsdfs() {
-        if !(is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")) {
+        if !crate::integrator::packet_kernel_available() {
             eprintln!("no AVX2 and FMA here: skipped");
             return;
         }
