@@ -3,7 +3,11 @@
 //! box and the ~1M-triangle sphere field, flattened (every triangle in one BVH) and as the
 //! renderer builds it (800 placements of three shared sphere meshes, a two-level BVH).
 //!
-//!     cargo bench --bench throughput [-- --out FILE.md]
+//!     cargo bench --bench throughput [-- --out FILE.md] [--scene NAME]...
+//!
+//! `--scene` (repeatable) measures only the named scenes: `cornell-box`, `sphere-field
+//! placed`, `sphere-field flattened` (the Cornell box alone takes seconds, the sphere field
+//! minutes).
 //!
 //! Rays are generated up front and traced in chunks on a rayon pool, so the figures are the
 //! traversal and intersection cost alone (no shading, no sampling):
@@ -118,12 +122,24 @@ fn rays_per_second(rays: &[Ray], threads: usize, trace: &(dyn Fn(&Ray) -> bool +
 }
 
 fn main() {
-    let mut out = None;
+    let (mut out, mut only) = (None, Vec::new());
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
-        if a == "--out" {
-            out = args.next();
+        match a.as_str() {
+            "--out" => out = args.next(),
+            "--scene" => only.extend(args.next()),
+            // cargo bench passes --bench; nothing else is an option here.
+            _ => {}
         }
+    }
+    const SCENES: [&str; 3] = [
+        "cornell-box",
+        "sphere-field placed",
+        "sphere-field flattened",
+    ];
+    if let Some(unknown) = only.iter().find(|o| !SCENES.contains(&o.as_str())) {
+        eprintln!("throughput: no scene {unknown:?}; the scenes are {SCENES:?}");
+        std::process::exit(2);
     }
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut report = String::from(
@@ -132,11 +148,14 @@ fn main() {
     let mut memory = String::new();
     let sphere_field = root.join("scenes/sphere-field/sphere-field.glb");
     for (name, path, flatten) in [
-        ("cornell-box", None, false),
+        (SCENES[0], None, false),
         // The smaller one first: the process peak only grows.
-        ("sphere-field placed", Some(&sphere_field), false),
-        ("sphere-field flattened", Some(&sphere_field), true),
+        (SCENES[1], Some(&sphere_field), false),
+        (SCENES[2], Some(&sphere_field), true),
     ] {
+        if !only.is_empty() && !only.iter().any(|o| o == name) {
+            continue;
+        }
         let load = || {
             let scene = match &path {
                 Some(p) => ingest::load(p, &Default::default()).expect("scene loads"),
