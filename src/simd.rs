@@ -204,6 +204,31 @@ impl F8 {
         unsafe { M8(_mm256_cmp_ps::<_CMP_NEQ_UQ>(self.0, o.0)) }
     }
 
+    /// The lanes' bits as integers.
+    #[inline(always)]
+    pub fn to_bits(self) -> U8 {
+        unsafe { U8(_mm256_castps_si256(self.0)) }
+    }
+
+    /// Floats with the lanes' bits.
+    #[inline(always)]
+    pub fn from_bits(bits: U8) -> F8 {
+        unsafe { F8(_mm256_castsi256_ps(bits.0)) }
+    }
+
+    /// `table[index[i]]` in each lane; an index past the end reads the last entry.
+    /// `table` must not be empty.
+    #[inline(always)]
+    pub fn gather(table: &[f32], index: U8) -> F8 {
+        assert!(!table.is_empty() && table.len() <= i32::MAX as usize);
+        let last = U8::splat(table.len() as u32 - 1);
+        // SAFETY: every index is clamped into `table`.
+        unsafe {
+            let index = _mm256_min_epu32(index.0, last.0);
+            F8(_mm256_i32gather_ps::<4>(table.as_ptr(), index))
+        }
+    }
+
     /// Truncates towards zero into signed integers (lanes out of range become i32::MIN).
     #[inline(always)]
     pub fn to_i32(self) -> U8 {
@@ -266,6 +291,12 @@ impl M8 {
         self.bits() != 0
     }
 
+    /// The mask's lanes as integers (all ones or zero).
+    #[inline(always)]
+    pub fn as_u8(self) -> U8 {
+        unsafe { U8(_mm256_castps_si256(self.0)) }
+    }
+
     /// Set lanes of `self` that are not set in `o`.
     #[inline(always)]
     pub fn and_not(self, o: M8) -> M8 {
@@ -290,6 +321,82 @@ impl U8 {
     #[inline(always)]
     pub fn eq(self, o: U8) -> M8 {
         unsafe { M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(self.0, o.0))) }
+    }
+
+    /// The lanes as an array.
+    #[cfg(test)]
+    #[inline(always)]
+    pub fn to_array(self) -> [u32; 8] {
+        // SAFETY: as in `from_array`.
+        unsafe { std::mem::transmute::<U8, [u32; 8]>(self) }
+    }
+
+    /// Lanes of `a` where `m` is set, of `b` elsewhere.
+    #[inline(always)]
+    pub fn select(m: M8, a: U8, b: U8) -> U8 {
+        F8::select(m, F8::from_bits(a), F8::from_bits(b)).to_bits()
+    }
+
+    /// Lane-wise wrapping product (the low 32 bits, as `u32::wrapping_mul`).
+    #[inline(always)]
+    pub fn wrapping_mul(self, o: U8) -> U8 {
+        unsafe { U8(_mm256_mullo_epi32(self.0, o.0)) }
+    }
+
+    /// Logical shift right by `N` bits.
+    #[inline(always)]
+    pub fn shr<const N: i32>(self) -> U8 {
+        unsafe { U8(_mm256_srli_epi32::<N>(self.0)) }
+    }
+
+    /// Shift left by `N` bits.
+    #[inline(always)]
+    pub fn shl<const N: i32>(self) -> U8 {
+        unsafe { U8(_mm256_slli_epi32::<N>(self.0)) }
+    }
+
+    /// Each lane's bits in reverse order (as `u32::reverse_bits`).
+    #[inline(always)]
+    pub fn reverse_bits(self) -> U8 {
+        // Bits, pairs, nibbles and bytes swapped, then the halves (aggregate.org's bit
+        // reversal, as sobol_burley's four lanes do it).
+        let m = U8::splat(0x5555_5555);
+        let n = (self.shr::<1>() & m) | (self & m).shl::<1>();
+        let m = U8::splat(0x3333_3333);
+        let n = (n.shr::<2>() & m) | (n & m).shl::<2>();
+        let m = U8::splat(0x0f0f_0f0f);
+        let n = (n.shr::<4>() & m) | (n & m).shl::<4>();
+        let m = U8::splat(0x00ff_00ff);
+        let n = (n.shr::<8>() & m) | (n & m).shl::<8>();
+        n.shr::<16>() | n.shl::<16>()
+    }
+
+    /// `table[self[i]]` in each lane; an index past the end reads the last entry (so that
+    /// no index can read outside the table). `table` must not be empty.
+    #[inline(always)]
+    pub fn gather(self, table: &[u32]) -> U8 {
+        assert!(!table.is_empty() && table.len() <= i32::MAX as usize);
+        let last = U8::splat(table.len() as u32 - 1);
+        // SAFETY: every index is clamped into `table`.
+        unsafe {
+            let index = _mm256_min_epu32(self.0, last.0);
+            U8(_mm256_i32gather_epi32::<4>(
+                table.as_ptr() as *const i32,
+                index,
+            ))
+        }
+    }
+
+    /// The top 23 bits as a float in [0, 1) (sobol_burley's `to_f32_norm`).
+    #[inline(always)]
+    pub fn to_f32_norm(self) -> F8 {
+        unsafe {
+            let bits = _mm256_or_si256(
+                _mm256_srli_epi32::<9>(self.0),
+                _mm256_set1_epi32(0x3f80_0000),
+            );
+            F8(_mm256_castsi256_ps(bits)) - F8::ONE
+        }
     }
 }
 
@@ -450,6 +557,34 @@ mod tests {
                     assert_eq!(c.to_array()[l].to_bits(), ec.to_bits());
                 }
             }
+        });
+    }
+
+    /// The integer lanes agree with u32's operations, and gathers clamp into the table.
+    #[test]
+    fn integer_lanes_are_u32_operations() {
+        with_avx2(|| {
+            let mut rng = crate::sampling::pcg::Pcg32::new(1, 2);
+            for _ in 0..10_000 {
+                let a: [u32; 8] = std::array::from_fn(|_| rng.next_u32());
+                let b: [u32; 8] = std::array::from_fn(|_| rng.next_u32());
+                let (x, y) = (U8::from_array(a), U8::from_array(b));
+                let each = |f: fn(u32, u32) -> u32| std::array::from_fn(|l| f(a[l], b[l]));
+                assert_eq!(x.wrapping_mul(y).to_array(), each(u32::wrapping_mul));
+                assert_eq!((x + y).to_array(), each(u32::wrapping_add));
+                assert_eq!(x.reverse_bits().to_array(), a.map(u32::reverse_bits));
+                assert_eq!(x.shr::<7>().to_array(), a.map(|v| v >> 7));
+                assert_eq!(x.shl::<9>().to_array(), a.map(|v| v << 9));
+                let f = x.to_f32_norm().to_array();
+                let expected = a.map(|v| f32::from_bits((v >> 9) | 0x3f80_0000) - 1.0);
+                assert_eq!(f.map(f32::to_bits), expected.map(f32::to_bits));
+            }
+            let table: Vec<u32> = (0..10).map(|i| i * 100).collect();
+            let index = U8::from_array([0, 9, 3, 10, u32::MAX, 1, 2, 5]);
+            assert_eq!(
+                index.gather(&table).to_array(),
+                [0, 900, 300, 900, 900, 100, 200, 500]
+            );
         });
     }
 

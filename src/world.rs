@@ -163,6 +163,9 @@ pub struct World {
     pub light_groups: Vec<crate::scene::LightGroup>,
     /// The objects that hits belong to (Cryptomatte).
     pub objects: Objects,
+    /// The lights as the packet kernel's lanes sample them, built when it first runs.
+    #[cfg(target_arch = "x86_64")]
+    triangle_lights: std::sync::OnceLock<crate::light::lanes::TriangleLights>,
 }
 
 /// The named objects of the scene, and which object each hit primitive belongs to: the
@@ -798,6 +801,18 @@ impl World {
             light_names,
             light_groups: std::mem::take(&mut scene.light_groups),
             objects,
+            #[cfg(target_arch = "x86_64")]
+            triangle_lights: std::sync::OnceLock::new(),
+        })
+    }
+
+    /// The triangle lights laid out for the packet kernel's lanes (built on first use).
+    #[cfg(target_arch = "x86_64")]
+    pub(crate) fn triangle_lights(&self) -> &crate::light::lanes::TriangleLights {
+        self.triangle_lights.get_or_init(|| {
+            crate::light::lanes::TriangleLights::new(&self.lights.lights, |prim| {
+                self.surfaces.untextured_emission(prim)
+            })
         })
     }
 
@@ -1135,16 +1150,28 @@ impl Surfaces {
         material::emission(mat, &self.textures, &it.attrs)
     }
 
+    /// The emitted radiance of primitive `prim` where its emission is not textured (then
+    /// [`Surfaces::emission_at`] returns it at every point).
+    pub fn untextured_emission(&self, prim: u32) -> Option<Vec3> {
+        let mat = &self.materials[self.material_of(prim) as usize];
+        mat.emissive_texture.is_none().then_some(mat.emissive)
+    }
+
+    /// The material of primitive `prim`.
+    #[inline]
+    fn material_of(&self, prim: u32) -> u32 {
+        match self.prims[prim as usize] {
+            PrimRef::Triangle { mesh, .. } => self.meshes[mesh as usize].material,
+            PrimRef::Sphere(s) => self.spheres[s as usize].material,
+            PrimRef::Quadric(q) => self.quadrics[q as usize].material,
+        }
+    }
+
     /// Emitted radiance of primitive `prim` at surface coordinates `b` (for light samples,
     /// which already checked the side).
     #[inline]
     pub fn emission_at(&self, prim: u32, b: Vec2) -> Vec3 {
-        let material = match self.prims[prim as usize] {
-            PrimRef::Triangle { mesh, .. } => self.meshes[mesh as usize].material,
-            PrimRef::Sphere(s) => self.spheres[s as usize].material,
-            PrimRef::Quadric(q) => self.quadrics[q as usize].material,
-        };
-        let mat = &self.materials[material as usize];
+        let mat = &self.materials[self.material_of(prim) as usize];
         if mat.emissive_texture.is_none() {
             return mat.emissive;
         }

@@ -27,6 +27,12 @@ impl Ray {
     }
 }
 
+/// [`offset_ray_origin`]'s constants: coordinates below `ORIGIN` move by `FLOAT_SCALE`
+/// times the normal, larger ones by `INT_SCALE` times the normal in ulps.
+const ORIGIN: f32 = 1.0 / 32.0;
+const FLOAT_SCALE: f32 = 1.0 / 65536.0;
+const INT_SCALE: f32 = 256.0;
+
 /// Moves a surface point off its surface along the geometric normal `n` (pointing to the side
 /// the new ray leaves towards), so that the new ray cannot hit the surface it starts on.
 ///
@@ -37,9 +43,6 @@ impl Ray {
 /// part relative to the scene too.
 #[inline]
 pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
-    const ORIGIN: f32 = 1.0 / 32.0;
-    const FLOAT_SCALE: f32 = 1.0 / 65536.0;
-    const INT_SCALE: f32 = 256.0;
     let offset_axis = |p: f32, n: f32| -> f32 {
         if p.abs() < ORIGIN {
             p + FLOAT_SCALE * n
@@ -56,6 +59,24 @@ pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
     )
 }
 
+/// [`offset_ray_origin`] in eight lanes, to the bit (the packet kernel's light samples).
+/// Only for code compiled with AVX2 (see `crate::simd`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn offset_ray_origin_lanes(p: crate::simd::V3, n: crate::simd::V3) -> crate::simd::V3 {
+    use crate::simd::{F8, U8, V3};
+    #[inline(always)]
+    fn axis(p: F8, n: F8) -> F8 {
+        let near = p + F8::splat(FLOAT_SCALE) * n;
+        // `as i32` truncates, as the conversion does; NaN gives 0 there, i32::MIN here.
+        let of_i = (F8::splat(INT_SCALE) * n).to_i32() & n.eq(n).as_u8();
+        let of_i = U8::select(p.lt(F8::ZERO), U8::splat(0) - of_i, of_i);
+        let far = F8::from_bits(p.to_bits() + of_i);
+        F8::select(p.abs().lt(F8::splat(ORIGIN)), near, far)
+    }
+    V3::new(axis(p.x, n.x), axis(p.y, n.y), axis(p.z, n.z))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,6 +89,49 @@ mod tests {
                 let q = offset_ray_origin(p, n);
                 assert!((q - p).dot(n) > 0.0, "scale {scale} n {n}");
                 assert!((q - p).length() < 1e-3 * scale.max(1.0));
+            }
+        }
+    }
+
+    /// The lanes' offset is the scalar one to the bit, at every magnitude and sign
+    /// (including NaN and infinite coordinates, and NaN normals).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn offset_lanes_are_the_scalar_offsets() {
+        use crate::simd::V3;
+        if !crate::integrator::packet_kernel_available() {
+            eprintln!("no AVX2 and FMA here: skipped");
+            return;
+        }
+        let mut rng = crate::sampling::pcg::Pcg32::new(4, 4);
+        let mut value = |i: usize| match i % 11 {
+            0 => f32::NAN,
+            1 => f32::INFINITY,
+            2 => -0.0,
+            _ => (rng.next_f32() - 0.5) * 10f32.powi((rng.next_u32() % 16) as i32 - 8),
+        };
+        for round in 0..20_000 {
+            let ps: [Vec3; 8] = std::array::from_fn(|l| {
+                Vec3::new(value(round + l), value(round + 3 * l), value(round + 5 * l))
+            });
+            let ns: [Vec3; 8] = std::array::from_fn(|l| {
+                let n = Vec3::new(value(l + 1), value(l + 2), value(l + 4)).normalize_or(Vec3::Z);
+                if round % 97 == 0 {
+                    Vec3::new(f32::NAN, n.y, n.z)
+                } else {
+                    n
+                }
+            });
+            let lanes = offset_ray_origin_lanes(V3::from_lanes(&ps), V3::from_lanes(&ns));
+            for l in 0..8 {
+                let (got, want) = (lanes.lane(l), offset_ray_origin(ps[l], ns[l]));
+                assert_eq!(
+                    got.to_array().map(f32::to_bits),
+                    want.to_array().map(f32::to_bits),
+                    "p {} n {}",
+                    ps[l],
+                    ns[l]
+                );
             }
         }
     }

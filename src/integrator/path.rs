@@ -197,8 +197,21 @@ pub(crate) fn sample_light(
     u_select: f32,
     u_light: Vec2,
 ) -> Option<(usize, f32, LightSample)> {
+    let (index, p_select) = world.lights.select(u_select, it.p, it.frame.n)?;
+    let ls = sample_chosen_light(world, settings, it, index, u_light)?;
+    Some((index, p_select, ls))
+}
+
+/// [`sample_light`]'s sample of light `index`, once chosen.
+#[inline(always)]
+pub(crate) fn sample_chosen_light(
+    world: &World,
+    settings: &Settings,
+    it: &Interaction,
+    index: usize,
+    u_light: Vec2,
+) -> Option<LightSample> {
     let lights = &world.lights;
-    let (index, p_select) = lights.select(u_select, it.p, it.frame.n)?;
     let mut ls = lights.lights[index].sample(
         it.p,
         lights.environment.as_ref(),
@@ -209,7 +222,7 @@ pub(crate) fn sample_light(
         ls.radiance *= world.surfaces.emission_at(prim, b);
     }
     let useless = ls.radiance == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0;
-    (!useless).then_some((index, p_select, ls))
+    (!useless).then_some(ls)
 }
 
 /// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.

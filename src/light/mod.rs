@@ -5,6 +5,8 @@
 
 pub mod environment;
 pub mod groups;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lanes;
 pub mod selection;
 pub mod solid_angle;
 pub mod tree;

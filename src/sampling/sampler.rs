@@ -144,11 +144,6 @@ impl Sampler {
     /// `branch` (0: the main path).
     #[inline]
     pub fn vertex(&mut self, depth: u32, branch: u32) -> VertexSample {
-        let base = if branch == 0 {
-            1
-        } else {
-            0x4000_0000 ^ hash_u32(branch).wrapping_mul(0x10000)
-        };
         let (a, b) = if self.kind == SamplerKind::Sobol && depth >= SOBOL_DEPTH {
             // Deep vertices: hashed independent numbers, cheaper than scrambled Sobol sets.
             let key =
@@ -159,12 +154,34 @@ impl Sampler {
                 std::array::from_fn(|_| rng.next_f32()),
             )
         } else {
-            (
-                self.set(base.wrapping_add(2 * depth)),
-                self.set(base.wrapping_add(2 * depth + 1)),
-            )
+            let [a, b] = vertex_sets(depth, branch);
+            (self.set(a), self.set(b))
         };
-        VertexSample {
+        VertexSample::from_sets(a, b)
+    }
+
+    /// What the Sobol sets of vertex `depth` of branch `branch` start from: the sample's
+    /// bit-reversed index and the two sets' seeds, so that [`sobol_4d_lanes`] computes
+    /// eight lanes' sets at once; `None` where [`Sampler::vertex`] takes other numbers
+    /// (the independent sampler, deep vertices).
+    #[inline]
+    pub(crate) fn vertex_sobol(&self, depth: u32, branch: u32) -> Option<(u32, [u32; 2])> {
+        (self.kind == SamplerKind::Sobol && depth < SOBOL_DEPTH).then(|| {
+            let sets = vertex_sets(depth, branch);
+            (
+                self.index_rev,
+                sets.map(|set| self.pixel_seed ^ set_key(set)),
+            )
+        })
+    }
+}
+
+impl VertexSample {
+    /// A vertex's numbers from its two sets: light position, light selection and roulette
+    /// from the first; BSDF direction and lobe from the second.
+    #[inline(always)]
+    pub(crate) fn from_sets(a: [f32; 4], b: [f32; 4]) -> Self {
+        Self {
             light: Vec2::new(a[0], a[1]),
             light_select: a[2],
             rr: a[3],
@@ -172,6 +189,21 @@ impl Sampler {
             lobe: b[2],
         }
     }
+}
+
+/// The dimension sets of vertex `depth` of branch `branch`: the main path's follow the
+/// camera's; a split branch's start at a key of their own.
+#[inline]
+fn vertex_sets(depth: u32, branch: u32) -> [u32; 2] {
+    let base = if branch == 0 {
+        1
+    } else {
+        0x4000_0000 ^ hash_u32(branch).wrapping_mul(0x10000)
+    };
+    [
+        base.wrapping_add(2 * depth),
+        base.wrapping_add(2 * depth + 1),
+    ]
 }
 
 impl Sampler {
@@ -269,6 +301,9 @@ fn set_key(set: u32) -> u32 {
         .unwrap_or_else(|| key(set))
 }
 
+/// The per-dimension scramble constants of sobol_burley, for dimension set 0.
+const SCRAMBLE_LANES: [u32; 4] = [0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8];
+
 /// `sobol_burley::sample_4d(index, 0, seed)` (Burley 2020: Owen-scrambled, shuffled Sobol)
 /// of the index given bit-reversed (`index_rev`, so a sample reverses it once for all its
 /// sets), with the Sobol matrix product read from two byte tables instead of a loop over
@@ -281,12 +316,66 @@ fn sobol_4d(index_rev: u32, seed: u32) -> [f32; 4] {
     let high = bytes.high[(rev >> 24) as usize];
     let low = bytes.low[((rev >> 16) & 0xff) as usize];
     let sobol = Int4::from(high) ^ Int4::from(low);
-    // The per-lane scramble constants of sobol_burley, for dimension set 0.
-    let scramble = Int4::from([seed.wrapping_mul(0x9c8f2d3b); 4])
-        ^ Int4::from([0x912f69ba, 0x174f18ab, 0x691e72ca, 0xb40cc1b8]);
+    let scramble = Int4::from([seed.wrapping_mul(0x9c8f2d3b); 4]) ^ Int4::from(SCRAMBLE_LANES);
     owen_scramble_int4_rev(sobol, hash_int4(scramble))
         .reverse_bits()
         .to_f32_norm()
+}
+
+/// [`sobol_4d`] in eight lanes: lane i is `sobol_4d(index_rev[i], seed[i])` to the bit
+/// (the same integer operations), for the packet kernel, which takes eight vertices' sets
+/// at once. Only for code compiled with AVX2 (see `crate::simd`). Written with loops and
+/// functions, not closures handed to library code, which would compile outside AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn sobol_4d_lanes(
+    index_rev: crate::simd::U8,
+    seed: crate::simd::U8,
+) -> [crate::simd::F8; 4] {
+    use crate::simd::{F8, U8};
+    let rev = lanes::owen_scramble(index_rev, lanes::hash(seed ^ U8::splat(0x79c6_8e4a)));
+    let bytes = &*SOBOL_BYTES;
+    let (high, low) = (bytes.high.as_flattened(), bytes.low.as_flattened());
+    let high_row = rev.shr::<24>().shl::<2>();
+    let low_row = (rev.shr::<16>() & U8::splat(0xff)).shl::<2>();
+    let seed_mix = seed.wrapping_mul(U8::splat(0x9c8f_2d3b));
+    let mut out = [F8::ZERO; 4];
+    for (d, out) in out.iter_mut().enumerate() {
+        let offset = U8::splat(d as u32);
+        let sobol = (high_row + offset).gather(high) ^ (low_row + offset).gather(low);
+        let scramble = seed_mix ^ U8::splat(SCRAMBLE_LANES[d]);
+        *out = lanes::owen_scramble(sobol, lanes::hash(scramble))
+            .reverse_bits()
+            .to_f32_norm();
+    }
+    out
+}
+
+/// sobol_burley's hash and Owen scramble, lane by lane.
+#[cfg(target_arch = "x86_64")]
+mod lanes {
+    use crate::simd::U8;
+
+    /// `sobol_burley::parts::hash` in each lane.
+    #[inline(always)]
+    pub(super) fn hash(n: U8) -> U8 {
+        let n = n ^ U8::splat(0xe6fe_3beb);
+        let n = n ^ n.shr::<16>();
+        let n = n.wrapping_mul(U8::splat(0x7feb_352d));
+        let n = n ^ n.shr::<15>();
+        let n = n.wrapping_mul(U8::splat(0x846c_a68b));
+        n ^ n.shr::<16>()
+    }
+
+    /// `sobol_burley::parts::owen_scramble_rev` in each lane.
+    #[inline(always)]
+    pub(super) fn owen_scramble(n: U8, scramble: U8) -> U8 {
+        let n = n ^ n.wrapping_mul(U8::splat(0x3d20_adea));
+        let n = n + scramble;
+        let n = n.wrapping_mul(scramble.shr::<16>() | U8::splat(1));
+        let n = n ^ n.wrapping_mul(U8::splat(0x0552_6c56));
+        n ^ n.wrapping_mul(U8::splat(0x53a2_2864))
+    }
 }
 
 #[cfg(test)]
@@ -376,6 +465,48 @@ mod tests {
                 "index {index}, seed {seed}"
             );
         }
+    }
+
+    /// Eight lanes' Sobol sets are the scalar sets to the bit, over the index range and
+    /// random seeds, and a vertex's lane inputs give [`Sampler::vertex`]'s numbers.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn sobol_lanes_are_the_scalar_sets() {
+        use crate::simd::U8;
+        if !crate::integrator::packet_kernel_available() {
+            eprintln!("no AVX2 and FMA here: skipped");
+            return;
+        }
+        let mut rng = Pcg32::new(11, 3);
+        for base in (0u32..1 << 16).step_by(8 * 5).chain([0xfff8]) {
+            let index: [u32; 8] = std::array::from_fn(|l| (base + l as u32 * 5) & 0xffff);
+            let seed: [u32; 8] = std::array::from_fn(|_| rng.next_u32());
+            let rev = index.map(u32::reverse_bits);
+            let lanes = sobol_4d_lanes(U8::from_array(rev), U8::from_array(seed));
+            for l in 0..8 {
+                let scalar = sobol_4d(rev[l], seed[l]);
+                for d in 0..4 {
+                    assert_eq!(lanes[d].to_array()[l].to_bits(), scalar[d].to_bits());
+                }
+            }
+        }
+        let mut s = Sampler::new(SamplerKind::Sobol, 7);
+        for (x, index, depth, branch) in [(3, 0, 0, 0), (4, 9, 1, 0), (5, 70_000, 2, 3)] {
+            s.start(x, 2, index);
+            let (rev, seeds) = s.vertex_sobol(depth, branch).expect("a Sobol vertex");
+            let [a, b] = seeds.map(|seed| sobol_4d_lanes(U8::splat(rev), U8::splat(seed)));
+            let lane = |set: &[crate::simd::F8; 4]| std::array::from_fn(|d| set[d].to_array()[0]);
+            let expected = s.vertex(depth, branch);
+            let got = VertexSample::from_sets(lane(&a), lane(&b));
+            assert_eq!(format!("{got:?}"), format!("{expected:?}"));
+        }
+        s.start(1, 1, 0);
+        assert!(s.vertex_sobol(SOBOL_DEPTH, 0).is_none());
+        assert!(
+            Sampler::new(SamplerKind::Independent, 7)
+                .vertex_sobol(0, 0)
+                .is_none()
+        );
     }
 
     #[test]
