@@ -143,6 +143,8 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
 struct Vertices {
     its: [Option<Interaction>; LANES],
     mask: u32,
+    /// The scattering lanes at their path's first vertex (the one that splits).
+    first: u32,
     /// Shading points, and the origins of the rays that leave them, in lanes.
     p: V3,
     origin_lanes: V3,
@@ -162,6 +164,28 @@ impl Vertices {
             (Some(it), Some(vs)) => (it, vs),
             _ => unreachable!("lane {lane} does not scatter"),
         }
+    }
+
+    /// The lanes of `lanes` in round `j` of the first vertex's `count` samples: a deeper
+    /// vertex takes one. Decided from masks, not lane by lane: the lanes' depths are
+    /// unpredictable branches.
+    #[inline(always)]
+    fn round_lanes(&self, lanes: u32, j: u32, count: u32) -> u32 {
+        let deeper = if j == 0 { lanes & !self.first } else { 0 };
+        deeper | if j < count { lanes & self.first } else { 0 }
+    }
+
+    /// How many rounds the lanes of `lanes` take with `count` samples at the first vertex.
+    #[inline(always)]
+    fn rounds(&self, lanes: u32, count: u32) -> u32 {
+        let deeper = u32::from(lanes & !self.first != 0);
+        deeper.max(if lanes & self.first != 0 { count } else { 0 })
+    }
+
+    /// `count` in the first-vertex lanes, 1 in the others.
+    #[inline(always)]
+    fn counts(&self, count: u32) -> F8 {
+        F8::select(M8::from_bits(self.first), F8::splat(count as f32), F8::ONE)
     }
 
     #[inline(always)]
@@ -425,6 +449,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let mut vs = [None; LANES];
         // Lanes whose numbers are Sobol sets: their inputs, scrambled eight at a time below.
         let (mut sobol, mut index_rev, mut seeds) = (0u32, [0u32; LANES], [[0u32; LANES]; 2]);
+        let mut first = 0u32;
         for lane in Lanes::new(mask) {
             let it = its[lane]
                 .as_ref()
@@ -435,6 +460,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             (p[lane], origin[lane]) = (it.p, offset_ray_origin(it.p, it.ng));
             let sampler = &mut buffers.slots[path.sample as usize].sampler;
             let (depth, branch) = (path.state.depth, path.state.branch);
+            first |= u32::from(depth == 0) << lane;
             match sampler.vertex_sobol(depth, branch) {
                 Some((rev, [a, b])) => {
                     (index_rev[lane], seeds[0][lane], seeds[1][lane]) = (rev, a, b);
@@ -475,6 +501,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let mut v = Vertices {
             its,
             mask,
+            first,
             p: V3::from_lanes(&p),
             origin_lanes: V3::from_lanes(&origin),
             ng: V3::from_lanes(&ng),
@@ -506,18 +533,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let nee_lanes = Lanes::new(v.mask)
             .filter(|&l| v.bsdf.lane(l).has_non_delta())
             .fold(0u32, |m, l| m | 1 << l);
-        let counts = |lane: usize| self.split.at(lanes[lane].state.depth);
-        let rounds = Lanes::new(nee_lanes)
-            .map(|l| counts(l).nee)
-            .max()
-            .unwrap_or(0);
-        let mut n_nee = [1.0f32; LANES];
-        let mut n_bsdf = [1.0f32; LANES];
-        for lane in Lanes::new(nee_lanes) {
-            let n = counts(lane);
-            (n_nee[lane], n_bsdf[lane]) = (n.nee as f32, n.bsdf as f32);
-        }
-        let (n_nee, n_bsdf) = (F8::from_array(n_nee), F8::from_array(n_bsdf));
+        let counts = self.split.at(0);
+        let rounds = v.rounds(nee_lanes, counts.nee);
+        let (n_nee, n_bsdf) = (v.counts(counts.nee), v.counts(counts.bsdf));
         let beta = betas(lanes);
         // Area-sampled triangles go through the lanes; solid-angle sampling through the
         // scalar code.
@@ -534,10 +552,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let mut area = 0u32;
             let (mut light, mut p_select_area) = ([0u32; LANES], [0.0f32; LANES]);
             let mut u_area = [[0.0f32; LANES]; 2];
-            for lane in Lanes::new(nee_lanes).filter(|&l| j < counts(l).nee) {
+            for lane in Lanes::new(v.round_lanes(nee_lanes, j, counts.nee)) {
                 let (it, vs) = v.lane(lane);
                 let path = &lanes[lane];
-                let (u_light, u_select) = if counts(lane).nee == 1 {
+                let (u_light, u_select) = if v.first & (1 << lane) == 0 || counts.nee == 1 {
                     (vs.light, vs.light_select)
                 } else {
                     let sampler = &buffers.slots[path.sample as usize].sampler;
@@ -644,25 +662,20 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         v: &Vertices,
         buffers: &mut PacketBuffers,
     ) {
-        let count = |path: &Path| self.split.at(path.state.depth).bsdf;
+        let counts = self.split.at(0);
         let parents = *lanes;
-        let rounds = Lanes::new(v.mask)
-            .map(|l| count(&parents[l]))
-            .max()
-            .unwrap_or(0);
+        let rounds = v.rounds(v.mask, counts.bsdf);
         let beta = betas(&parents);
+        let n_bsdf = v.counts(counts.bsdf);
+        let weight = F8::ONE / n_bsdf;
+        let split = |lane: usize| v.first & (1 << lane) != 0 && counts.bsdf > 1;
         let mut continued = 0u32;
         for k in 0..rounds {
-            let round = Lanes::new(v.mask)
-                .filter(|&l| k < count(&parents[l]))
-                .fold(0u32, |m, l| m | 1 << l);
+            let round = v.round_lanes(v.mask, k, counts.bsdf);
             let mut u = [[0.0f32; 4]; LANES];
-            let mut weight = [1.0f32; LANES];
             for lane in Lanes::new(round) {
                 let path = &parents[lane];
-                let n = count(path);
-                weight[lane] = 1.0 / n as f32;
-                u[lane] = if n == 1 {
+                u[lane] = if !split(lane) {
                     let vs = v.lane(lane).1;
                     [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
                 } else {
@@ -685,14 +698,14 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             };
             let wi = v.to_world(s.wi);
             let ok = (s.valid & wi.dot(v.ng).gt(F8::ZERO)).bits() & round;
-            let new_beta = beta * s.weight * F8::from_array(weight);
+            let new_beta = beta * s.weight * weight;
             let (bx, by, bz) = (
                 new_beta.x.to_array(),
                 new_beta.y.to_array(),
                 new_beta.z.to_array(),
             );
             let delta = s.delta.bits();
-            let (pdf, u_rr) = (s.pdf.to_array(), lane_u(3).to_array());
+            let (pdf, u_rr) = ((s.pdf * n_bsdf).to_array(), lane_u(3).to_array());
             for lane in Lanes::new(ok) {
                 let parent = &parents[lane];
                 let mut b = Vec3::new(bx[lane], by[lane], bz[lane]);
@@ -718,9 +731,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                         branch: if k == 0 { parent.state.branch } else { k },
                         prev_p: it.p,
                         prev_n: it.frame.n,
-                        prev_pdf: pdf[lane] * count(parent) as f32,
+                        prev_pdf: pdf[lane],
                         prev_delta: delta & (1 << lane) != 0,
-                        prev_nee_count: self.split.at(parent.state.depth).nee,
+                        prev_nee_count: if v.first & (1 << lane) != 0 {
+                            counts.nee
+                        } else {
+                            1
+                        },
                         lobes: parent.state.lobes,
                     },
                     sample: parent.sample,
