@@ -37,6 +37,7 @@ use crate::film::filter::PixelFilter;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::geometry::triangle::Lanes;
 use crate::material::lambert::Lambert;
+use crate::light::lanes::TriangleLights;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample, sobol_4d_lanes};
@@ -138,6 +139,10 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
     filter: &'a PixelFilter,
     /// A sampler of the render's kind and seed, which camera samples start from.
     sampler: Sampler,
+    /// The triangle lights the lanes sample; `None` where none is (no triangle light of
+    /// untextured emission, or triangles sampled by solid angle, which the scalar code
+    /// does).
+    triangle_lights: Option<&'a TriangleLights>,
 }
 
 /// The lanes that scatter at a bounce: their shading points, BSDFs and random numbers.
@@ -217,6 +222,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             split,
             filter,
             sampler: Sampler::new(settings.sampler, settings.seed),
+            triangle_lights: (!settings.light_sampling.triangles_by_solid_angle())
+                .then(|| world.triangle_lights())
+                .filter(|t| t.any()),
         }
     }
 
@@ -539,11 +547,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let rounds = v.rounds(nee_lanes, counts.nee);
         let (n_nee, n_bsdf) = (v.counts(counts.nee), v.counts(counts.bsdf));
         let beta = betas(lanes);
-        // Area-sampled triangles go through the lanes; solid-angle sampling through the
-        // scalar code.
-        let triangle_lights = (!self.settings.light_sampling.triangles_by_solid_angle())
-            .then(|| world.triangle_lights())
-            .filter(|t| t.any());
+        let triangle_lights = self.triangle_lights;
         for j in 0..rounds {
             let mut sampled = 0u32;
             let (mut wi, mut radiance) = ([Vec3::Z; LANES], [Vec3::ZERO; LANES]);

@@ -29,6 +29,8 @@ const TWO_SIDED: u32 = 2;
 pub struct TriangleLights {
     records: Vec<f32>,
     flags: Vec<u32>,
+    /// Whether the lanes sample any light.
+    any: bool,
 }
 
 /// Eight lanes' area samples.
@@ -62,12 +64,17 @@ impl TriangleLights {
             record[EMISSION as usize..EMISSION as usize + 3].copy_from_slice(&e.to_array());
             flags[i] = LANES_SAMPLE | if t.two_sided { TWO_SIDED } else { 0 };
         }
-        Self { records, flags }
+        let any = flags.iter().any(|&f| f & LANES_SAMPLE != 0);
+        Self {
+            records,
+            flags,
+            any,
+        }
     }
 
     /// Whether the lanes sample any light.
     pub fn any(&self) -> bool {
-        self.flags.iter().any(|&f| f & LANES_SAMPLE != 0)
+        self.any
     }
 
     /// Whether the lanes sample light `light` (otherwise the scalar code does).
