@@ -530,16 +530,25 @@ impl AddAssign for V3 {
     }
 }
 
+/// For the lane tests across the crate: whether the CPU has AVX2 and FMA (the module's
+/// invariant); where it has not, says the test is skipped.
+#[cfg(test)]
+pub(crate) fn avx2_or_skip() -> bool {
+    let available = crate::integrator::packet_kernel_available();
+    if !available {
+        eprintln!("no AVX2 and FMA here: skipped");
+    }
+    available
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     /// Runs `f` where the CPU has AVX2 and FMA (the module's invariant); skips elsewhere.
     fn with_avx2(f: impl FnOnce()) {
-        if crate::integrator::packet_kernel_available() {
+        if avx2_or_skip() {
             f();
-        } else {
-            eprintln!("no AVX2 and FMA here: skipped");
         }
     }
 

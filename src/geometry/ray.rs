@@ -99,8 +99,7 @@ mod tests {
     #[test]
     fn offset_lanes_are_the_scalar_offsets() {
         use crate::simd::V3;
-        if !crate::integrator::packet_kernel_available() {
-            eprintln!("no AVX2 and FMA here: skipped");
+        if !crate::simd::avx2_or_skip() {
             return;
         }
         let mut rng = crate::sampling::pcg::Pcg32::new(4, 4);

@@ -159,8 +159,7 @@ mod tests {
     /// sides, grazing and from their own plane, and a light of zero emission.
     #[test]
     fn lanes_are_the_scalar_light_samples() {
-        if !crate::integrator::packet_kernel_available() {
-            eprintln!("no AVX2 and FMA here: skipped");
+        if !crate::simd::avx2_or_skip() {
             return;
         }
         let triangle = |p: [Vec3; 3], two_sided: bool, prim: u32| {

@@ -377,8 +377,7 @@ mod tests {
     /// glTF surface).
     #[test]
     fn lanes_agree_with_the_scalar_bsdfs() {
-        if !crate::integrator::packet_kernel_available() {
-            eprintln!("no AVX2 and FMA here: skipped");
+        if !crate::simd::avx2_or_skip() {
             return;
         }
         let kinds = [

@@ -473,8 +473,7 @@ mod tests {
     #[test]
     fn sobol_lanes_are_the_scalar_sets() {
         use crate::simd::U8;
-        if !crate::integrator::packet_kernel_available() {
-            eprintln!("no AVX2 and FMA here: skipped");
+        if !crate::simd::avx2_or_skip() {
             return;
         }
         let mut rng = Pcg32::new(11, 3);
