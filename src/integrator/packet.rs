@@ -40,7 +40,7 @@ use crate::light::lanes::TriangleLights;
 use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf};
-use crate::sampling::sampler::{Sampler, SplitKind, VertexSample, sobol_4d_lanes};
+use crate::sampling::sampler::{Sampler, SplitKind, VertexSample, sobol_4d_lanes, sobol_vertex};
 use crate::simd::{F8, LANES, M8, U8, V3};
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
@@ -482,9 +482,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         // transposes around it cost about as many instructions as three scalar sets.
         if sobol.count_ones() < 3 {
             for lane in Lanes::new(sobol) {
-                let path = &lanes[lane];
-                let sampler = &mut buffers.slots[path.sample as usize].sampler;
-                vs[lane] = Some(sampler.vertex(path.state.depth, path.state.branch));
+                let lane_seeds = [seeds[0][lane], seeds[1][lane]];
+                vs[lane] = Some(sobol_vertex(index_rev[lane], lane_seeds));
             }
         } else {
             let rev = U8::from_array(index_rev);

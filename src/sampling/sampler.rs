@@ -123,11 +123,14 @@ impl Sampler {
     fn set(&mut self, set: u32) -> [f32; 4] {
         match self.kind {
             SamplerKind::Independent => std::array::from_fn(|_| self.rng.next_f32()),
-            SamplerKind::Sobol => {
-                let seed = self.pixel_seed ^ set_key(set);
-                sobol_4d(self.index_rev, seed)
-            }
+            SamplerKind::Sobol => sobol_4d(self.index_rev, self.set_seed(set)),
         }
+    }
+
+    /// The scramble seed of dimension set `set` in this pixel (Sobol sampler).
+    #[inline]
+    fn set_seed(&self, set: u32) -> u32 {
+        self.pixel_seed ^ set_key(set)
     }
 
     /// Numbers for the camera ray.
@@ -168,12 +171,16 @@ impl Sampler {
     pub(crate) fn vertex_sobol(&self, depth: u32, branch: u32) -> Option<(u32, [u32; 2])> {
         (self.kind == SamplerKind::Sobol && depth < SOBOL_DEPTH).then(|| {
             let sets = vertex_sets(depth, branch);
-            (
-                self.index_rev,
-                sets.map(|set| self.pixel_seed ^ set_key(set)),
-            )
+            (self.index_rev, sets.map(|set| self.set_seed(set)))
         })
     }
+}
+
+/// The numbers of a Sobol vertex from [`Sampler::vertex_sobol`]'s inputs, one vertex at a
+/// time: [`Sampler::vertex`]'s to the bit.
+#[inline]
+pub(crate) fn sobol_vertex(index_rev: u32, seeds: [u32; 2]) -> VertexSample {
+    VertexSample::from_sets(sobol_4d(index_rev, seeds[0]), sobol_4d(index_rev, seeds[1]))
 }
 
 impl VertexSample {
