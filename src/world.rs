@@ -1152,6 +1152,7 @@ impl Surfaces {
 
     /// The emitted radiance of primitive `prim` where its emission is not textured (then
     /// [`Surfaces::emission_at`] returns it at every point).
+    #[inline]
     pub fn untextured_emission(&self, prim: u32) -> Option<Vec3> {
         let mat = &self.materials[self.material_of(prim) as usize];
         mat.emissive_texture.is_none().then_some(mat.emissive)
@@ -1171,12 +1172,10 @@ impl Surfaces {
     /// which already checked the side).
     #[inline]
     pub fn emission_at(&self, prim: u32, b: Vec2) -> Vec3 {
-        let mat = &self.materials[self.material_of(prim) as usize];
-        if mat.emissive_texture.is_none() {
-            return mat.emissive;
-        }
-        let (mat, attrs) = self.material_at(prim, b);
-        material::emission(mat, &self.textures, &attrs)
+        self.untextured_emission(prim).unwrap_or_else(|| {
+            let (mat, attrs) = self.material_at(prim, b);
+            material::emission(mat, &self.textures, &attrs)
+        })
     }
 }
 
