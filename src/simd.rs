@@ -229,6 +229,13 @@ impl F8 {
         }
     }
 
+    /// 1.0 with the sign of each lane (as `1.0f32.copysign(x)`).
+    #[inline(always)]
+    pub fn sign_of(x: F8) -> F8 {
+        let sign = x.to_bits() & U8::splat(0x8000_0000);
+        F8::from_bits(sign | F8::ONE.to_bits())
+    }
+
     /// Truncates towards zero into signed integers (lanes out of range become i32::MIN).
     #[inline(always)]
     pub fn to_i32(self) -> U8 {
@@ -462,6 +469,56 @@ impl V3 {
     #[inline(always)]
     pub fn normalize(self) -> V3 {
         self * (F8::ONE / self.length_squared().sqrt())
+    }
+
+    /// The lanes as eight vectors.
+    #[inline(always)]
+    pub fn to_lanes(self) -> [Vec3; 8] {
+        let (x, y, z) = (self.x.to_array(), self.y.to_array(), self.z.to_array());
+        std::array::from_fn(|lane| Vec3::new(x[lane], y[lane], z[lane]))
+    }
+
+    /// The unit vector where glam's `normalize_or` gives one (a finite, positive inverse
+    /// length), `fallback` elsewhere; also says in which lanes it gave one.
+    #[inline(always)]
+    pub fn normalize_or(self, fallback: V3) -> (V3, M8) {
+        let rcp = F8::ONE / self.length_squared().sqrt();
+        let ok = rcp.gt(F8::ZERO) & rcp.lt(F8::splat(f32::INFINITY));
+        (V3::select(ok, self * rcp, fallback), ok)
+    }
+
+    /// The cross product computed in f64 from the f32 lanes and rounded back to f32: glam's
+    /// `DVec3::cross` of `as_dvec3()`s and `as_vec3()`, to the bit
+    /// (`geometry::triangle::geometric_normal`).
+    #[inline(always)]
+    pub fn cross_in_f64(self, o: V3) -> V3 {
+        #[inline(always)]
+        fn half<const HIGH: i32>(v: F8) -> __m256d {
+            // SAFETY: as for the module's other intrinsics.
+            unsafe { _mm256_cvtps_pd(_mm256_extractf128_ps::<HIGH>(v.0)) }
+        }
+        #[inline(always)]
+        fn diff(a: __m256d, b: __m256d, c: __m256d, d: __m256d) -> __m128 {
+            // SAFETY: as for the module's other intrinsics.
+            unsafe { _mm256_cvtpd_ps(_mm256_sub_pd(_mm256_mul_pd(a, b), _mm256_mul_pd(c, d))) }
+        }
+        #[inline(always)]
+        fn cross_half<const HIGH: i32>(a: V3, b: V3) -> [__m128; 3] {
+            let (ax, ay, az) = (half::<HIGH>(a.x), half::<HIGH>(a.y), half::<HIGH>(a.z));
+            let (bx, by, bz) = (half::<HIGH>(b.x), half::<HIGH>(b.y), half::<HIGH>(b.z));
+            [
+                diff(ay, bz, by, az),
+                diff(az, bx, bz, ax),
+                diff(ax, by, bx, ay),
+            ]
+        }
+        #[inline(always)]
+        fn join(low: __m128, high: __m128) -> F8 {
+            // SAFETY: as for the module's other intrinsics.
+            unsafe { F8(_mm256_set_m128(high, low)) }
+        }
+        let ([lx, ly, lz], [hx, hy, hz]) = (cross_half::<0>(self, o), cross_half::<1>(self, o));
+        V3::new(join(lx, hx), join(ly, hy), join(lz, hz))
     }
 
     /// Lanes of `a` where `m` is set, of `b` elsewhere.

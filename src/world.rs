@@ -7,6 +7,8 @@
 //! renders like the same scene at the origin, and every absolute epsilon (ray offsets near
 //! the origin) is relative to the scene's size.
 
+pub(crate) mod lanes;
+
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
 use crate::geometry::frame::Frame;
@@ -907,6 +909,35 @@ impl World {
             .get(it.prim as usize)
             .filter(|&&l| l != NO_LIGHT)
             .map(|&l| l as usize)
+    }
+}
+
+#[cfg(test)]
+impl Surfaces {
+    /// Surfaces of `meshes` placed once (a primitive a triangle, mesh by mesh) with
+    /// `materials`, nothing else.
+    pub(crate) fn for_tests(meshes: Vec<Mesh>, materials: Vec<Material>) -> Self {
+        let prims = meshes
+            .iter()
+            .enumerate()
+            .flat_map(|(m, mesh)| {
+                (0..mesh.triangles.len()).map(move |tri| PrimRef::Triangle {
+                    mesh: m as u32,
+                    tri: tri as u32,
+                })
+            })
+            .collect();
+        Self {
+            meshes,
+            shared_meshes: Vec::new(),
+            placements: Vec::new(),
+            spheres: Vec::new(),
+            quadrics: Vec::new(),
+            materials,
+            textures: Vec::new(),
+            prims,
+            prim_light: Vec::new(),
+        }
     }
 }
 

@@ -1,5 +1,6 @@
 //! Orthonormal frames for local shading coordinates (z = normal).
 
+use crate::simd::{F8, V3};
 use glam::Vec3;
 
 /// An orthonormal basis `(s, t, n)`; local coordinates have `n` as +z.
@@ -55,9 +56,50 @@ impl Frame {
     }
 }
 
+/// [`Frame::from_normal`] of eight lanes' normals, to the bit: the axes `[s, t, n]` (the
+/// packet kernel's shading points). Only for code compiled with AVX2 (see `crate::simd`).
+#[inline(always)]
+pub(crate) fn frame_from_normal_lanes(n: V3) -> [V3; 3] {
+    let sign = F8::sign_of(n.z);
+    let a = F8::splat(-1.0) / (sign + n.z);
+    let b = n.x * n.y * a;
+    let s = V3::new(F8::ONE + sign * n.x * n.x * a, sign * b, -sign * n.x);
+    let t = V3::new(b, sign + n.y * n.y * a, -n.y);
+    [s, t, n]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The lanes' frames are the scalar frames to the bit, at the poles and around them.
+    #[test]
+    fn lane_frames_are_the_scalar_frames() {
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let mut normals = vec![Vec3::Z, -Vec3::Z, Vec3::X, -Vec3::Y];
+        normals.push(Vec3::new(0.0, 0.0, -1.0 + 1e-7).normalize());
+        normals.push(Vec3::new(1e-20, -1e-20, -1.0));
+        let mut state = 0x9e37_79b9u32;
+        let mut next = || {
+            state = state.wrapping_mul(747_796_405).wrapping_add(2_891_336_453);
+            (state >> 8) as f32 / (1 << 24) as f32 * 2.0 - 1.0
+        };
+        normals.extend((0..4000).map(|_| Vec3::new(next(), next(), next()).normalize_or(Vec3::Z)));
+        for chunk in normals.chunks(8) {
+            let mut lanes = [Vec3::Z; 8];
+            lanes[..chunk.len()].copy_from_slice(chunk);
+            let [s, t, n] = frame_from_normal_lanes(V3::from_lanes(&lanes));
+            for (lane, &normal) in chunk.iter().enumerate() {
+                let f = Frame::from_normal(normal);
+                for (axis, scalar) in [(s, f.s), (t, f.t), (n, f.n)] {
+                    let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                    assert_eq!(bits(axis.lane(lane)), bits(scalar), "normal {normal}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn frames_are_orthonormal_and_right_handed() {

@@ -198,22 +198,24 @@ pub(crate) fn sample_light(
     u_light: Vec2,
 ) -> Option<(usize, f32, LightSample)> {
     let (index, p_select) = world.lights.select(u_select, it.p, it.frame.n)?;
-    let ls = sample_chosen_light(world, settings, it, index, u_light)?;
+    let ls = sample_chosen_light(world, settings, it.p, it.ng, index, u_light)?;
     Some((index, p_select, ls))
 }
 
-/// [`sample_light`]'s sample of light `index`, once chosen.
+/// [`sample_light`]'s sample of light `index`, once chosen, from point `p` of geometric
+/// normal `ng`.
 #[inline(always)]
 pub(crate) fn sample_chosen_light(
     world: &World,
     settings: &Settings,
-    it: &Interaction,
+    p: Vec3,
+    ng: Vec3,
     index: usize,
     u_light: Vec2,
 ) -> Option<LightSample> {
     let lights = &world.lights;
     let mut ls = lights.lights[index].sample(
-        it.p,
+        p,
         lights.environment.as_ref(),
         settings.light_sampling,
         u_light,
@@ -221,7 +223,7 @@ pub(crate) fn sample_chosen_light(
     if let Some((prim, b)) = ls.area_point {
         ls.radiance *= world.surfaces.emission_at(prim, b);
     }
-    let useless = ls.radiance == Vec3::ZERO || ls.wi.dot(it.ng) <= 0.0;
+    let useless = ls.radiance == Vec3::ZERO || ls.wi.dot(ng) <= 0.0;
     (!useless).then_some(ls)
 }
 
