@@ -187,7 +187,7 @@ impl ScalarShading {
 }
 
 /// A bounce's shading points: lanes the scalar code shaded, and triangle hits the lanes
-/// shade.
+/// shade. Reused from bounce to bounce, not cleared: only the lanes a bounce sets are read.
 struct Shading {
     scalar: ScalarShading,
     triangles: TriangleHits,
@@ -195,6 +195,15 @@ struct Shading {
 }
 
 impl Shading {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            scalar: ScalarShading::new(),
+            triangles: TriangleHits::new(),
+            lane_shaded: 0,
+        }
+    }
+
     /// The shading points of the lanes of `mask`, hit by rays of directions `dir`.
     #[inline(always)]
     fn lanes(&self, mask: u32, dir: V3) -> ShadingLanes {
@@ -339,6 +348,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         interrupt: Option<&AtomicBool>,
     ) -> u64 {
         let mut lanes = [NO_PATH; LANES];
+        let mut shading = Shading::new();
         let mut active = 0u32;
         let (mut item, mut next) = (0usize, 0u32);
         // Checked at every pixel's start, as the scalar loop does.
@@ -372,7 +382,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if active == 0 {
                 return taken;
             }
-            self.bounce(&mut lanes, &mut active, buffers, rays);
+            self.bounce(&mut lanes, &mut active, &mut shading, buffers, rays);
         }
     }
 
@@ -463,14 +473,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         &self,
         lanes: &mut [Path; LANES],
         active: &mut u32,
+        shading: &mut Shading,
         buffers: &mut PacketBuffers,
         rays: &mut RayCounts,
     ) {
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
         rays.closest += active.count_ones() as u64;
-        let mut scalar = ScalarShading::new();
-        let mut triangles = TriangleHits::new();
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
         for lane in Lanes::new(*active) {
@@ -500,7 +509,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 if path.state.depth == 0 && path.state.branch == 0 {
                     slot.covered = true;
                 }
-                triangles.set(lane, &world.surfaces.meshes[mesh as usize], tri, &hit);
+                let mesh = &world.surfaces.meshes[mesh as usize];
+                shading.triangles.set(lane, mesh, tri, &hit);
                 bsdfs[lane] = *bsdf;
                 scatter |= 1 << lane;
                 lane_shaded |= 1 << lane;
@@ -524,7 +534,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             }
             match bsdf {
                 Some(b) if !b.is_black() => {
-                    scalar.set(lane, &it);
+                    shading.scalar.set(lane, &it);
                     bsdfs[lane] = b;
                     scatter |= 1 << lane;
                 }
@@ -537,12 +547,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         if scatter == 0 {
             return;
         }
-        let shading = Shading {
-            scalar,
-            triangles,
-            lane_shaded,
-        };
-        let v = self.vertices(lanes, &shading, bsdfs, scatter, buffers);
+        shading.lane_shaded = lane_shaded;
+        let v = self.vertices(lanes, shading, bsdfs, scatter, buffers);
         self.light_samples(lanes, &v, buffers, rays);
         self.continue_paths(lanes, active, &v, buffers);
     }
