@@ -170,17 +170,18 @@ fn plans_of_small_scenes_are_as_expected() {
     // The request: AOVs decide the film and the kernel's data and routing.
     let scene = cornell();
     let beauty = plan_for(&scene, "", PlanMode::Auto);
-    // All Lambert: the packet kernel does not pay, unless asked for.
+    // Untextured Lambert: the lanes compute the shading points, where the CPU can run them.
+    let available = lucerna::integrator::packet_kernel_available();
+    assert_eq!(SceneFeatures::of(&scene).uniform_meshes, 7);
     assert_eq!(
         beauty.kernel,
         Kernel {
             emitter_hits: true,
             first_hit_data: false,
             routing: false,
-            packet: false,
+            packet: available,
         }
     );
-    let available = lucerna::integrator::packet_kernel_available();
     assert_eq!(
         plan_for(&scene, "", PlanMode::Packet).kernel.packet,
         available
