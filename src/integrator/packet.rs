@@ -230,7 +230,7 @@ impl Shading {
 }
 
 /// The lanes that scatter at a bounce: their shading points, BSDFs and random numbers.
-struct Vertices {
+struct Vertices<'b> {
     mask: u32,
     /// The scattering lanes at their path's first vertex (the one that splits).
     first: u32,
@@ -240,7 +240,7 @@ struct Vertices {
     ng: V3,
     frame: [V3; 3],
     wo: V3,
-    bsdf: BsdfLanes,
+    bsdf: BsdfLanes<'b>,
     /// Lane by lane: the ray origins, the points and their shading normals.
     origin: [Vec3; LANES],
     points: [Vec3; LANES],
@@ -248,7 +248,7 @@ struct Vertices {
     vs: [Option<VertexSample>; LANES],
 }
 
-impl Vertices {
+impl Vertices<'_> {
     /// The random numbers of scattering lane `lane`.
     #[inline(always)]
     fn lane(&self, lane: usize) -> &VertexSample {
@@ -548,21 +548,21 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             return;
         }
         shading.lane_shaded = lane_shaded;
-        let v = self.vertices(lanes, shading, bsdfs, scatter, buffers);
+        let v = self.vertices(lanes, shading, &bsdfs, scatter, buffers);
         self.light_samples(lanes, &v, buffers, rays);
         self.continue_paths(lanes, active, &v, buffers);
     }
 
     /// The scattering lanes' shading points in lanes, their BSDFs and random numbers.
     #[inline(always)]
-    fn vertices(
+    fn vertices<'b>(
         &self,
         lanes: &[Path; LANES],
         shading: &Shading,
-        bsdfs: [Bsdf; LANES],
+        bsdfs: &'b [Bsdf; LANES],
         mask: u32,
         buffers: &mut PacketBuffers,
-    ) -> Vertices {
+    ) -> Vertices<'b> {
         let mut dir = [Vec3::Z; LANES];
         let mut vs = [None; LANES];
         // Lanes whose numbers are Sobol sets: their inputs, scrambled eight at a time below.
@@ -705,28 +705,39 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 }
                 sampled |= 1 << lane;
             }
+            // The scalar code's samples in lanes, then the lanes' own samples over them.
+            let (mut wi, mut radiance, mut p_light) = if sampled != 0 {
+                (
+                    V3::from_lanes(&wi),
+                    V3::from_lanes(&radiance),
+                    F8::from_array(p_light),
+                )
+            } else {
+                (V3::ZERO, V3::ZERO, F8::ONE)
+            };
             if let Some(table) = triangle_lights
                 && area != 0
             {
                 let u = [F8::from_array(u_area[0]), F8::from_array(u_area[1])];
                 let s = table.sample(U8::from_array(light), v.p, v.ng, u, area);
-                let p_area = (F8::from_array(p_select_area) * s.pdf).to_array();
-                let dir = s.target - v.origin_lanes;
+                let valid = M8::from_bits(s.valid);
+                wi = V3::select(valid, s.wi, wi);
+                radiance = V3::select(valid, s.radiance, radiance);
+                p_light = F8::select(valid, F8::from_array(p_select_area) * s.pdf, p_light);
+                let dir = (s.target - v.origin_lanes).to_lanes();
                 for lane in Lanes::new(s.valid) {
-                    (wi[lane], radiance[lane]) = (s.wi.lane(lane), s.radiance.lane(lane));
-                    p_light[lane] = p_area[lane];
                     shadow[lane] = Ray {
                         origin: v.origin[lane],
-                        dir: dir.lane(lane),
+                        dir: dir[lane],
                         tmax: 1.0,
                     };
-                    sampled |= 1 << lane;
                 }
+                sampled |= s.valid;
             }
             if sampled == 0 {
                 continue;
             }
-            let wi_local = v.to_local(V3::from_lanes(&wi));
+            let wi_local = v.to_local(wi);
             // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
             let (f, pdf) = unsafe { v.bsdf.eval_pdf(v.wo, wi_local, sampled) };
             let zero = F8::ZERO;
@@ -742,7 +753,6 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if lit == 0 {
                 continue;
             }
-            let p_light = F8::from_array(p_light);
             let no_bsdf = if EMITTERS {
                 M8::from_bits(delta)
             } else {
@@ -750,7 +760,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             };
             let p_bsdf = F8::select(no_bsdf, zero, pdf);
             let own = p_light * n_nee;
-            let value = (beta * f) * V3::from_lanes(&radiance) / own;
+            let value = (beta * f) * radiance / own;
             let w = mis_weights(self.settings.mis, Technique::Nee, own, p_bsdf * n_bsdf, lit);
             let value = value * w;
             for lane in Lanes::new(lit) {

@@ -12,7 +12,7 @@ use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, FRAC_PI_2, FRAC_PI_4, PI};
 
 /// Eight BSDFs (one a lane) in local shading frames (+z = shading normal).
-pub struct BsdfLanes {
+pub struct BsdfLanes<'a> {
     /// Lanes whose BSDF is Lambert.
     lambert: M8,
     /// Lanes whose BSDF is the glTF BRDF without a clear coat.
@@ -26,8 +26,8 @@ pub struct BsdfLanes {
     metallic: F8,
     alpha: F8,
     f0: V3,
-    /// Each lane's scalar BSDF.
-    bsdfs: [Bsdf; LANES],
+    /// Each lane's scalar BSDF (borrowed: eight of them are too large to copy a bounce).
+    bsdfs: &'a [Bsdf; LANES],
 }
 
 /// Directions sampled in eight lanes.
@@ -132,10 +132,10 @@ impl GgxLanes {
     }
 }
 
-impl BsdfLanes {
+impl<'a> BsdfLanes<'a> {
     /// The lanes of `bsdfs`; only lanes set in `used` are ever read.
     #[inline(always)]
-    pub fn new(bsdfs: [Bsdf; LANES], used: u32) -> Self {
+    pub fn new(bsdfs: &'a [Bsdf; LANES], used: u32) -> Self {
         let mut base = [Vec3::ZERO; LANES];
         let mut f0 = [Vec3::ZERO; LANES];
         let (mut metallic, mut alpha) = ([0.0; LANES], [1.0; LANES]);
@@ -396,7 +396,7 @@ mod tests {
             Bsdf::GltfPbr(GltfPbr::new(Vec3::splat(0.4), 0.0, 0.5, 1.5).with_clearcoat(0.8, 0.2)),
             Bsdf::GltfPbr(GltfPbr::new(Vec3::splat(0.7), 1.0, 0.9, 1.5)),
         ];
-        let lanes = BsdfLanes::new(kinds, 0xff);
+        let lanes = BsdfLanes::new(&kinds, 0xff);
         let mut rng = Pcg32::new(7, 3);
         let mut checked = [0usize; 2];
         for _ in 0..4000 {
