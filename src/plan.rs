@@ -326,7 +326,7 @@ pub struct Kernel {
     /// indirect room. Where no surface is uniform and none glossy, the lanes would shade
     /// nothing (the Cornell box before they shaded: 1 % more instructions, about 5 % more
     /// time), so `auto` keeps the scalar kernel (`--plan packet` runs it there too).
-    /// Passes that learn the first vertex's split stay scalar.
+    /// Passes that learn the first vertex's split (`--split auto`) run in it too.
     pub packet: bool,
 }
 

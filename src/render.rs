@@ -587,13 +587,12 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         let k = plan.kernel;
         let learned = match (k.routing, k.emitter_hits, k.first_hit_data) {
             #[cfg(target_arch = "x86_64")]
-            (false, emitters, false) if k.packet && !learning && !split_learning => {
+            (false, emitters, false) if k.packet && !learning => {
                 if emitters {
-                    run_packet_pass::<true>(&mut film, &tracer_args);
+                    run_packet_pass::<true>(&mut film, &tracer_args)
                 } else {
-                    run_packet_pass::<false>(&mut film, &tracer_args);
+                    run_packet_pass::<false>(&mut film, &tracer_args)
                 }
-                Vec::new()
             }
             (false, false, false) => run_pass::<false, false, false>(&mut film, &tracer_args),
             (false, false, true) => run_pass::<false, false, true>(&mut film, &tracer_args),
@@ -760,9 +759,13 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
 }
 
 /// Renders one pass over every tile with the packet kernel (see `plan::Kernel::packet`):
-/// the beauty only, and no learning.
+/// the beauty only, and no roulette learning. Returns what a pass that learns the split
+/// counts learned, tile by tile in tile order, as [`run_pass`] does.
 #[cfg(target_arch = "x86_64")]
-fn run_packet_pass<const EMITTERS: bool>(film: &mut Film, args: &PassArgs) {
+fn run_packet_pass<const EMITTERS: bool>(
+    film: &mut Film,
+    args: &PassArgs,
+) -> Vec<(Option<Learning>, Option<SplitStats>)> {
     use crate::film::TILE_SIZE;
     use crate::integrator::packet::{PacketBuffers, PacketTracer, PixelWork};
     let PassArgs {
@@ -771,46 +774,64 @@ fn run_packet_pass<const EMITTERS: bool>(film: &mut Film, args: &PassArgs) {
         samples,
         first_sample,
         split,
+        split_learning,
         rays: counts,
         bar,
         ..
     } = *args;
-    let tracer = PacketTracer::<EMITTERS>::new(world, &options.settings, split, &options.filter);
+    let tracer = PacketTracer::<EMITTERS>::new(
+        world,
+        &options.settings,
+        split,
+        split_learning,
+        &options.filter,
+    );
     let window = film.window;
     let interrupt = options.interrupt.as_deref();
-    film.tiles.par_iter_mut().for_each_init(
-        || {
-            let pixels = (TILE_SIZE * TILE_SIZE) as usize;
-            (PacketBuffers::new(pixels), Vec::with_capacity(pixels))
-        },
-        |(buffers, work), tile| {
-            work.clear();
-            for ty in 0..tile.height {
-                for tx in 0..tile.width {
-                    let (x, y) = (tile.x0 + tx, tile.y0 + ty);
-                    let in_tile = (ty * tile.width + tx) as usize;
-                    let taken = tile.samples_at(in_tile);
-                    let count = samples.at(window.index(x, y), taken);
-                    if count > 0 {
-                        buffers.pixels[in_tile].clear();
-                        work.push(PixelWork {
-                            in_tile,
-                            x,
-                            y,
-                            first: first_sample + taken,
-                            count,
-                        });
+    film.tiles
+        .par_iter_mut()
+        .map_init(
+            || {
+                let pixels = (TILE_SIZE * TILE_SIZE) as usize;
+                (PacketBuffers::new(pixels), Vec::with_capacity(pixels))
+            },
+            |(buffers, work), tile| {
+                work.clear();
+                buffers.split_stats = SplitStats::default();
+                for ty in 0..tile.height {
+                    for tx in 0..tile.width {
+                        let (x, y) = (tile.x0 + tx, tile.y0 + ty);
+                        let in_tile = (ty * tile.width + tx) as usize;
+                        let taken = tile.samples_at(in_tile);
+                        let count = samples.at(window.index(x, y), taken);
+                        if count > 0 {
+                            buffers.pixels[in_tile].clear();
+                            buffers.pixel_parts[in_tile] = PixelParts::default();
+                            work.push(PixelWork {
+                                in_tile,
+                                x,
+                                y,
+                                first: first_sample + taken,
+                                count,
+                            });
+                        }
                     }
                 }
-            }
-            let mut rays = RayCounts::default();
-            let taken = tracer.render(work, buffers, &mut rays, interrupt);
-            for w in work.iter() {
-                tile.add(w.in_tile, &buffers.pixels[w.in_tile]);
-            }
-            tile_done(counts, &rays, bar, taken);
-        },
-    );
+                let mut rays = RayCounts::default();
+                let taken = tracer.render(work, buffers, &mut rays, interrupt);
+                for w in work.iter() {
+                    tile.add(w.in_tile, &buffers.pixels[w.in_tile]);
+                    if split_learning {
+                        buffers
+                            .split_stats
+                            .add_pixel(&buffers.pixel_parts[w.in_tile]);
+                    }
+                }
+                tile_done(counts, &rays, bar, taken);
+                (None, split_learning.then_some(buffers.split_stats))
+            },
+        )
+        .collect()
 }
 
 /// Adds a finished tile's ray counts to the render's and its `taken` samples to the

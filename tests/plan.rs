@@ -270,19 +270,21 @@ fn specialised_and_general_kernels_render_the_same_image() {
 /// The packet kernel runs the scalar kernel's estimator on the same random numbers with the
 /// same operations (its lanes round as the scalar code does), so its paths are the scalar
 /// kernel's and only the order in which a pixel's samples are summed differs: on every
-/// scene, with the default settings, a split first vertex, other MIS heuristics,
-/// roulettes, a depth limit and other light sampling and filter, every pixel agrees to
-/// 1e-6 (float rounding of the sums), as do the sample counts and discarded
-/// contributions.
+/// scene, with the default settings, a split first vertex, a learned one (the learning
+/// samples record their parts in either kernel, and the two learn the same counts), other
+/// MIS heuristics, roulettes, a depth limit and other light sampling and filter, every
+/// pixel agrees to 1e-6 (float rounding of the sums), as do the sample counts and
+/// discarded contributions.
 #[test]
 fn packet_kernel_renders_the_scalar_kernels_image() {
     if !lucerna::integrator::packet_kernel_available() {
         eprintln!("no AVX2 and FMA here: the packet kernel is never chosen");
         return;
     }
-    let settings: [&[(&str, &str)]; 5] = [
+    let settings: [&[(&str, &str)]; 6] = [
         &[],
         &[("split", "nee=3,bsdf=2")],
+        &[("split", "auto")],
         &[("mis", "balance"), ("rr", "fixed:0.6")],
         &[("mis", "cutoff"), ("max-depth", "3"), ("rr", "off")],
         &[
@@ -317,6 +319,7 @@ fn packet_kernel_renders_the_scalar_kernels_image() {
             assert!(packet.planes(Aov::Spp) == scalar.planes(Aov::Spp));
             assert_eq!(packet_stats.discarded, scalar_stats.discarded);
             assert_eq!(packet_stats.samples, scalar_stats.samples);
+            assert_eq!(packet_stats.learned_split, scalar_stats.learned_split);
         }
     }
 }

@@ -34,7 +34,7 @@ use super::path::{
     Emitter, PathState, RayCounts, emitters_at_infinity, sample_chosen_light, surface_emitter,
 };
 use super::settings::Settings;
-use super::split::FirstSplit;
+use super::split::{FirstSplit, PixelParts, SampleParts, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
 use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
@@ -105,6 +105,10 @@ struct SampleSlot {
     paths: u32,
     rays: u64,
     discarded: u64,
+    /// In a pass that learns the split counts: what the sample's parts brought back, and
+    /// the rays of its camera ray, of its first vertex's light samples and of the rest.
+    parts: SampleParts,
+    part_rays: [u64; 3],
 }
 
 /// What a thread reuses from tile to tile: samples in flight, waiting paths, and the
@@ -115,6 +119,10 @@ pub struct PacketBuffers {
     waiting: Vec<Path>,
     /// One accumulator per pixel of the tile (row-major), cleared by the caller.
     pub pixels: Vec<PixelAccumulator>,
+    /// In a pass that learns the split counts: each pixel's learning samples (row-major,
+    /// cleared by the caller) and the tile's rays by part.
+    pub pixel_parts: Vec<PixelParts>,
+    pub split_stats: SplitStats,
 }
 
 impl PacketBuffers {
@@ -127,6 +135,8 @@ impl PacketBuffers {
             pixels: (0..pixels)
                 .map(|_| PixelAccumulator::new(1, false))
                 .collect(),
+            pixel_parts: vec![PixelParts::default(); pixels],
+            split_stats: SplitStats::default(),
         }
     }
 }
@@ -147,6 +157,9 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
     /// untextured emission, or triangles sampled by solid angle, which the scalar code
     /// does).
     triangle_lights: Option<&'a TriangleLights>,
+    /// Whether the pass learns the split counts (`split` is then `FirstSplit::learning`):
+    /// samples record their parts as the scalar kernel's do.
+    learning: bool,
     /// By mesh, the BSDF of a mesh whose shading points the lanes compute
     /// (`Surfaces::uniform_bsdf`); the others go through `World::interaction` lane by lane.
     mesh_bsdfs: Vec<Option<Bsdf>>,
@@ -295,17 +308,20 @@ impl Vertices<'_> {
 
 impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     /// The kernel for `world`; `split` says how the first vertex splits, `filter` places
-    /// camera samples.
+    /// camera samples; `learning` passes record what the first vertex's parts bring back
+    /// (into [`PacketBuffers::pixel_parts`] and [`PacketBuffers::split_stats`]).
     pub fn new(
         world: &'a World,
         settings: &'a Settings,
         split: FirstSplit,
+        learning: bool,
         filter: &'a PixelFilter,
     ) -> Self {
         Self {
             world,
             settings,
             split,
+            learning,
             filter,
             sampler: Sampler::new(settings.sampler, settings.seed),
             triangle_lights: (!settings.light_sampling.triangles_by_solid_angle())
@@ -406,6 +422,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             paths: 1,
             rays: 0,
             discarded: 0,
+            parts: SampleParts::default(),
+            part_rays: [0; 3],
         };
         let sample = match buffers.free.pop() {
             Some(i) => {
@@ -427,14 +445,47 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     /// One path of sample slot `sample` ended: the sample goes to its pixel once it has no
     /// path left.
     #[inline(always)]
-    fn end_path(sample: u32, buffers: &mut PacketBuffers) {
+    fn end_path(&self, sample: u32, buffers: &mut PacketBuffers) {
         let slot = &mut buffers.slots[sample as usize];
         slot.paths -= 1;
         if slot.paths == 0 {
             let pixel = &mut buffers.pixels[slot.pixel];
             pixel.add_sample(slot.value, slot.covered, slot.discarded);
             pixel.rays += slot.rays;
+            if self.learning {
+                // The scalar kernel's ray marks, as if the parts had been traced in turn.
+                let [camera, nee, bsdf] = slot.part_rays;
+                slot.parts.rays = [0, camera, camera + nee, camera + nee + bsdf];
+                buffers.split_stats.add_rays(&slot.parts);
+                buffers.pixel_parts[slot.pixel].add(&slot.parts);
+            }
             buffers.free.push(sample);
+        }
+    }
+
+    /// In a learning pass, adds a contribution to the sample's parts (as the scalar
+    /// kernel's `record` does, before dropping a non-finite one): `depth` and `by_light`
+    /// as `SampleParts::add` takes them, `current` the first vertex's light estimate or
+    /// BSDF path it belongs to.
+    #[inline(always)]
+    fn learn(&self, slot: &mut SampleSlot, value: Vec3, depth: u32, by_light: bool, current: u32) {
+        if self.learning {
+            slot.parts.current = current as usize;
+            slot.parts.add(value, depth, by_light);
+        }
+    }
+
+    /// In a learning pass, counts a ray of a path at `depth`: `camera` for the first
+    /// vertex's closest-hit ray (`false`: a light sample's shadow ray).
+    #[inline(always)]
+    fn count_part_ray(&self, slot: &mut SampleSlot, depth: u32, closest: bool) {
+        if self.learning {
+            let part = match (depth, closest) {
+                (0, true) => 0,
+                (0, false) => 1,
+                _ => 2,
+            };
+            slot.part_rays[part] += 1;
         }
     }
 
@@ -455,6 +506,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     fn reached_emitter(&self, path: &PathState, e: Emitter, slot: &mut SampleSlot) {
         let value = path.beta * e.le;
         if path.depth == 0 {
+            self.learn(slot, value, 0, false, 0);
             Self::contribute(slot, value);
             return;
         }
@@ -463,6 +515,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             .settings
             .mis
             .weight(Technique::Bsdf, path.prev_pdf, p_light);
+        self.learn(slot, value * w, path.depth, false, path.branch);
         Self::contribute(slot, value * w);
     }
 
@@ -487,6 +540,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let path = &lanes[lane];
             let slot = &mut buffers.slots[path.sample as usize];
             slot.rays += 1;
+            self.count_part_ray(slot, path.state.depth, true);
             let Some(hit) = world.intersect(&path.ray) else {
                 if EMITTERS {
                     emitters_at_infinity(world, path.ray.dir, |e| {
@@ -494,7 +548,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     });
                 }
                 *active &= !(1 << lane);
-                Self::end_path(path.sample, buffers);
+                self.end_path(path.sample, buffers);
                 continue;
             };
             if let Some((mesh, tri)) = world.surfaces.hit_triangle(&hit)
@@ -504,7 +558,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 // lanes (`vertices`), the rest as below.
                 if path.state.depth >= max_depth {
                     *active &= !(1 << lane);
-                    Self::end_path(path.sample, buffers);
+                    self.end_path(path.sample, buffers);
                     continue;
                 }
                 if path.state.depth == 0 && path.state.branch == 0 {
@@ -541,7 +595,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 }
                 _ => {
                     *active &= !(1 << lane);
-                    Self::end_path(path.sample, buffers);
+                    self.end_path(path.sample, buffers);
                 }
             }
         }
@@ -572,9 +626,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         for lane in Lanes::new(mask) {
             let path = &lanes[lane];
             dir[lane] = path.ray.dir;
-            let sampler = &mut buffers.slots[path.sample as usize].sampler;
+            let slot = &mut buffers.slots[path.sample as usize];
             let (depth, branch) = (path.state.depth, path.state.branch);
             first |= u32::from(depth == 0) << lane;
+            if self.learning && depth == 0 {
+                slot.parts.split = true;
+            }
+            let sampler = &mut slot.sampler;
             match sampler.vertex_sobol(depth, branch) {
                 Some((rev, [a, b])) => {
                     (index_rev[lane], seeds[0][lane], seeds[1][lane]) = (rev, a, b);
@@ -745,7 +803,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             sampled &= (f.x.ne(zero) | f.y.ne(zero) | f.z.ne(zero)).bits();
             let mut lit = 0u32;
             for lane in Lanes::new(sampled) {
-                buffers.slots[lanes[lane].sample as usize].rays += 1;
+                let slot = &mut buffers.slots[lanes[lane].sample as usize];
+                slot.rays += 1;
+                self.count_part_ray(slot, lanes[lane].state.depth, false);
                 if !world.occluded(&shadow[lane]) {
                     lit |= 1 << lane;
                 }
@@ -765,10 +825,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let w = mis_weights(self.settings.mis, Technique::Nee, own, p_bsdf * n_bsdf, lit);
             let value = value * w;
             for lane in Lanes::new(lit) {
-                Self::contribute(
-                    &mut buffers.slots[lanes[lane].sample as usize],
-                    value.lane(lane),
-                );
+                let state = &lanes[lane].state;
+                let slot = &mut buffers.slots[lanes[lane].sample as usize];
+                // The first vertex's light estimate j, or the BSDF path a deeper vertex is on.
+                let current = if state.depth == 0 { j } else { state.branch };
+                self.learn(slot, value.lane(lane), state.depth + 1, true, current);
+                Self::contribute(slot, value.lane(lane));
             }
         }
     }
@@ -874,7 +936,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
         for lane in Lanes::new(v.mask & !continued) {
             *active &= !(1 << lane);
-            Self::end_path(parents[lane].sample, buffers);
+            self.end_path(parents[lane].sample, buffers);
         }
     }
 }
