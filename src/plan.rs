@@ -256,16 +256,7 @@ impl SceneFeatures {
                 .meshes
                 .iter()
                 .zip(&placements)
-                .filter(|&(mesh, &n)| {
-                    let m = &scene.materials[mesh.material as usize];
-                    n == 1
-                        && mesh.colors.is_none()
-                        && !m.is_emissive()
-                        && m.base_color_texture.is_none()
-                        && m.metallic_roughness_texture.is_none()
-                        && m.normal_texture.is_none()
-                        && m.emissive_texture.is_none()
-                })
+                .filter(|&(mesh, &n)| n == 1 && mesh.uniform_material(&scene.materials).is_some())
                 .count(),
         }
     }

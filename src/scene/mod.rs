@@ -77,6 +77,18 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// Its material, where it is the same at every point of the mesh and does not emit: no
+    /// texture (so no normal map either) and no vertex colours. The packet kernel computes
+    /// such a mesh's shading points in lanes (`world::lanes`).
+    pub fn uniform_material<'m>(&self, materials: &'m [Material]) -> Option<&'m Material> {
+        let m = materials.get(self.material as usize)?;
+        let textured = m.base_color_texture.is_some()
+            || m.metallic_roughness_texture.is_some()
+            || m.normal_texture.is_some()
+            || m.emissive_texture.is_some();
+        (!textured && self.colors.is_none() && !m.is_emissive()).then_some(m)
+    }
+
     /// Bytes of its vertex and triangle data.
     pub fn data_bytes(&self) -> u64 {
         fn bytes<T>(v: &Option<Vec<T>>) -> usize {

@@ -102,19 +102,11 @@ impl TriangleHits {
 
 impl Surfaces {
     /// The BSDF of every point of `mesh` where its shading points can be taken in lanes
-    /// ([`TriangleHits`]): a material without textures (and a mesh without vertex colours),
-    /// so that the BSDF does not vary over the surface and no normal map bends the normal,
-    /// that does not emit and that reflects something. `None` otherwise: such a mesh's
-    /// points go through [`Surfaces::interaction`].
+    /// ([`TriangleHits`]): its material is uniform (`Mesh::uniform_material`) and reflects
+    /// something. `None` otherwise: such a mesh's points go through
+    /// [`Surfaces::interaction`].
     pub(crate) fn uniform_bsdf(&self, mesh: &Mesh) -> Option<Bsdf> {
-        let m = &self.materials[mesh.material as usize];
-        let textured = m.base_color_texture.is_some()
-            || m.metallic_roughness_texture.is_some()
-            || m.normal_texture.is_some()
-            || m.emissive_texture.is_some();
-        if textured || mesh.colors.is_some() || m.is_emissive() {
-            return None;
-        }
+        let m = mesh.uniform_material(&self.materials)?;
         let attrs = SurfaceAttributes {
             uv: [glam::Vec2::ZERO; 2],
             color: Vec4::ONE,
