@@ -7,7 +7,9 @@ use crate::film::{Film, PixelAccumulator, SampleRecord, Window};
 use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
 use crate::integrator::path::{PathTracer, RayCounts};
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
-use crate::integrator::split::{self, FirstSplit, PixelParts, SampleParts, SplitStats};
+use crate::integrator::split::{
+    self, FirstSplit, LearningPixels, PixelParts, SampleParts, SplitStats,
+};
 use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
 use crate::light::groups::LightGroups;
 use crate::plan::{PlanMode, RenderPlan};
@@ -340,25 +342,31 @@ pub fn peak_memory_bytes() -> Option<u64> {
     Some(kib * 1024)
 }
 
-/// The samples of the next pass: fixed-size passes without a budget; with one, passes
-/// sized to about a twentieth of the budget from the measured time per sample, shortened
-/// to fit what remains, and none when less than half a sample's time remains.
-fn next_pass(done: u32, target: u32, budget: Option<f64>, elapsed: f64) -> u32 {
-    let left = target - done;
+/// The samples of the next pass, `left` being the most it may take: fixed-size passes
+/// without a budget. With one (`elapsed` of `budget` seconds having gone to `rendered`
+/// samples per pixel, on average over the pixels): one sample to measure, then the samples
+/// that fit in what remains, in the fewest passes of at most a quarter of the budget, of
+/// equal size; none when less than half a sample's time remains. Every pass costs a fixed
+/// time (each tile's last paths leave lanes and threads idle: about 3 ms a pass on the
+/// Cornell box at 256², 2 threads, where a sample takes 65 ms), which budgets cut into
+/// twentieths paid about 15 times a second; a pass of at most a quarter of the budget
+/// still ends near it if the machine slows down.
+fn next_pass(left: u32, budget: Option<f64>, elapsed: f64, rendered: f64) -> u32 {
     let Some(budget) = budget else {
         return left.min(PASS_SAMPLES);
     };
-    if done == 0 {
-        return 1;
+    if rendered <= 0.0 {
+        return 1.min(left);
     }
-    let per_sample = elapsed / done as f64;
+    let per_sample = elapsed / rendered;
     let remaining = budget - elapsed;
     if remaining < 0.5 * per_sample {
         return 0;
     }
     let fit = (remaining / per_sample).round().max(1.0);
-    let slice = (budget / 20.0 / per_sample).max(1.0);
-    (fit.min(slice) as u32).clamp(1, left)
+    let most = (budget / 4.0 / per_sample).floor().max(1.0);
+    let passes = (fit / most).ceil();
+    ((fit / passes).ceil() as u32).clamp(1, left)
 }
 
 /// Samples each pixel takes in one pass.
@@ -371,6 +379,17 @@ enum PassSamples {
 }
 
 impl PassSamples {
+    /// The split learning's pass: `n` samples in each of `film`'s learning pixels.
+    fn learning(film: &Film, pixels: LearningPixels, n: u32) -> Self {
+        let w = film.window;
+        Self::PerPixel(
+            (w.y..w.y + w.height)
+                .flat_map(|y| (w.x..w.x + w.width).map(move |x| (x, y)))
+                .map(|(x, y)| if pixels.contains(x, y) { n } else { 0 })
+                .collect(),
+        )
+    }
+
     /// Samples to take at film pixel `pixel`, which has taken `taken`.
     #[inline]
     fn at(&self, pixel: usize, taken: u32) -> u32 {
@@ -496,7 +515,8 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         }
         _ => None,
     };
-    // Learned splitting takes its first samples split two and two, then the counts chosen.
+    // Learned splitting takes the first samples of its learning pixels split two and two,
+    // then the counts chosen everywhere.
     let mut first_split = match options.settings.split {
         SplitChoice::Fixed(counts) => FirstSplit::fixed(counts),
         SplitChoice::Auto => FirstSplit::learning(),
@@ -524,25 +544,28 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         );
         bar
     });
-    if let Some(bar) = &bar {
+    // A resumed render's samples so far (the other bars count time and pixels).
+    if let (Some(bar), None, false) = (&bar, options.time, adaptive) {
         bar.set_position(film.total_samples());
     }
+    let learning_pixels = LearningPixels::new(film.display.0, film.display.1);
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
     let resumed = film.min_samples().min(uniform_spp);
     let mut done = resumed;
+    // What a time budget has rendered: the samples since the start, per pixel.
+    let samples_before = film.total_samples();
+    let rendered = |film: &Film| (film.total_samples() - samples_before) as f64 / pixels as f64;
     while !interrupted() {
         let elapsed = start.elapsed().as_secs_f64();
         let split_learning = options.settings.split == SplitChoice::Auto
             && learned_split.is_none()
             && done < uniform_spp;
-        let (pass, learning) = if done < uniform_spp {
-            let mut n = next_pass(done - resumed, uniform_spp - resumed, options.time, elapsed);
-            if split_learning {
-                n = split::LEARNING_SAMPLES
-                    .saturating_sub(done)
-                    .clamp(1, uniform_spp - done);
-            }
+        let (pass, learning) = if split_learning {
+            let n = split::LEARNING_SAMPLES.min(uniform_spp - done);
+            (PassSamples::learning(&film, learning_pixels, n), false)
+        } else if done < uniform_spp {
+            let mut n = next_pass(uniform_spp - done, options.time, elapsed, rendered(&film));
             // Efficiency-aware roulette learns in passes of 1, 1, 2, 4, 8 samples, each
             // deciding with everything learned before it.
             let learning = ears.is_some() && done < LEARNING_SAMPLES;
@@ -582,7 +605,11 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
             split: first_split,
             split_learning,
             rays: &counts,
-            bar: bar.as_ref().filter(|_| options.time.is_none() && !adaptive),
+            progress: match (&bar, options.time, adaptive) {
+                (Some(bar), Some(_), _) => Progress::Time(bar, start),
+                (Some(bar), None, false) => Progress::Samples(bar),
+                _ => Progress::Nothing,
+            },
         };
         let k = plan.kernel;
         let learned = match (k.routing, k.emitter_hits, k.first_hit_data) {
@@ -610,20 +637,18 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
             }
             e.refresh();
         }
-        if let (true, PassSamples::UpTo(total)) = (split_learning, &pass) {
+        if let (true, PassSamples::PerPixel(taken)) = (split_learning, &pass) {
             let mut stats = SplitStats::default();
             for s in learned.iter().filter_map(|t| t.1.as_ref()) {
                 stats.merge(s);
             }
             let counts = stats.choose();
-            first_split = FirstSplit::after_learning(counts, *total);
+            let n = taken.iter().copied().max().unwrap_or(0);
+            first_split = FirstSplit::after_learning(counts, n, learning_pixels);
             learned_split = Some(counts);
         }
         if let PassSamples::UpTo(total) = pass {
             done = total;
-        }
-        if let (Some(bar), Some(_)) = (&bar, options.time) {
-            bar.set_position(start.elapsed().as_millis() as u64);
         }
     }
     if let Some(bar) = bar {
@@ -656,8 +681,8 @@ struct PassArgs<'a> {
     split: FirstSplit,
     split_learning: bool,
     rays: &'a Mutex<RayCounts>,
-    /// Advanced by samples taken (fixed sample counts only).
-    bar: Option<&'a indicatif::ProgressBar>,
+    /// What finished tiles advance.
+    progress: Progress<'a>,
 }
 
 /// Renders one pass over every tile with the kernel variant `<ROUTED, EMITTERS, DATA>`
@@ -677,7 +702,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
         split,
         split_learning,
         rays: counts,
-        bar,
+        progress,
     } = *args;
     let router = &film.router;
     let crypto = film.aovs.wants_crypto();
@@ -752,7 +777,7 @@ fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
                     taken += n as u64;
                 }
             }
-            tile_done(counts, &rays, bar, taken);
+            tile_done(counts, &rays, progress, taken);
             (tile_learning, tile_split)
         })
         .collect()
@@ -776,7 +801,7 @@ fn run_packet_pass<const EMITTERS: bool>(
         split,
         split_learning,
         rays: counts,
-        bar,
+        progress,
         ..
     } = *args;
     let tracer = PacketTracer::<EMITTERS>::new(
@@ -827,27 +852,35 @@ fn run_packet_pass<const EMITTERS: bool>(
                             .add_pixel(&buffers.pixel_parts[w.in_tile]);
                     }
                 }
-                tile_done(counts, &rays, bar, taken);
+                tile_done(counts, &rays, progress, taken);
                 (None, split_learning.then_some(buffers.split_stats))
             },
         )
         .collect()
 }
 
-/// Adds a finished tile's ray counts to the render's and its `taken` samples to the
-/// progress bar.
-fn tile_done(
-    counts: &Mutex<RayCounts>,
-    rays: &RayCounts,
-    bar: Option<&indicatif::ProgressBar>,
-    taken: u64,
-) {
+/// What a finished tile advances on the progress bar.
+#[derive(Clone, Copy)]
+enum Progress<'a> {
+    Nothing,
+    /// The samples taken (fixed sample counts).
+    Samples(&'a indicatif::ProgressBar),
+    /// The milliseconds of a time budget spent since the render started: passes are up to
+    /// a quarter of the budget, too coarse a step for the bar.
+    Time(&'a indicatif::ProgressBar, Instant),
+}
+
+/// Adds a finished tile's ray counts to the render's and advances the progress bar by its
+/// `taken` samples.
+fn tile_done(counts: &Mutex<RayCounts>, rays: &RayCounts, progress: Progress, taken: u64) {
     counts
         .lock()
         .expect("no thread panicked holding the lock")
         .add(rays);
-    if let Some(bar) = bar {
-        bar.inc(taken);
+    match progress {
+        Progress::Nothing => {}
+        Progress::Samples(bar) => bar.inc(taken),
+        Progress::Time(bar, start) => bar.set_position(start.elapsed().as_millis() as u64),
     }
 }
 
@@ -888,15 +921,20 @@ mod tests {
 
     #[test]
     fn passes_fit_the_budget() {
-        assert_eq!(next_pass(0, 100, None, 0.0), 16);
-        assert_eq!(next_pass(96, 100, None, 0.0), 4);
-        assert_eq!(next_pass(0, MAX_SPP, Some(10.0), 0.0), 1);
-        // 0.1 s a sample, 10 s budget: passes of 5 (half a second).
-        assert_eq!(next_pass(10, MAX_SPP, Some(10.0), 1.0), 5);
+        assert_eq!(next_pass(100, None, 0.0, 0.0), 16);
+        assert_eq!(next_pass(4, None, 0.0, 0.0), 4);
+        assert_eq!(next_pass(MAX_SPP, Some(10.0), 0.0, 0.0), 1);
+        // 0.1 s a sample, 10 s budget: 90 samples left, in four passes of at most 25.
+        assert_eq!(next_pass(MAX_SPP, Some(10.0), 1.0, 10.0), 23);
+        // 0.07 s a sample, 1 s budget: 13 samples left, in five passes of at most 3.
+        assert_eq!(next_pass(MAX_SPP, Some(1.0), 0.07, 1.0), 3);
+        assert_eq!(next_pass(MAX_SPP, Some(1.0), 0.7, 10.0), 2);
+        // A learning pass that took a quarter of the pixels' first 4 samples counts as one.
+        assert_eq!(next_pass(MAX_SPP, Some(1.0), 0.07, 0.25 * 4.0), 3);
         // Near the end: what fits, then nothing.
-        assert_eq!(next_pass(97, MAX_SPP, Some(10.0), 9.7), 3);
-        assert_eq!(next_pass(100, MAX_SPP, Some(10.0), 9.97), 0);
+        assert_eq!(next_pass(MAX_SPP, Some(10.0), 9.7, 97.0), 3);
+        assert_eq!(next_pass(MAX_SPP, Some(10.0), 9.97, 100.0), 0);
         // The sample count still caps a budget.
-        assert_eq!(next_pass(62, 64, Some(10.0), 0.1), 2);
+        assert_eq!(next_pass(2, Some(10.0), 0.1, 62.0), 2);
     }
 }

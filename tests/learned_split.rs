@@ -48,7 +48,10 @@ fn the_counts_follow_where_the_noise_comes_from() {
         "MIS plates: {plates:?}"
     );
     let room = learned("indirect-room/indirect-room.glb", 2);
-    assert!(room.nee == 1 && room.bsdf >= 3, "indirect room: {room:?}");
+    assert!(
+        room.bsdf >= 3 && room.bsdf > room.nee,
+        "indirect room: {room:?}"
+    );
     // Sums in tile order: one thread learns what two do.
     assert_eq!(learned("mis-plates/mis-plates.glb", 1), plates);
 }

@@ -727,9 +727,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     (vs.light, vs.light_select)
                 } else {
                     let sampler = &buffers.slots[path.sample as usize].sampler;
-                    let point = self
-                        .split
-                        .point(SplitKind::Light, sampler.sample_index(), j);
+                    let point = self.split.point(
+                        SplitKind::Light,
+                        sampler.pixel(),
+                        sampler.sample_index(),
+                        j,
+                    );
                     let p = sampler.first_split_point(SplitKind::Light, point);
                     (Vec2::new(p[0], p[1]), p[2])
                 };
@@ -865,7 +868,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
                 } else {
                     let sampler = &buffers.slots[path.sample as usize].sampler;
-                    let point = self.split.point(SplitKind::Bsdf, sampler.sample_index(), k);
+                    let point = self.split.point(
+                        SplitKind::Bsdf,
+                        sampler.pixel(),
+                        sampler.sample_index(),
+                        k,
+                    );
                     sampler.first_split_point(SplitKind::Bsdf, point)
                 };
             }

@@ -507,9 +507,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     let (u_light, u_select) = if n_nee == 1 {
                         (vs.light, vs.light_select)
                     } else {
-                        let point = self
-                            .split
-                            .point(SplitKind::Light, sampler.sample_index(), j);
+                        let point = self.split.point(
+                            SplitKind::Light,
+                            sampler.pixel(),
+                            sampler.sample_index(),
+                            j,
+                        );
                         let p = sampler.first_split_point(SplitKind::Light, point);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
@@ -546,7 +549,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     let p = match (first, self.split.counts.bsdf > 1) {
                         (true, true) => {
                             let index = sampler.sample_index();
-                            let point = self.split.point(SplitKind::Bsdf, index, k);
+                            let point =
+                                self.split.point(SplitKind::Bsdf, sampler.pixel(), index, k);
                             sampler.first_split_point(SplitKind::Bsdf, point)
                         }
                         (true, false) => sampler.split_point(SplitKind::Bsdf, 0, k),

@@ -64,6 +64,8 @@ pub struct Sampler {
     /// This pixel's key (image seed and pixel): seeds the sequences of the first vertex's
     /// split samples, which run over all of the pixel's samples.
     pixel_key: u64,
+    /// The pixel (x, y) of the sample.
+    pixel: (u32, u32),
     /// The sample's index in the pixel.
     index: u32,
     pixel_seed: u32,
@@ -93,6 +95,7 @@ impl Sampler {
             kind,
             seed_key: mix_u64(seed as u64 ^ 0x5851f42d4c957f2d),
             pixel_key: 0,
+            pixel: (0, 0),
             index: 0,
             pixel_seed: 0,
             index_rev: 0,
@@ -107,6 +110,7 @@ impl Sampler {
         let pixel = ((y as u64) << 32) | x as u64;
         let key = mix_u64(pixel ^ self.seed_key);
         self.pixel_key = key;
+        self.pixel = (x, y);
         self.index = index;
         self.sample_key = mix_u64(key ^ ((index as u64) << 20)) as u32;
         match self.kind {
@@ -250,6 +254,12 @@ impl Sampler {
     #[inline]
     pub fn sample_index(&self) -> u32 {
         self.index
+    }
+
+    /// The pixel (x, y) of the current sample.
+    #[inline]
+    pub fn pixel(&self) -> (u32, u32) {
+        self.pixel
     }
 }
 
