@@ -67,6 +67,11 @@ def machine():
                 if line.startswith("model name")), platform.processor())
     mem = next((int(line.split()[1]) * 1024 for line in Path("/proc/meminfo").read_text().splitlines()
                 if line.startswith("MemTotal")), 0)
+    flags = next((line.split(":", 1)[1].split() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                  if line.startswith("flags")), [])
+    # The widest vectors the CPU has: Mitsuba's llvm variant and Embree run 16 lanes with
+    # AVX-512 and 8 with AVX2; lucerna's packet kernel runs 8 (AVX2) on both.
+    isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
 
     def out(cmd):
         try:
@@ -75,7 +80,7 @@ def machine():
             return "?"
     import mitsuba
     return {
-        "cpu": cpu, "cores": os.cpu_count(), "memory_gb": round(mem / 1e9, 1),
+        "cpu": cpu, "isa": isa, "cores": os.cpu_count(), "memory_gb": round(mem / 1e9, 1),
         "os": f"{platform.system()} {platform.release()}", "python": platform.python_version(),
         "rustc": out(["rustc", "--version"]), "mitsuba": mitsuba.__version__,
         "lucerna": out([lt.BINARY, "--version"]), "commit": out(["git", "-C", str(lt.ROOT), "describe", "--always", "--dirty"]),
@@ -232,8 +237,8 @@ def report(result, out):
     renderers = renderer_names(result)
     m = result["machine"]
     lines = ["# tools/bench: time against error", "",
-             f"Machine: {m['cpu']}, {m['cores']} cores, {m['memory_gb']} GB, {m['os']}; shared (see the steal "
-             f"column: the share of CPU time the hypervisor gave to others during the render).",
+             f"Machine: {m['cpu']} ({m.get('isa', '?')}), {m['cores']} cores, {m['memory_gb']} GB, {m['os']}; "
+             f"shared (see the steal column: the share of CPU time the hypervisor gave to others during the render).",
              f"Software: {m['lucerna']} ({m['commit']}), {m['rustc']}, Mitsuba {m['mitsuba']}, Python {m['python']}. "
              f"Run {m['date']}, {result['repeats']} repeat(s), renderers interleaved rung by rung.", "",
              "Command: `tools/bench/run` (configuration `tools/bench/bench.toml`).", "",
