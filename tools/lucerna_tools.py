@@ -5,7 +5,6 @@ Error metric (../shared/design.md): relMSE = mean over pixels and channels of
 (x - ref)^2 / (ref^2 + 0.01); efficiency = 1 / (seconds x relMSE).
 """
 import copy
-import functools
 import hashlib
 import json
 import os
@@ -85,25 +84,47 @@ def mape(x, ref):
     return float(np.mean(np.abs(x - ref) / (np.abs(ref) + 0.01)))
 
 
-@functools.cache
-def binary_digest():
-    """SHA-256 of the lucerna binary: references are keyed by it, so that a change of the
-    renderer (which may change the image it converges to) never serves an old reference."""
-    return hashlib.sha256(Path(BINARY).read_bytes()).hexdigest()
+# Samples per pixel of the render that fingerprints what lucerna renders for a reference: a
+# pass of 16 and the start of the next, so that the pass structure is exercised too.
+FINGERPRINT_SPP = 20
+FIRST_SEED = 1_000_003
+
+
+def fingerprint(scene, resolution, **settings):
+    """SHA-256 of the image lucerna renders at the reference's resolution and settings with
+    FINGERPRINT_SPP samples from the reference's first seed, bit for bit. References are
+    keyed by it rather than by the binary: a change of the renderer that changes what it
+    converges to changes these samples too (every pixel's first samples run the same code
+    as the reference's), while a rebuild that renders the same image keeps the reference
+    (the Cornell box's takes four minutes). A change confined to samples past the 20th of a
+    pixel would go unnoticed; none of the estimator's code depends on that index."""
+    with tempfile.TemporaryDirectory() as tmp:
+        out = Path(tmp) / "fingerprint.exr"
+        cmd = [BINARY, "render"] + ([str(scene)] if scene else [])
+        cmd += ["-o", str(out), "-q", "--resolution", f"{resolution[0]}x{resolution[1]}",
+                "--spp", str(FINGERPRINT_SPP), "--seed", str(FIRST_SEED), "--aov", "beauty"]
+        for key, value in settings.items():
+            cmd += [f"--{key.replace('_', '-')}", str(value)]
+        run(cmd)
+        channels, _ = read_exr(out)
+    digest = hashlib.sha256()
+    for name in sorted(channels):
+        digest.update(name.encode() + np.ascontiguousarray(channels[name], dtype=np.float32).tobytes())
+    return digest.hexdigest()
 
 
 def reference(scene, resolution, spp, **settings):
-    """A high-sample reference, cached under tools/.cache by the lucerna binary, scene
-    contents, resolution, sample count and settings. Returns (image, info) where info
-    records the sample count, the render seconds and the reference's own noise: its
-    expected relMSE against the true image.
+    """A high-sample reference, cached under tools/.cache by what lucerna renders (its
+    fingerprint), scene contents, resolution, sample count and settings. Returns (image,
+    info) where info records the sample count, the render seconds and the reference's own
+    noise: its expected relMSE against the true image.
 
     The reference is the mean of two renders of half the samples each with different seeds
     (independent scrambles), so their difference measures its noise: with equal halves,
     E[relMSE(a, b)] is twice a half's noise and four times the mean's. (The variance layer
     would overstate it: it sees the samples as independent, not Sobol's stratification.)"""
     scene_bytes = Path(scene).read_bytes() if scene else b"default"
-    key = hashlib.sha256(binary_digest().encode() + scene_bytes
+    key = hashlib.sha256(fingerprint(scene, resolution, **settings).encode() + scene_bytes
                          + json.dumps([resolution, spp, sorted(settings.items())]).encode()).hexdigest()[:16]
     CACHE.mkdir(parents=True, exist_ok=True)
     image_path = CACHE / f"ref-{key}.npy"
@@ -112,7 +133,7 @@ def reference(scene, resolution, spp, **settings):
         half = spp // 2
         halves, seconds = [], 0.0
         with tempfile.TemporaryDirectory() as tmp:
-            for seed in (1_000_003, 1_000_033):
+            for seed in (FIRST_SEED, 1_000_033):
                 image, header, _ = render(scene, Path(tmp) / "half.exr", resolution, spp=half, aov="beauty",
                                           **dict(settings, seed=seed))
                 halves.append(image)
@@ -120,10 +141,17 @@ def reference(scene, resolution, spp, **settings):
         image = (halves[0] + halves[1]) / 2
         noise = float(np.mean((halves[0] - halves[1]) ** 2 / (image ** 2 + 0.01))) / 4
         info = {"scene": str(scene), "resolution": list(resolution), "spp": 2 * half, "settings": settings,
-                "seconds": seconds, "relmse_noise": noise}
+                "seconds": seconds, "relmse_noise": noise, "commit": commit()}
         np.save(image_path, image)
         meta.write_text(json.dumps(info, indent=1))
     return np.load(image_path), json.loads(meta.read_text())
+
+
+def commit():
+    """The repository's commit (`git describe --always --dirty`), or "?" outside a clone."""
+    done = subprocess.run(["git", "-C", str(ROOT), "describe", "--always", "--dirty"], capture_output=True,
+                          text=True)
+    return done.stdout.strip() if done.returncode == 0 else "?"
 
 
 # Mesh attributes of a scene file: (key, floats or words per element, numpy type).

@@ -248,7 +248,8 @@ def report(result, out):
     for s in result["scenes"]:
         ref = s["reference"]
         lines.append(f"- **{s['name']}** ({s['path']}, {s['resolution'][0]}x{s['resolution'][1]}): reference "
-                     f"{ref['spp']} spp by lucerna, {ref['seconds']:.0f} s, its own noise relMSE {ref['relmse_noise']:.2e}.")
+                     f"{ref['spp']} spp by lucerna{' at ' + ref['commit'] if 'commit' in ref else ''}, "
+                     f"{ref['seconds']:.0f} s, its own noise relMSE {ref['relmse_noise']:.2e}.")
     for spec in result["renderers"]:
         settings = {k: v for k, v in spec.items() if k not in ("name", "kind")}
         # lucerna's flags (a table) read as flags; Mitsuba's variant and sampler as they are.
