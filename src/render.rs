@@ -347,10 +347,10 @@ pub fn peak_memory_bytes() -> Option<u64> {
 /// samples per pixel, on average over the pixels): one sample to measure, then the samples
 /// that fit in what remains, in the fewest passes of at most a quarter of the budget, of
 /// equal size; none when less than half a sample's time remains. Every pass costs a fixed
-/// time (each tile's last paths leave lanes and threads idle: about 3 ms a pass on the
-/// Cornell box at 256², 2 threads, where a sample takes 65 ms), which budgets cut into
-/// twentieths paid about 15 times a second; a pass of at most a quarter of the budget
-/// still ends near it if the machine slows down.
+/// time (about 3 ms on the Cornell box at 256², 2 threads, where a sample takes 65 ms: 32
+/// passes of one sample against one of 32), which budgets cut into twentieths paid about
+/// 15 times a second; a pass of at most a quarter of the budget still ends near it if the
+/// machine slows down.
 fn next_pass(left: u32, budget: Option<f64>, elapsed: f64, rendered: f64) -> u32 {
     let Some(budget) = budget else {
         return left.min(PASS_SAMPLES);

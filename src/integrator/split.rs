@@ -80,9 +80,8 @@ impl LearningPixels {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FirstSplit {
     pub counts: Split,
-    /// Samples the learning pixels took before these counts.
-    learned: u32,
-    pixels: LearningPixels,
+    /// The samples each learning pixel took before these counts, and those pixels.
+    learned: Option<(u32, LearningPixels)>,
     independent: bool,
 }
 
@@ -91,8 +90,7 @@ impl FirstSplit {
     pub fn fixed(counts: Split) -> Self {
         Self {
             counts,
-            learned: 0,
-            pixels: LearningPixels::new(1, 1),
+            learned: None,
             independent: false,
         }
     }
@@ -111,8 +109,7 @@ impl FirstSplit {
     pub fn after_learning(counts: Split, learned: u32, pixels: LearningPixels) -> Self {
         Self {
             counts,
-            learned,
-            pixels,
+            learned: Some((learned, pixels)),
             independent: false,
         }
     }
@@ -139,10 +136,9 @@ impl FirstSplit {
             SplitKind::Light => self.counts.nee,
             SplitKind::Bsdf => self.counts.bsdf,
         };
-        let from = if self.learned > 0 && self.pixels.contains(x, y) {
-            self.learned
-        } else {
-            0
+        let from = match self.learned {
+            Some((n, pixels)) if pixels.contains(x, y) => n,
+            _ => 0,
         };
         (
             0,
