@@ -558,11 +558,12 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
     let rendered = |film: &Film| (film.total_samples() - samples_before) as f64 / pixels as f64;
     while !interrupted() {
         let elapsed = start.elapsed().as_secs_f64();
-        let split_learning = options.settings.split == SplitChoice::Auto
+        // The samples each learning pixel takes, in the pass that learns the split counts.
+        let split_learning = (options.settings.split == SplitChoice::Auto
             && learned_split.is_none()
-            && done < uniform_spp;
-        let (pass, learning) = if split_learning {
-            let n = split::LEARNING_SAMPLES.min(uniform_spp - done);
+            && done < uniform_spp)
+            .then(|| split::LEARNING_SAMPLES.min(uniform_spp - done));
+        let (pass, learning) = if let Some(n) = split_learning {
             (PassSamples::learning(&film, learning_pixels, n), false)
         } else if done < uniform_spp {
             let mut n = next_pass(uniform_spp - done, options.time, elapsed, rendered(&film));
@@ -603,7 +604,7 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
             first_sample: range.start,
             learning,
             split: first_split,
-            split_learning,
+            split_learning: split_learning.is_some(),
             rays: &counts,
             progress: match (&bar, options.time, adaptive) {
                 (Some(bar), Some(_), _) => Progress::Time(bar, start),
@@ -637,13 +638,12 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
             }
             e.refresh();
         }
-        if let (true, PassSamples::PerPixel(taken)) = (split_learning, &pass) {
+        if let Some(n) = split_learning {
             let mut stats = SplitStats::default();
             for s in learned.iter().filter_map(|t| t.1.as_ref()) {
                 stats.merge(s);
             }
             let counts = stats.choose();
-            let n = taken.iter().copied().max().unwrap_or(0);
             first_split = FirstSplit::after_learning(counts, n, learning_pixels);
             learned_split = Some(counts);
         }

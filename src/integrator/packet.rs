@@ -34,7 +34,7 @@ use super::path::{
     Emitter, PathState, RayCounts, emitters_at_infinity, sample_chosen_light, surface_emitter,
 };
 use super::settings::Settings;
-use super::split::{FirstSplit, PixelParts, SampleParts, SplitStats};
+use super::split::{FirstSplit, PixelParts, SampleParts, SamplePoints, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
 use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
@@ -109,6 +109,8 @@ struct SampleSlot {
     /// the rays of its camera ray, of its first vertex's light samples and of the rest.
     parts: SampleParts,
     part_rays: [u64; 3],
+    /// Where its first vertex's split points lie.
+    split_points: SamplePoints,
 }
 
 /// What a thread reuses from tile to tile: samples in flight, waiting paths, and the
@@ -424,6 +426,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             discarded: 0,
             parts: SampleParts::default(),
             part_rays: [0; 3],
+            split_points: self.split.sample_points((work.x, work.y), index),
         };
         let sample = match buffers.free.pop() {
             Some(i) => {
@@ -726,14 +729,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 let (u_light, u_select) = if v.first & (1 << lane) == 0 || counts.nee == 1 {
                     (vs.light, vs.light_select)
                 } else {
-                    let sampler = &buffers.slots[path.sample as usize].sampler;
-                    let point = self.split.point(
-                        SplitKind::Light,
-                        sampler.pixel(),
-                        sampler.sample_index(),
-                        j,
-                    );
-                    let p = sampler.first_split_point(SplitKind::Light, point);
+                    let slot = &buffers.slots[path.sample as usize];
+                    let point = slot.split_points.point(SplitKind::Light, j);
+                    let p = slot.sampler.first_split_point(SplitKind::Light, point);
                     (Vec2::new(p[0], p[1]), p[2])
                 };
                 let p = v.points[lane];
@@ -867,14 +865,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     let vs = v.lane(lane);
                     [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
                 } else {
-                    let sampler = &buffers.slots[path.sample as usize].sampler;
-                    let point = self.split.point(
-                        SplitKind::Bsdf,
-                        sampler.pixel(),
-                        sampler.sample_index(),
-                        k,
-                    );
-                    sampler.first_split_point(SplitKind::Bsdf, point)
+                    let slot = &buffers.slots[path.sample as usize];
+                    let point = slot.split_points.point(SplitKind::Bsdf, k);
+                    slot.sampler.first_split_point(SplitKind::Bsdf, point)
                 };
             }
             let lane_u = |i: usize| {

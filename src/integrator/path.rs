@@ -15,7 +15,7 @@
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
 use super::mis::{Mis, Technique};
 use super::settings::{RussianRoulette, Settings};
-use super::split::{FirstSplit, SampleParts};
+use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::light::LightSample;
@@ -240,6 +240,8 @@ struct Walk<'l> {
     learning: Option<&'l mut Learning>,
     /// Where learned splitting records what this sample's parts brought back.
     parts: Option<&'l mut SampleParts>,
+    /// Where the sample's first-vertex split points lie.
+    split_points: SamplePoints,
 }
 
 impl Walk<'_> {
@@ -401,6 +403,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             paths: 1,
             learning,
             parts,
+            split_points: self
+                .split
+                .sample_points(sampler.pixel(), sampler.sample_index()),
         };
         let camera = PathState::camera(ray.origin);
         self.trace_from(ray, camera, &mut walk, sampler, rec, rays);
@@ -507,12 +512,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     let (u_light, u_select) = if n_nee == 1 {
                         (vs.light, vs.light_select)
                     } else {
-                        let point = self.split.point(
-                            SplitKind::Light,
-                            sampler.pixel(),
-                            sampler.sample_index(),
-                            j,
-                        );
+                        let point = walk.split_points.point(SplitKind::Light, j);
                         let p = sampler.first_split_point(SplitKind::Light, point);
                         (Vec2::new(p[0], p[1]), p[2])
                     };
@@ -548,9 +548,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     // efficiency-aware splitting's count varies.
                     let p = match (first, self.split.counts.bsdf > 1) {
                         (true, true) => {
-                            let index = sampler.sample_index();
-                            let point =
-                                self.split.point(SplitKind::Bsdf, sampler.pixel(), index, k);
+                            let point = walk.split_points.point(SplitKind::Bsdf, k);
                             sampler.first_split_point(SplitKind::Bsdf, point)
                         }
                         (true, false) => sampler.split_point(SplitKind::Bsdf, 0, k),
