@@ -99,14 +99,8 @@ def fingerprint(scene, resolution, **settings):
     (the Cornell box's takes four minutes). A change confined to samples past the 20th of a
     pixel would go unnoticed; none of the estimator's code depends on that index."""
     with tempfile.TemporaryDirectory() as tmp:
-        out = Path(tmp) / "fingerprint.exr"
-        cmd = [BINARY, "render"] + ([str(scene)] if scene else [])
-        cmd += ["-o", str(out), "-q", "--resolution", f"{resolution[0]}x{resolution[1]}",
-                "--spp", str(FINGERPRINT_SPP), "--seed", str(FIRST_SEED), "--aov", "beauty"]
-        for key, value in settings.items():
-            cmd += [f"--{key.replace('_', '-')}", str(value)]
-        run(cmd)
-        channels, _ = read_exr(out)
+        _, _, channels = render(scene, Path(tmp) / "fingerprint.exr", resolution, spp=FINGERPRINT_SPP,
+                                aov="beauty", **dict(settings, seed=FIRST_SEED))
     digest = hashlib.sha256()
     for name in sorted(channels):
         digest.update(name.encode() + np.ascontiguousarray(channels[name], dtype=np.float32).tobytes())
