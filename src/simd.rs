@@ -151,6 +151,19 @@ impl F8 {
         unsafe { F8(_mm256_max_ps(self.0, o.0)) }
     }
 
+    /// The least lane (a NaN lane may or may not be ignored).
+    #[inline(always)]
+    pub fn reduce_min(self) -> f32 {
+        unsafe {
+            let m = _mm_min_ps(
+                _mm256_castps256_ps128(self.0),
+                _mm256_extractf128_ps::<1>(self.0),
+            );
+            let m = _mm_min_ps(m, _mm_movehl_ps(m, m));
+            _mm_cvtss_f32(_mm_min_ss(m, _mm_shuffle_ps::<1>(m, m)))
+        }
+    }
+
     /// Square root (correctly rounded, as f32::sqrt).
     #[inline(always)]
     pub fn sqrt(self) -> F8 {

@@ -852,6 +852,89 @@ impl World {
             })
     }
 
+    /// [`World::intersect`] of the `mask` lanes of `rays`, the flattened geometry's BVH
+    /// traversed by the rays as a packet (see `geometry::wide::WideBvh::traverse_lanes`):
+    /// the same hits, lane by lane. Runs only inside the packet kernel.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn intersect_lanes(
+        &self,
+        rays: &[Ray; crate::simd::LANES],
+        mask: u32,
+    ) -> [Option<Hit>; crate::simd::LANES] {
+        let mut hits = self.bvh.intersect_lanes(rays, mask, |lane, prim, hit| {
+            self.surfaces.alpha_passes(prim, hit, &rays[lane])
+        });
+        if let Some(placed) = &self.placed {
+            for lane in crate::geometry::triangle::Lanes::new(mask) {
+                let ray = &rays[lane];
+                let nearer = Ray {
+                    tmax: hits[lane].map_or(ray.tmax, |h| h.t),
+                    ..*ray
+                };
+                let found = placed.intersect(&nearer, |placement, prim, hit, object_ray| {
+                    self.surfaces
+                        .placed_alpha_passes(placement, prim, hit, object_ray)
+                });
+                hits[lane] = found.or(hits[lane]);
+            }
+        }
+        hits
+    }
+
+    /// [`World::occluded`] of the `mask` lanes of `rays`: the mask of those blocked. Runs
+    /// only inside the packet kernel.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn occluded_lanes(&self, rays: &[Ray; crate::simd::LANES], mask: u32) -> u32 {
+        let mut occluded = self.bvh.occluded_lanes(rays, mask, |lane, prim, hit| {
+            self.surfaces.alpha_passes(prim, hit, &rays[lane])
+        });
+        if let Some(placed) = &self.placed {
+            for lane in crate::geometry::triangle::Lanes::new(mask & !occluded) {
+                let blocked = placed.occluded(&rays[lane], |placement, prim, hit, object_ray| {
+                    self.surfaces
+                        .placed_alpha_passes(placement, prim, hit, object_ray)
+                });
+                occluded |= u32::from(blocked) << lane;
+            }
+        }
+        occluded
+    }
+
+    /// How many of `rays` hit something (`occlusion`: are blocked), queried eight at a time
+    /// as the packet kernel queries them ([`World::intersect_lanes`],
+    /// [`World::occluded_lanes`]); `None` where the CPU lacks AVX2 and FMA. For the
+    /// throughput benchmark, which sets these against the single-ray queries.
+    pub fn count_hits_in_packets(&self, rays: &[Ray], occlusion: bool) -> Option<usize> {
+        #[cfg(target_arch = "x86_64")]
+        if crate::integrator::packet_kernel_available() {
+            // SAFETY: the CPU has AVX2 and FMA.
+            return Some(unsafe { self.count_hits_in_packets_avx2(rays, occlusion) });
+        }
+        let _ = (rays, occlusion);
+        None
+    }
+
+    /// [`World::count_hits_in_packets`] on a CPU with AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn count_hits_in_packets_avx2(&self, rays: &[Ray], occlusion: bool) -> usize {
+        use crate::simd::LANES;
+        let mut hits = 0;
+        for chunk in rays.chunks(LANES) {
+            let packet: [Ray; LANES] = std::array::from_fn(|l| chunk[l.min(chunk.len() - 1)]);
+            let mask = (1u32 << chunk.len()) - 1;
+            hits += if occlusion {
+                self.occluded_lanes(&packet, mask).count_ones() as usize
+            } else {
+                let found = self.intersect_lanes(&packet, mask);
+                found.iter().filter(|h| h.is_some()).count()
+            };
+        }
+        hits
+    }
+
     /// Primitives the renderer intersects: flattened triangles and spheres, plus every
     /// triangle of every placement.
     pub fn primitive_count(&self) -> usize {

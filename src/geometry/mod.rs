@@ -9,10 +9,16 @@ pub mod sphere;
 pub mod triangle;
 pub mod wide;
 
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{F8, LANES};
 use glam::Vec3;
 use obvhs::aabb::Aabb;
 use ray::Ray;
+#[cfg(target_arch = "x86_64")]
+use triangle::Lanes;
 use triangle::{RayShear, TriangleBlock};
+#[cfg(target_arch = "x86_64")]
+use wide::{LaneRays, LaneVisitor, Subtree};
 use wide::{LeafResult, WideBvh};
 
 /// A primitive the BVH holds.
@@ -227,41 +233,11 @@ impl Bvh {
         mut accept: F,
     ) -> Option<Hit> {
         let shear = RayShear::new(ray);
-        let mut closest = Closest {
-            tmax: ray.tmax,
-            hit: None,
-            prim: u32::MAX,
-        };
+        let mut closest = Closest::new(ray.tmax);
         self.bvh.traverse(ray, |index, count, _| {
-            let (blocks, shapes) = self.leaf(index, count);
-            let before = closest.tmax;
-            for leaf in blocks {
-                if let Some(hits) = triangle::intersect(&shear, &leaf.block, closest.bound()) {
-                    for lane in hits.lanes() {
-                        let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
-                        closest.consider(hits.get(lane), prim, flags, &mut accept);
-                    }
-                }
-            }
-            for s in shapes {
-                if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
-                    closest.consider(hit, s.prim, s.flags, &mut accept);
-                }
-            }
-            if closest.tmax < before {
-                LeafResult::Closer(closest.tmax)
-            } else {
-                LeafResult::Miss
-            }
+            self.leaf_closest(index, count, ray, &shear, &mut closest, &mut accept)
         });
-        closest.hit.map(|h| Hit {
-            t: h.t,
-            prim: closest.prim,
-            b1: h.b1,
-            b2: h.b2,
-            front: h.front,
-            instance: NOT_PLACED,
-        })
+        closest.into_hit()
     }
 
     /// True if anything accepted lies along `ray` in `(0, ray.tmax)`; stops at the first hit.
@@ -269,29 +245,244 @@ impl Bvh {
         let shear = RayShear::new(ray);
         let mut occluded = false;
         self.bvh.traverse(ray, |index, count, _| {
-            let (blocks, shapes) = self.leaf(index, count);
-            for leaf in blocks {
-                if let Some(hits) = triangle::intersect(&shear, &leaf.block, ray.tmax) {
-                    for lane in hits.lanes() {
-                        let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
-                        if accepted(&hits.get(lane), prim, flags, &mut accept) {
-                            occluded = true;
-                            return LeafResult::Stop;
-                        }
+            occluded = self.leaf_occludes(index, count, ray, &shear, &mut accept);
+            if occluded {
+                LeafResult::Stop
+            } else {
+                LeafResult::Miss
+            }
+        });
+        occluded
+    }
+
+    /// [`Bvh::intersect`] of the `mask` lanes of `rays` at once (a packet traversal; see
+    /// [`WideBvh::traverse_lanes`]): the same hits, lane by lane. `accept(lane, prim, hit)`
+    /// filters hits on alpha-tested triangles. Runs only inside the packet kernel.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn intersect_lanes<F: FnMut(usize, u32, &PrimitiveHit) -> bool>(
+        &self,
+        rays: &[Ray; LANES],
+        mask: u32,
+        accept: F,
+    ) -> [Option<Hit>; LANES] {
+        let mut visitor = ClosestLanes {
+            bvh: self,
+            rays,
+            shears: shears_of(rays, mask),
+            closest: std::array::from_fn(|lane| {
+                // An idle lane's negative bound keeps it out of every box.
+                Closest::new(if mask & (1 << lane) != 0 {
+                    rays[lane].tmax
+                } else {
+                    -1.0
+                })
+            }),
+            accept,
+        };
+        self.bvh.traverse_lanes(&LaneRays::new(rays), &mut visitor);
+        visitor.closest.map(Closest::into_hit)
+    }
+
+    /// [`Bvh::occluded`] of the `mask` lanes of `rays` at once: the mask of those occluded.
+    /// `accept` as for [`Bvh::intersect_lanes`]. Runs only inside the packet kernel.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn occluded_lanes<F: FnMut(usize, u32, &PrimitiveHit) -> bool>(
+        &self,
+        rays: &[Ray; LANES],
+        mask: u32,
+        accept: F,
+    ) -> u32 {
+        let mut visitor = OccludedLanes {
+            bvh: self,
+            rays,
+            shears: shears_of(rays, mask),
+            bounds: std::array::from_fn(|lane| {
+                if mask & (1 << lane) != 0 {
+                    rays[lane].tmax
+                } else {
+                    -1.0
+                }
+            }),
+            occluded: 0,
+            accept,
+        };
+        self.bvh.traverse_lanes(&LaneRays::new(rays), &mut visitor);
+        visitor.occluded
+    }
+
+    /// Tests the leaf labelled `(index, count)` for `ray`'s closest hit (`shear` is the
+    /// ray's): the leaf test of [`Bvh::intersect`].
+    #[inline(always)]
+    fn leaf_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        index: u32,
+        count: u32,
+        ray: &Ray,
+        shear: &RayShear,
+        closest: &mut Closest,
+        accept: &mut F,
+    ) -> LeafResult {
+        let (blocks, shapes) = self.leaf(index, count);
+        let before = closest.tmax;
+        for leaf in blocks {
+            if let Some(hits) = triangle::intersect(shear, &leaf.block, closest.bound()) {
+                for lane in hits.lanes() {
+                    let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
+                    closest.consider(hits.get(lane), prim, flags, accept);
+                }
+            }
+        }
+        for s in shapes {
+            if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
+                closest.consider(hit, s.prim, s.flags, accept);
+            }
+        }
+        if closest.tmax < before {
+            LeafResult::Closer(closest.tmax)
+        } else {
+            LeafResult::Miss
+        }
+    }
+
+    /// Whether the leaf labelled `(index, count)` holds an accepted hit along `ray` (`shear`
+    /// is the ray's): the leaf test of [`Bvh::occluded`].
+    #[inline(always)]
+    fn leaf_occludes<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        index: u32,
+        count: u32,
+        ray: &Ray,
+        shear: &RayShear,
+        accept: &mut F,
+    ) -> bool {
+        let (blocks, shapes) = self.leaf(index, count);
+        for leaf in blocks {
+            if let Some(hits) = triangle::intersect(shear, &leaf.block, ray.tmax) {
+                for lane in hits.lanes() {
+                    let (prim, flags) = (leaf.prims[lane], leaf.flags[lane]);
+                    if accepted(&hits.get(lane), prim, flags, accept) {
+                        return true;
                     }
                 }
             }
-            for s in shapes {
-                if let Some(hit) = s.shape.intersect(ray, ray.tmax)
-                    && accepted(&hit, s.prim, s.flags, &mut accept)
-                {
-                    occluded = true;
-                    return LeafResult::Stop;
-                }
+        }
+        shapes.iter().any(|s| {
+            s.shape
+                .intersect(ray, ray.tmax)
+                .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
+        })
+    }
+}
+
+/// The watertight test's constants of the `mask` lanes of `rays`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn shears_of(rays: &[Ray; LANES], mask: u32) -> [RayShear; LANES] {
+    let mut shears = [RayShear::IDLE; LANES];
+    for lane in Lanes::new(mask) {
+        shears[lane] = RayShear::new(&rays[lane]);
+    }
+    shears
+}
+
+/// A closest-hit query of eight lanes: each lane's closest hit so far.
+#[cfg(target_arch = "x86_64")]
+struct ClosestLanes<'a, F> {
+    bvh: &'a Bvh,
+    rays: &'a [Ray; LANES],
+    shears: [RayShear; LANES],
+    closest: [Closest; LANES],
+    accept: F,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'_, F> {
+    #[inline(always)]
+    fn bounds(&self) -> F8 {
+        F8::from_array(self.closest.each_ref().map(|c| c.tmax))
+    }
+
+    #[inline(always)]
+    fn leaf(&mut self, index: u32, count: u32, active: u32) {
+        for lane in Lanes::new(active) {
+            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+            let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+            self.bvh
+                .leaf_closest(index, count, ray, shear, &mut self.closest[lane], accept);
+        }
+    }
+
+    #[inline(always)]
+    fn single(&mut self, subtree: Subtree, lane: usize) {
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears[lane]);
+        let closest = &mut self.closest[lane];
+        let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+        let tmax = closest.tmax;
+        bvh.bvh
+            .traverse_from(subtree, ray, tmax, |index, count, _| {
+                bvh.leaf_closest(index, count, ray, shear, closest, accept)
+            });
+    }
+}
+
+/// An occlusion query of eight lanes: the lanes found occluded so far.
+#[cfg(target_arch = "x86_64")]
+struct OccludedLanes<'a, F> {
+    bvh: &'a Bvh,
+    rays: &'a [Ray; LANES],
+    shears: [RayShear; LANES],
+    /// The rays' bounds; -1 once a lane is answered (or idle).
+    bounds: [f32; LANES],
+    occluded: u32,
+    accept: F,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> OccludedLanes<'_, F> {
+    #[inline(always)]
+    fn answer(&mut self, lane: usize) {
+        self.occluded |= 1 << lane;
+        self.bounds[lane] = -1.0;
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<'_, F> {
+    #[inline(always)]
+    fn bounds(&self) -> F8 {
+        F8::from_array(self.bounds)
+    }
+
+    #[inline(always)]
+    fn leaf(&mut self, index: u32, count: u32, active: u32) {
+        for lane in Lanes::new(active) {
+            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+            let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+            if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
+                self.answer(lane);
             }
-            LeafResult::Miss
-        });
-        occluded
+        }
+    }
+
+    #[inline(always)]
+    fn single(&mut self, subtree: Subtree, lane: usize) {
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears[lane]);
+        let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+        let mut occluded = false;
+        bvh.bvh
+            .traverse_from(subtree, ray, ray.tmax, |index, count, _| {
+                occluded = bvh.leaf_occludes(index, count, ray, shear, accept);
+                if occluded {
+                    LeafResult::Stop
+                } else {
+                    LeafResult::Miss
+                }
+            });
+        if occluded {
+            self.answer(lane);
+        }
     }
 }
 
@@ -307,6 +498,29 @@ struct Closest {
 }
 
 impl Closest {
+    /// No hit yet, below `tmax`.
+    #[inline(always)]
+    fn new(tmax: f32) -> Self {
+        Self {
+            tmax,
+            hit: None,
+            prim: u32::MAX,
+        }
+    }
+
+    /// The closest hit found, if any (on geometry that is not placed).
+    #[inline(always)]
+    fn into_hit(self) -> Option<Hit> {
+        self.hit.map(|h| Hit {
+            t: h.t,
+            prim: self.prim,
+            b1: h.b1,
+            b2: h.b2,
+            front: h.front,
+            instance: NOT_PLACED,
+        })
+    }
+
     /// The bound a primitive's hit must be below to be considered.
     #[inline(always)]
     fn bound(&self) -> f32 {
@@ -419,20 +633,10 @@ mod tests {
             .collect()
     }
 
-    /// A soup of 3,000 random triangles and 300 spheres (sizes over three decades, with
-    /// exact duplicates; some culled from the back, some alpha-tested and accepted for even
-    /// primitives) against brute force, for random rays from inside and outside it with random
-    /// bounds: the same closest hit (distance, and the first-given primitive of coincident
-    /// ones) and the same occlusion answer. This exercises multi-level nodes, nearest-first
-    /// order, pruning by the closest hit, and leaves of several triangle blocks' lanes and
-    /// shapes.
-    #[test]
-    fn closest_hits_and_occlusion_match_brute_force() {
-        let mut rng = crate::sampling::pcg::Pcg32::new(11, 3);
-        let mut point = |scale: f32| {
-            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * scale
-                - Vec3::splat(scale)
-        };
+    /// 3,000 random triangles and 300 spheres within 5 of the origin (sizes over three
+    /// decades, with exact duplicates), some culled from the back (flag CULL_BACK) and some
+    /// alpha-tested (ALPHA_TESTED), with `point(scale)` a random point within `scale`.
+    fn random_soup(point: &mut impl FnMut(f32) -> Vec3) -> (Vec<Primitive>, Vec<u8>) {
         let mut soup = Vec::new();
         for i in 0..3300 {
             let size = [0.01, 0.1, 1.0][i % 3];
@@ -449,13 +653,109 @@ mod tests {
                 soup.push(soup[soup.len() - 1]);
             }
         }
-        let flags: Vec<u8> = (0..soup.len())
+        let flags = (0..soup.len())
             .map(|i| match i % 7 {
                 0 => CULL_BACK,
                 1 => ALPHA_TESTED,
                 _ => 0,
             })
             .collect();
+        (soup, flags)
+    }
+
+    /// The packet queries answer as the single-ray ones, lane by lane and to the bit, on the
+    /// random soup: packets of rays from one point (coherent) and from anywhere
+    /// (incoherent), with random bounds and random idle lanes.
+    #[test]
+    fn packet_queries_answer_as_single_rays() {
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let mut rng = crate::sampling::pcg::Pcg32::new(5, 9);
+        let mut point = |scale: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * scale
+                - Vec3::splat(scale)
+        };
+        let (soup, flags) = random_soup(&mut point);
+        let bvh = Bvh::build(&soup, &flags);
+        let (mut hits, mut lanes) = (0, 0);
+        for k in 0..3000 {
+            let shared = point(6.0);
+            let rays: [Ray; LANES] = std::array::from_fn(|_| Ray {
+                origin: if k % 2 == 0 { shared } else { point(6.0) },
+                dir: point(1.0),
+                tmax: if k % 3 == 0 {
+                    f32::INFINITY
+                } else {
+                    8.0 * point(0.5).x.abs()
+                },
+            });
+            let mask = match k % 4 {
+                0 => 0xff,
+                _ => (point(0.5).x.to_bits() >> 3) & 0xff,
+            };
+            // SAFETY: the CPU has AVX2 and FMA.
+            let (found, occluded) = unsafe { query_lanes(&bvh, &rays, mask) };
+            for (lane, ray) in rays.iter().enumerate() {
+                if mask & (1 << lane) == 0 {
+                    assert!(found[lane].is_none() && occluded & (1 << lane) == 0);
+                    continue;
+                }
+                let accept = |prim: u32, _: &PrimitiveHit| !prim.is_multiple_of(3);
+                let single = bvh.intersect(ray, accept);
+                let bits = |h: Option<Hit>| {
+                    h.map(|h| {
+                        (
+                            h.t.to_bits(),
+                            h.prim,
+                            h.b1.to_bits(),
+                            h.b2.to_bits(),
+                            h.front,
+                        )
+                    })
+                };
+                assert_eq!(bits(found[lane]), bits(single), "packet {k}, lane {lane}");
+                let blocked = occluded & (1 << lane) != 0;
+                assert_eq!(
+                    blocked,
+                    bvh.occluded(ray, accept),
+                    "packet {k}, lane {lane}"
+                );
+                (hits, lanes) = (hits + single.is_some() as u32, lanes + 1);
+            }
+        }
+        assert!(
+            hits > lanes / 4 && hits < lanes * 3 / 4,
+            "{hits} of {lanes} lanes hit"
+        );
+    }
+
+    /// The packet queries of the soup test, compiled for AVX2 and FMA; alpha-tested
+    /// primitives accept unless a multiple of 3.
+    #[target_feature(enable = "avx2,fma")]
+    fn query_lanes(bvh: &Bvh, rays: &[Ray; LANES], mask: u32) -> ([Option<Hit>; LANES], u32) {
+        let accept = |_: usize, prim: u32, _: &PrimitiveHit| !prim.is_multiple_of(3);
+        (
+            bvh.intersect_lanes(rays, mask, accept),
+            bvh.occluded_lanes(rays, mask, accept),
+        )
+    }
+
+    /// A soup of 3,000 random triangles and 300 spheres (sizes over three decades, with
+    /// exact duplicates; some culled from the back, some alpha-tested and accepted for even
+    /// primitives) against brute force, for random rays from inside and outside it with random
+    /// bounds: the same closest hit (distance, and the first-given primitive of coincident
+    /// ones) and the same occlusion answer. This exercises multi-level nodes, nearest-first
+    /// order, pruning by the closest hit, and leaves of several triangle blocks' lanes and
+    /// shapes.
+    #[test]
+    fn closest_hits_and_occlusion_match_brute_force() {
+        let mut rng = crate::sampling::pcg::Pcg32::new(11, 3);
+        let mut point = |scale: f32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 * scale
+                - Vec3::splat(scale)
+        };
+        let (soup, flags) = random_soup(&mut point);
         let accept = |prim: u32, _: &PrimitiveHit| prim.is_multiple_of(2);
         let bvh = Bvh::build(&soup, &flags);
         let (mut hits, mut sphere_hits) = (0, 0);

@@ -89,12 +89,23 @@ impl BlockHits {
 
 /// Per-ray constants of the watertight test: the axis permutation (kx, ky, kz) that puts
 /// the ray's largest direction component on z, the origin's coordinates on those axes, and
-/// the shear (sx, sy, sz) that maps the ray onto +z, each broadcast to four lanes.
+/// the shear (sx, sy, sz) that maps the ray onto +z. Kept as scalars (28 bytes, so that a
+/// packet's eight cost little to set up) and broadcast to four lanes where a block is
+/// tested, which costs what loading broadcast copies would.
 #[derive(Clone, Copy, Debug)]
 pub struct RayShear {
-    axes: [usize; 3],
-    origin: [Vec4; 3],
-    shear: [Vec4; 3],
+    axes: [u32; 3],
+    origin: [f32; 3],
+    shear: [f32; 3],
+}
+
+impl RayShear {
+    /// The constants of no ray, for lanes that trace none.
+    pub const IDLE: Self = Self {
+        axes: [0, 1, 2],
+        origin: [0.0; 3],
+        shear: [0.0; 3],
+    };
 }
 
 impl RayShear {
@@ -116,9 +127,9 @@ impl RayShear {
         // with the same shear, not the shear's exact rounding.
         let sz = 1.0 / d[kz];
         Self {
-            axes: [kx, ky, kz],
-            origin: [kx, ky, kz].map(|k| Vec4::splat(o[k])),
-            shear: [d[kx] * sz, d[ky] * sz, sz].map(Vec4::splat),
+            axes: [kx as u32, ky as u32, kz as u32],
+            origin: [o[kx], o[ky], o[kz]],
+            shear: [d[kx] * sz, d[ky] * sz, sz],
         }
     }
 }
@@ -129,13 +140,15 @@ impl RayShear {
 /// barycentrics are the scalar test's to the bit.
 #[inline(always)]
 pub fn intersect(s: &RayShear, block: &TriangleBlock, tmax: f32) -> Option<BlockHits> {
-    let [kx, ky, kz] = s.axes;
+    let [kx, ky, kz] = s.axes.map(|k| k as usize);
+    let origin = s.origin.map(Vec4::splat);
+    let shear = s.shear.map(Vec4::splat);
     // Vertex v relative to the origin, permuted and sheared, for the four triangles.
     let vertex = |v: usize| {
         let c = &block.coords[v];
-        let z = c[kz] - s.origin[2];
-        let x = (c[kx] - s.origin[0]) - s.shear[0] * z;
-        let y = (c[ky] - s.origin[1]) - s.shear[1] * z;
+        let z = c[kz] - origin[2];
+        let x = (c[kx] - origin[0]) - shear[0] * z;
+        let y = (c[ky] - origin[1]) - shear[1] * z;
         (x, y, z)
     };
     let ((ax, ay, az), (bx, by, bz), (cx, cy, cz)) = (vertex(0), vertex(1), vertex(2));
@@ -157,7 +170,7 @@ pub fn intersect(s: &RayShear, block: &TriangleBlock, tmax: f32) -> Option<Block
         return None;
     }
     let det = u + v + w;
-    let sz = s.shear[2];
+    let sz = shear[2];
     let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
     let inv_det = Vec4::ONE / det;
     let t = t_scaled * inv_det;

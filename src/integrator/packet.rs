@@ -539,12 +539,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         rays.closest += active.count_ones() as u64;
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
+        let hits = world.intersect_lanes(&std::array::from_fn(|l| lanes[l].ray), *active);
         for lane in Lanes::new(*active) {
             let path = &lanes[lane];
             let slot = &mut buffers.slots[path.sample as usize];
             slot.rays += 1;
             self.count_part_ray(slot, path.state.depth, true);
-            let Some(hit) = world.intersect(&path.ray) else {
+            let Some(hit) = hits[lane] else {
                 if EMITTERS {
                     emitters_at_infinity(world, path.ray.dir, |e| {
                         self.reached_emitter(&path.state, e, slot)
@@ -803,15 +804,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let (f, pdf) = unsafe { v.bsdf.eval_pdf(v.wo, wi_local, sampled) };
             let zero = F8::ZERO;
             sampled &= (f.x.ne(zero) | f.y.ne(zero) | f.z.ne(zero)).bits();
-            let mut lit = 0u32;
             for lane in Lanes::new(sampled) {
                 let slot = &mut buffers.slots[lanes[lane].sample as usize];
                 slot.rays += 1;
                 self.count_part_ray(slot, lanes[lane].state.depth, false);
-                if !world.occluded(&shadow[lane]) {
-                    lit |= 1 << lane;
-                }
             }
+            let lit = sampled & !world.occluded_lanes(&shadow, sampled);
             rays.shadow += sampled.count_ones() as u64;
             if lit == 0 {
                 continue;
