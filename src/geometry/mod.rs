@@ -1,5 +1,6 @@
 //! Geometry in render space: triangles, the BVH over them (four-wide, built by obvhs),
-//! and the two ray queries the integrator needs: closest hit and occlusion.
+//! and the two ray queries the integrator needs: closest hit and occlusion, for one ray or
+//! (in the packet kernel) eight as a packet.
 
 pub mod frame;
 pub mod instances;

@@ -14,8 +14,10 @@
 //! the shading points of triangles whose material is the same all over and does not emit
 //! (`world::lanes`): with the mends around them, 17 % fewer of the Cornell box's
 //! instructions (988 M to 823 M at 64×64, 16 spp), and 17 % less time than the scalar
-//! kernel. Ray queries, the other shading points and the other lights' samples go through
-//! the scalar code lane by lane, so every scene the scalar kernel renders renders here too.
+//! kernel. The lanes' rays are traced as packets of eight (`World::intersect_lanes`,
+//! `World::occluded_lanes`): 5.6 % fewer of the Cornell box's instructions, with the same
+//! hits. The other shading points and the other lights' samples go through the scalar
+//! code lane by lane, so every scene the scalar kernel renders renders here too.
 //!
 //! The estimator is the scalar kernel's, sample for sample: every path takes the same
 //! random numbers (the sampler is a pure function of pixel, sample index, depth and
