@@ -17,6 +17,8 @@ use obvhs::aabb::Aabb;
 use ray::Ray;
 #[cfg(target_arch = "x86_64")]
 use triangle::Lanes;
+#[cfg(target_arch = "x86_64")]
+use triangle::ShearLanes;
 use triangle::{RayShear, TriangleBlock};
 #[cfg(target_arch = "x86_64")]
 use wide::{LaneRays, LaneVisitor, Subtree};
@@ -267,18 +269,22 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> [Option<Hit>; LANES] {
+        let shears = shears_of(rays, mask);
+        // An idle lane's negative bound keeps it out of every box.
+        let tmax: [f32; LANES] = std::array::from_fn(|l| {
+            if mask & (1 << l) != 0 {
+                rays[l].tmax
+            } else {
+                -1.0
+            }
+        });
         let mut visitor = ClosestLanes {
             bvh: self,
             rays,
-            shears: shears_of(rays, mask),
-            closest: std::array::from_fn(|lane| {
-                // An idle lane's negative bound keeps it out of every box.
-                Closest::new(if mask & (1 << lane) != 0 {
-                    rays[lane].tmax
-                } else {
-                    -1.0
-                })
-            }),
+            shear_lanes: ShearLanes::new(&shears),
+            shears,
+            closest: tmax.map(Closest::new),
+            bound: tmax,
             accept,
         };
         self.bvh.traverse_lanes(&LaneRays::new(rays), &mut visitor);
@@ -295,10 +301,12 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> u32 {
+        let shears = shears_of(rays, mask);
         let mut visitor = OccludedLanes {
             bvh: self,
             rays,
-            shears: shears_of(rays, mask),
+            shear_lanes: ShearLanes::new(&shears),
+            shears,
             bounds: std::array::from_fn(|lane| {
                 if mask & (1 << lane) != 0 {
                     rays[lane].tmax
@@ -335,11 +343,7 @@ impl Bvh {
                 }
             }
         }
-        for s in shapes {
-            if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
-                closest.consider(hit, s.prim, s.flags, accept);
-            }
-        }
+        shapes_closest(shapes, ray, closest, accept);
         if closest.tmax < before {
             LeafResult::Closer(closest.tmax)
         } else {
@@ -369,12 +373,48 @@ impl Bvh {
                 }
             }
         }
-        shapes.iter().any(|s| {
-            s.shape
-                .intersect(ray, ray.tmax)
-                .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
-        })
+        shapes_occlude(shapes, ray, accept)
     }
+}
+
+/// Tests `shapes` for `ray`'s closest hit.
+#[inline(always)]
+fn shapes_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
+    shapes: &[LeafShape],
+    ray: &Ray,
+    closest: &mut Closest,
+    accept: &mut F,
+) {
+    for s in shapes {
+        if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
+            closest.consider(hit, s.prim, s.flags, accept);
+        }
+    }
+}
+
+/// Whether one of `shapes` holds an accepted hit along `ray`.
+#[inline(always)]
+fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
+    shapes: &[LeafShape],
+    ray: &Ray,
+    accept: &mut F,
+) -> bool {
+    shapes.iter().any(|s| {
+        s.shape
+            .intersect(ray, ray.tmax)
+            .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
+    })
+}
+
+/// Whether a leaf's triangles are tested for the `active` lanes faster one triangle
+/// against all lanes ([`triangle::intersect_lanes`]) than one block of four triangles
+/// against each lane ([`triangle::intersect`]): when there are more lanes than triangles,
+/// the two tests costing about as many instructions.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lanes_pay(blocks: &[LeafTriangles], active: u32) -> bool {
+    let triangles: usize = blocks.iter().map(|b| b.block.triangles()).sum();
+    active.count_ones() as usize > triangles
 }
 
 /// The watertight test's constants of the `mask` lanes of `rays`.
@@ -394,7 +434,10 @@ struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
     shears: [RayShear; LANES],
+    shear_lanes: ShearLanes,
     closest: [Closest; LANES],
+    /// Each lane's `Closest::bound`.
+    bound: [f32; LANES],
     accept: F,
 }
 
@@ -407,11 +450,45 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 
     #[inline(always)]
     fn leaf(&mut self, index: u32, count: u32, active: u32) {
-        for lane in Lanes::new(active) {
-            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-            let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
-            self.bvh
-                .leaf_closest(index, count, ray, shear, &mut self.closest[lane], accept);
+        let (blocks, shapes) = self.bvh.leaf(index, count);
+        if !lanes_pay(blocks, active) {
+            for lane in Lanes::new(active) {
+                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+                let closest = &mut self.closest[lane];
+                self.bvh
+                    .leaf_closest(index, count, ray, shear, closest, accept);
+                self.bound[lane] = closest.bound();
+            }
+            return;
+        }
+        // Triangle by triangle, the lanes at once. A lane's hits are taken in the
+        // single-ray test's order within each block, and its closest hit is the least
+        // (distance, primitive) whatever the order: the single-ray query's.
+        for leaf in blocks {
+            for tri in 0..leaf.block.triangles() {
+                let bound = F8::from_array(self.bound);
+                let Some(hits) =
+                    triangle::intersect_lanes(&self.shear_lanes, &leaf.block, tri, bound, active)
+                else {
+                    continue;
+                };
+                let (prim, flags) = (leaf.prims[tri], leaf.flags[tri]);
+                for lane in Lanes::new(hits.mask) {
+                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                    let closest = &mut self.closest[lane];
+                    closest.consider(hits.get(lane), prim, flags, accept);
+                    self.bound[lane] = closest.bound();
+                }
+            }
+        }
+        if !shapes.is_empty() {
+            for lane in Lanes::new(active) {
+                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                let closest = &mut self.closest[lane];
+                shapes_closest(shapes, &self.rays[lane], closest, accept);
+                self.bound[lane] = closest.bound();
+            }
         }
     }
 
@@ -425,6 +502,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             .traverse_from(subtree, ray, tmax, |index, count, _| {
                 bvh.leaf_closest(index, count, ray, shear, closest, accept)
             });
+        self.bound[lane] = closest.bound();
     }
 }
 
@@ -434,6 +512,7 @@ struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
     shears: [RayShear; LANES],
+    shear_lanes: ShearLanes,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
     occluded: u32,
@@ -457,11 +536,42 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
     }
 
     #[inline(always)]
-    fn leaf(&mut self, index: u32, count: u32, active: u32) {
-        for lane in Lanes::new(active) {
+    fn leaf(&mut self, index: u32, count: u32, mut active: u32) {
+        let (blocks, shapes) = self.bvh.leaf(index, count);
+        if !lanes_pay(blocks, active) {
+            for lane in Lanes::new(active) {
+                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+                if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
+                    self.answer(lane);
+                }
+            }
+            return;
+        }
+        let tmax = F8::from_array(self.bounds);
+        for leaf in blocks {
+            for tri in 0..leaf.block.triangles() {
+                let Some(hits) =
+                    triangle::intersect_lanes(&self.shear_lanes, &leaf.block, tri, tmax, active)
+                else {
+                    continue;
+                };
+                let (prim, flags) = (leaf.prims[tri], leaf.flags[tri]);
+                for lane in Lanes::new(hits.mask) {
+                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                    if accepted(&hits.get(lane), prim, flags, accept) {
+                        self.answer(lane);
+                        active &= !(1 << lane);
+                    }
+                }
+                if active == 0 {
+                    return;
+                }
+            }
+        }
+        for lane in Lanes::new(if shapes.is_empty() { 0 } else { active }) {
             let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-            let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
-            if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
+            if shapes_occlude(shapes, &self.rays[lane], accept) {
                 self.answer(lane);
             }
         }

@@ -3,6 +3,8 @@
 
 use super::PrimitiveHit;
 use super::ray::Ray;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{F8, LANES, M8, U8};
 use glam::{DVec3, Vec3, Vec4};
 
 /// The set bits of a lane mask, lowest first.
@@ -53,6 +55,14 @@ impl TriangleBlock {
             }
         }
         Self { coords }
+    }
+}
+
+impl TriangleBlock {
+    /// How many triangles the block holds (in its first lanes).
+    #[inline(always)]
+    pub fn triangles(&self) -> usize {
+        4 - self.coords[0][0].is_nan_mask().bitmask().count_ones() as usize
     }
 }
 
@@ -199,6 +209,166 @@ fn exact_edge_functions(lanes: u32, xy: [Vec4; 6], uvw: [Vec4; 3]) -> (Vec4, Vec
         w[l] = (bx[l] * ay[l] - by[l] * ax[l]) as f32;
     }
     (Vec4::from(u), Vec4::from(v), Vec4::from(w))
+}
+
+/// Eight rays' constants of the watertight test, one a lane: [`RayShear`]s transposed, for
+/// testing one triangle against a packet ([`intersect_lanes`]).
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct ShearLanes {
+    /// Per permuted axis (kx, ky, kz): the lanes where it is the x axis, and where it is the
+    /// y axis (the z axis elsewhere).
+    is_x: [M8; 3],
+    is_y: [M8; 3],
+    origin: [F8; 3],
+    shear: [F8; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl ShearLanes {
+    /// The lanes of `shears`.
+    #[inline(always)]
+    pub(crate) fn new(shears: &[RayShear; LANES]) -> Self {
+        let (mut axes, mut origin, mut shear) =
+            ([[0u32; LANES]; 3], [[0.0; LANES]; 3], [[0.0; LANES]; 3]);
+        for (lane, s) in shears.iter().enumerate() {
+            for k in 0..3 {
+                axes[k][lane] = s.axes[k];
+                origin[k][lane] = s.origin[k];
+                shear[k][lane] = s.shear[k];
+            }
+        }
+        let mut lanes = Self {
+            is_x: [M8::none(); 3],
+            is_y: [M8::none(); 3],
+            origin: [F8::ZERO; 3],
+            shear: [F8::ZERO; 3],
+        };
+        for k in 0..3 {
+            let axis = U8::from_array(axes[k]);
+            lanes.is_x[k] = axis.eq(U8::splat(0));
+            lanes.is_y[k] = axis.eq(U8::splat(1));
+            lanes.origin[k] = F8::from_array(origin[k]);
+            lanes.shear[k] = F8::from_array(shear[k]);
+        }
+        lanes
+    }
+
+    /// Coordinate `k` of the permutation of `(x, y, z)` in each lane.
+    #[inline(always)]
+    fn pick(&self, k: usize, x: F8, y: F8, z: F8) -> F8 {
+        F8::select(self.is_x[k], x, F8::select(self.is_y[k], y, z))
+    }
+
+    /// Vertex `(x, y, z)` relative to each lane's origin, permuted and sheared.
+    #[inline(always)]
+    fn vertex(&self, x: f32, y: f32, z: f32) -> [F8; 3] {
+        let (x, y, z) = (F8::splat(x), F8::splat(y), F8::splat(z));
+        let sz = self.pick(2, x, y, z) - self.origin[2];
+        let sx = (self.pick(0, x, y, z) - self.origin[0]) - self.shear[0] * sz;
+        let sy = (self.pick(1, x, y, z) - self.origin[1]) - self.shear[1] * sz;
+        [sx, sy, sz]
+    }
+}
+
+/// A packet's hits on one triangle, lane by lane.
+#[cfg(target_arch = "x86_64")]
+pub(crate) struct LaneHits {
+    /// Lanes that hit the triangle within their bound.
+    pub mask: u32,
+    t: F8,
+    b1: F8,
+    b2: F8,
+    /// Lanes that arrive on the triangle's front.
+    front: u32,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneHits {
+    /// Lane `lane`'s hit (meaningful when its bit in `mask` is set).
+    #[inline(always)]
+    pub fn get(&self, lane: usize) -> PrimitiveHit {
+        PrimitiveHit {
+            t: self.t.to_array()[lane],
+            b1: self.b1.to_array()[lane],
+            b2: self.b2.to_array()[lane],
+            front: self.front & (1 << lane) != 0,
+        }
+    }
+}
+
+/// Intersects triangle `tri` of `block` with the `active` lanes of a packet, each within
+/// `(0, tmax)` of its lane. Each lane runs [`intersect`]'s operations in its order: its
+/// hit, distance and barycentrics are those [`intersect`] gives its ray, to the bit. Runs
+/// only inside the packet kernel (AVX2 and FMA; see `crate::simd`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn intersect_lanes(
+    s: &ShearLanes,
+    block: &TriangleBlock,
+    tri: usize,
+    tmax: F8,
+    active: u32,
+) -> Option<LaneHits> {
+    // No closures over vectors here: one would compile outside the packet kernel's AVX2
+    // context.
+    // Read as arrays: a vector's index is a match.
+    let c = |v: usize, axis: usize| AsRef::<[f32; 4]>::as_ref(&block.coords[v][axis])[tri];
+    let [ax, ay, az] = s.vertex(c(0, 0), c(0, 1), c(0, 2));
+    let [bx, by, bz] = s.vertex(c(1, 0), c(1, 1), c(1, 2));
+    let [cx, cy, cz] = s.vertex(c(2, 0), c(2, 1), c(2, 2));
+    let mut u = cx * by - cy * bx;
+    let mut v = ax * cy - ay * cx;
+    let mut w = bx * ay - by * ax;
+    let zero = F8::ZERO;
+    let on_edge = (u.eq(zero) | v.eq(zero) | w.eq(zero)).bits() & active;
+    if on_edge != 0 {
+        let xy = [ax, ay, bx, by, cx, cy].map(F8::to_array);
+        let [eu, ev, ew] = exact_edge_functions_lanes(on_edge, xy, [u, v, w].map(F8::to_array));
+        (u, v, w) = (F8::from_array(eu), F8::from_array(ev), F8::from_array(ew));
+    }
+    let non_negative = zero.le(u) & zero.le(v) & zero.le(w);
+    let non_positive = u.le(zero) & v.le(zero) & w.le(zero);
+    let inside = (non_negative | non_positive).bits() & active;
+    if inside == 0 {
+        return None;
+    }
+    let det = u + v + w;
+    let sz = s.shear[2];
+    let t_scaled = u * (sz * az) + v * (sz * bz) + w * (sz * cz);
+    let inv_det = F8::ONE / det;
+    let t = t_scaled * inv_det;
+    let valid = det.ne(zero) & t.gt(zero) & t.lt(tmax);
+    let mask = inside & valid.bits();
+    if mask == 0 {
+        return None;
+    }
+    Some(LaneHits {
+        mask,
+        t,
+        b1: v * inv_det,
+        b2: w * inv_det,
+        front: det.gt(zero).bits(),
+    })
+}
+
+/// [`exact_edge_functions`] for the `lanes` of a packet (arrays, not vectors: this cold
+/// function compiles outside the packet kernel's AVX2 context).
+#[cfg(target_arch = "x86_64")]
+#[cold]
+#[inline(never)]
+fn exact_edge_functions_lanes(
+    lanes: u32,
+    xy: [[f32; LANES]; 6],
+    uvw: [[f32; LANES]; 3],
+) -> [[f32; LANES]; 3] {
+    let [ax, ay, bx, by, cx, cy] = xy.map(|c| c.map(f64::from));
+    let [mut u, mut v, mut w] = uvw;
+    for l in Lanes(lanes) {
+        u[l] = (cx[l] * by[l] - cy[l] * bx[l]) as f32;
+        v[l] = (ax[l] * cy[l] - ay[l] * cx[l]) as f32;
+        w[l] = (bx[l] * ay[l] - by[l] * ax[l]) as f32;
+    }
+    [u, v, w]
 }
 
 /// Geometric normal (unnormalised) of a counter-clockwise triangle, computed in double
@@ -407,5 +577,115 @@ mod tests {
             hits > 10000 && exact_edges > 1000 && other_lanes > 1000,
             "{hits} hits, {exact_edges} on edges, {other_lanes} on lanes not aimed at"
         );
+    }
+
+    /// The packet test ([`intersect_lanes`]) gives each lane's ray what the single-ray
+    /// block test gives it, to the bit, for every triangle of blocks of one to four: eight
+    /// rays from anywhere, each aimed at a random point, a vertex or an edge's midpoint of
+    /// one of the triangles (where the double-precision decision runs), with their own
+    /// bounds (some exactly at the hit) and random idle lanes.
+    #[test]
+    fn packet_test_matches_the_block_test_to_the_bit() {
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let mut rng = crate::sampling::pcg::Pcg32::new(23, 7);
+        let point = |rng: &mut crate::sampling::pcg::Pcg32| {
+            Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - Vec3::splat(2.0)
+        };
+        let (mut hits, mut edges) = (0, 0);
+        for k in 0..5000 {
+            let count = 1 + k % 4;
+            let tris: Vec<[Vec3; 3]> = (0..count)
+                .map(|_| [point(&mut rng), point(&mut rng), point(&mut rng)])
+                .collect();
+            let block = TriangleBlock::new(&tris);
+            let mut rays: [Ray; LANES] = std::array::from_fn(|lane| {
+                let tri = tris[lane % count];
+                let (b1, b2) = match (k + lane) % 4 {
+                    0 | 1 => (0.3 * rng.next_f32(), 0.6 * rng.next_f32()),
+                    2 => (0.0, 0.0),
+                    _ => (0.5, 0.0),
+                };
+                let target = tri[0] * (1.0 - b1 - b2) + tri[1] * b1 + tri[2] * b2;
+                let origin = point(&mut rng) * 3.0;
+                let tmax = if (k + lane) % 5 == 0 {
+                    0.5
+                } else {
+                    f32::INFINITY
+                };
+                Ray {
+                    origin,
+                    dir: target - origin,
+                    tmax,
+                }
+            });
+            let active = if k % 3 == 0 {
+                0xff
+            } else {
+                rng.next_u32() >> 24
+            };
+            let shears = rays.each_ref().map(RayShear::new);
+            // Some lanes bounded at exactly their aimed triangle's distance, which is out.
+            for (lane, ray) in rays.iter_mut().enumerate() {
+                if (k + lane) % 5 == 1
+                    && let Some(b) = intersect(&shears[lane], &block, f32::INFINITY)
+                    && b.mask & (1 << (lane % count)) != 0
+                {
+                    ray.tmax = b.get(lane % count).t;
+                }
+            }
+            assert_eq!(block.triangles(), count);
+            for tri in 0..count {
+                // SAFETY: the CPU has AVX2 and FMA.
+                let lanes = unsafe { packet_test(&shears, &block, tri, &rays, active) };
+                for (lane, ray) in rays.iter().enumerate() {
+                    let single = intersect(&shears[lane], &block, ray.tmax)
+                        .filter(|b| b.mask & (1 << tri) != 0)
+                        .map(|b| b.get(tri));
+                    let expected = single.filter(|_| active & (1 << lane) != 0);
+                    let bits = |h: Option<PrimitiveHit>| {
+                        h.map(|h| (h.t.to_bits(), h.b1.to_bits(), h.b2.to_bits(), h.front))
+                    };
+                    assert_eq!(bits(lanes[lane]), bits(expected), "packet {k}, lane {lane}");
+                    hits += expected.is_some() as u32;
+                    edges += (expected.is_some() && (k + lane) % 4 >= 2) as u32;
+                }
+            }
+        }
+        assert!(
+            hits > 10000 && edges > 3000,
+            "{hits} hits, {edges} at vertices and edges"
+        );
+    }
+
+    /// [`intersect_lanes`] of triangle `tri` for the packet `rays`, compiled for AVX2 and
+    /// FMA, as each lane's hit.
+    #[target_feature(enable = "avx2,fma")]
+    fn packet_test(
+        shears: &[RayShear; LANES],
+        block: &TriangleBlock,
+        tri: usize,
+        rays: &[Ray; LANES],
+        active: u32,
+    ) -> [Option<PrimitiveHit>; LANES] {
+        let mut tmax = [0.0; LANES];
+        for (t, ray) in tmax.iter_mut().zip(rays) {
+            *t = ray.tmax;
+        }
+        let hits = intersect_lanes(
+            &ShearLanes::new(shears),
+            block,
+            tri,
+            F8::from_array(tmax),
+            active,
+        );
+        let mut out = [None; LANES];
+        if let Some(h) = hits {
+            for lane in Lanes(h.mask) {
+                out[lane] = Some(h.get(lane));
+            }
+        }
+        out
     }
 }
