@@ -269,7 +269,6 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> [Option<Hit>; LANES] {
-        let shears = shears_of(rays, mask);
         // An idle lane's negative bound keeps it out of every box.
         let tmax: [f32; LANES] = std::array::from_fn(|l| {
             if mask & (1 << l) != 0 {
@@ -281,8 +280,7 @@ impl Bvh {
         let mut visitor = ClosestLanes {
             bvh: self,
             rays,
-            shear_lanes: ShearLanes::new(&shears),
-            shears,
+            shears: ShearLanes::of_rays(rays),
             closest: tmax.map(Closest::new),
             bound: tmax,
             accept,
@@ -301,12 +299,10 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> u32 {
-        let shears = shears_of(rays, mask);
         let mut visitor = OccludedLanes {
             bvh: self,
             rays,
-            shear_lanes: ShearLanes::new(&shears),
-            shears,
+            shears: ShearLanes::of_rays(rays),
             bounds: std::array::from_fn(|lane| {
                 if mask & (1 << lane) != 0 {
                     rays[lane].tmax
@@ -417,24 +413,13 @@ fn lanes_pay(blocks: &[LeafTriangles], active: u32) -> bool {
     active.count_ones() as usize > triangles
 }
 
-/// The watertight test's constants of the `mask` lanes of `rays`.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn shears_of(rays: &[Ray; LANES], mask: u32) -> [RayShear; LANES] {
-    let mut shears = [RayShear::IDLE; LANES];
-    for lane in Lanes::new(mask) {
-        shears[lane] = RayShear::new(&rays[lane]);
-    }
-    shears
-}
-
 /// A closest-hit query of eight lanes: each lane's closest hit so far.
 #[cfg(target_arch = "x86_64")]
 struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
-    shears: [RayShear; LANES],
-    shear_lanes: ShearLanes,
+    /// The rays' watertight-test constants.
+    shears: ShearLanes,
     closest: [Closest; LANES],
     /// Each lane's `Closest::bound`.
     bound: [f32; LANES],
@@ -454,7 +439,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+                let (ray, shear) = (&self.rays[lane], &self.shears.lane(lane));
                 let closest = &mut self.closest[lane];
                 self.bvh
                     .leaf_closest(index, count, ray, shear, closest, accept);
@@ -469,7 +454,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             for tri in 0..leaf.block.triangles() {
                 let bound = F8::from_array(self.bound);
                 let Some(hits) =
-                    triangle::intersect_lanes(&self.shear_lanes, &leaf.block, tri, bound, active)
+                    triangle::intersect_lanes(&self.shears, &leaf.block, tri, bound, active)
                 else {
                     continue;
                 };
@@ -494,7 +479,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears[lane]);
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears.lane(lane));
         let closest = &mut self.closest[lane];
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         let tmax = closest.tmax;
@@ -511,8 +496,8 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
-    shears: [RayShear; LANES],
-    shear_lanes: ShearLanes,
+    /// The rays' watertight-test constants.
+    shears: ShearLanes,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
     occluded: u32,
@@ -541,7 +526,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], &self.shears[lane]);
+                let (ray, shear) = (&self.rays[lane], &self.shears.lane(lane));
                 if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
                     self.answer(lane);
                 }
@@ -552,7 +537,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         for leaf in blocks {
             for tri in 0..leaf.block.triangles() {
                 let Some(hits) =
-                    triangle::intersect_lanes(&self.shear_lanes, &leaf.block, tri, tmax, active)
+                    triangle::intersect_lanes(&self.shears, &leaf.block, tri, tmax, active)
                 else {
                     continue;
                 };
@@ -579,7 +564,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears[lane]);
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears.lane(lane));
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         let mut occluded = false;
         bvh.bvh

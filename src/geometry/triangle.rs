@@ -4,7 +4,7 @@
 use super::PrimitiveHit;
 use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, LANES, M8, U8};
+use crate::simd::{F8, LANES, M8};
 use glam::{DVec3, Vec3, Vec4};
 
 /// The set bits of a lane mask, lowest first.
@@ -107,15 +107,6 @@ pub struct RayShear {
     axes: [u32; 3],
     origin: [f32; 3],
     shear: [f32; 3],
-}
-
-impl RayShear {
-    /// The constants of no ray, for lanes that trace none.
-    pub const IDLE: Self = Self {
-        axes: [0, 1, 2],
-        origin: [0.0; 3],
-        shear: [0.0; 3],
-    };
 }
 
 impl RayShear {
@@ -225,32 +216,81 @@ pub(crate) struct ShearLanes {
 
 #[cfg(target_arch = "x86_64")]
 impl ShearLanes {
-    /// The lanes of `shears`.
+    /// The constants of `rays`: [`RayShear::new`]'s operations in lanes, so each lane's are
+    /// its ray's to the bit.
     #[inline(always)]
-    pub(crate) fn new(shears: &[RayShear; LANES]) -> Self {
-        let (mut axes, mut origin, mut shear) =
-            ([[0u32; LANES]; 3], [[0.0; LANES]; 3], [[0.0; LANES]; 3]);
-        for (lane, s) in shears.iter().enumerate() {
-            for k in 0..3 {
-                axes[k][lane] = s.axes[k];
-                origin[k][lane] = s.origin[k];
-                shear[k][lane] = s.shear[k];
+    pub(crate) fn of_rays(rays: &[Ray; LANES]) -> Self {
+        let (mut o, mut d) = ([[0.0; LANES]; 3], [[0.0; LANES]; 3]);
+        for (lane, ray) in rays.iter().enumerate() {
+            for axis in 0..3 {
+                o[axis][lane] = ray.origin[axis];
+                d[axis][lane] = ray.dir[axis];
             }
         }
+        // No closures over vectors here: one would compile outside the packet kernel's
+        // AVX2 context.
+        let (ox, oy, oz) = (
+            F8::from_array(o[0]),
+            F8::from_array(o[1]),
+            F8::from_array(o[2]),
+        );
+        let (dx, dy, dz) = (
+            F8::from_array(d[0]),
+            F8::from_array(d[1]),
+            F8::from_array(d[2]),
+        );
+        let (ax, ay, az) = (dx.abs(), dy.abs(), dz.abs());
+        // kz is x where x is largest, y where y is above x and z, z otherwise.
+        let kz_x = ay.lt(ax) & az.lt(ax);
+        let kz_y = ax.le(ay) & az.lt(ay);
+        let kz_z = !(kz_x | kz_y);
+        let dkz = F8::select(kz_x, dx, F8::select(kz_y, dy, dz));
+        // kx follows kz cyclically (z, x, y for x, y, z), ky after it; swapped where the
+        // ray runs down kz.
+        let swap = dkz.lt(F8::ZERO);
+        let (kx_x, kx_y) = (kz_z, kz_x);
+        let (ky_x, ky_y) = (kz_y, kz_z);
         let mut lanes = Self {
-            is_x: [M8::none(); 3],
-            is_y: [M8::none(); 3],
+            is_x: [
+                (swap & ky_x) | kx_x.and_not(swap),
+                (swap & kx_x) | ky_x.and_not(swap),
+                kz_x,
+            ],
+            is_y: [
+                (swap & ky_y) | kx_y.and_not(swap),
+                (swap & kx_y) | ky_y.and_not(swap),
+                kz_y,
+            ],
             origin: [F8::ZERO; 3],
             shear: [F8::ZERO; 3],
         };
+        let sz = F8::ONE / dkz;
         for k in 0..3 {
-            let axis = U8::from_array(axes[k]);
-            lanes.is_x[k] = axis.eq(U8::splat(0));
-            lanes.is_y[k] = axis.eq(U8::splat(1));
-            lanes.origin[k] = F8::from_array(origin[k]);
-            lanes.shear[k] = F8::from_array(shear[k]);
+            lanes.origin[k] = lanes.pick(k, ox, oy, oz);
         }
+        lanes.shear = [
+            lanes.pick(0, dx, dy, dz) * sz,
+            lanes.pick(1, dx, dy, dz) * sz,
+            sz,
+        ];
         lanes
+    }
+
+    /// Lane `lane`'s constants, for its single-ray tests.
+    #[inline(always)]
+    pub(crate) fn lane(&self, lane: usize) -> RayShear {
+        let axis = |k: usize| {
+            let (x, y) = (
+                self.is_x[k].bits() >> lane & 1,
+                self.is_y[k].bits() >> lane & 1,
+            );
+            2 - 2 * x - y
+        };
+        RayShear {
+            axes: [axis(0), axis(1), axis(2)],
+            origin: [0, 1, 2].map(|k| self.origin[k].to_array()[lane]),
+            shear: [0, 1, 2].map(|k| self.shear[k].to_array()[lane]),
+        }
     }
 
     /// Coordinate `k` of the permutation of `(x, y, z)` in each lane.
@@ -580,7 +620,8 @@ mod tests {
     }
 
     /// The packet test ([`intersect_lanes`]) gives each lane's ray what the single-ray
-    /// block test gives it, to the bit, for every triangle of blocks of one to four: eight
+    /// block test gives it, to the bit, for every triangle of blocks of one to four (and
+    /// the lanes' constants are each ray's [`RayShear`], to the bit): eight
     /// rays from anywhere, each aimed at a random point, a vertex or an edge's midpoint of
     /// one of the triangles (where the double-precision decision runs), with their own
     /// bounds (some exactly at the hit) and random idle lanes.
@@ -626,6 +667,14 @@ mod tests {
                 rng.next_u32() >> 24
             };
             let shears = rays.each_ref().map(RayShear::new);
+            // SAFETY: the CPU has AVX2 and FMA.
+            let lanes = unsafe { shear_lanes(&rays) };
+            for (lane, shear) in shears.iter().enumerate() {
+                let l = lanes.lane(lane);
+                assert_eq!(l.axes, shear.axes, "packet {k}, lane {lane}");
+                assert_eq!(l.origin.map(f32::to_bits), shear.origin.map(f32::to_bits));
+                assert_eq!(l.shear.map(f32::to_bits), shear.shear.map(f32::to_bits));
+            }
             // Some lanes bounded at exactly their aimed triangle's distance, which is out.
             for (lane, ray) in rays.iter_mut().enumerate() {
                 if (k + lane) % 5 == 1
@@ -638,7 +687,7 @@ mod tests {
             assert_eq!(block.triangles(), count);
             for tri in 0..count {
                 // SAFETY: the CPU has AVX2 and FMA.
-                let lanes = unsafe { packet_test(&shears, &block, tri, &rays, active) };
+                let lanes = unsafe { packet_test(&block, tri, &rays, active) };
                 for (lane, ray) in rays.iter().enumerate() {
                     let single = intersect(&shears[lane], &block, ray.tmax)
                         .filter(|b| b.mask & (1 << tri) != 0)
@@ -659,11 +708,16 @@ mod tests {
         );
     }
 
+    /// [`ShearLanes::of_rays`], compiled for AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    fn shear_lanes(rays: &[Ray; LANES]) -> ShearLanes {
+        ShearLanes::of_rays(rays)
+    }
+
     /// [`intersect_lanes`] of triangle `tri` for the packet `rays`, compiled for AVX2 and
     /// FMA, as each lane's hit.
     #[target_feature(enable = "avx2,fma")]
     fn packet_test(
-        shears: &[RayShear; LANES],
         block: &TriangleBlock,
         tri: usize,
         rays: &[Ray; LANES],
@@ -674,7 +728,7 @@ mod tests {
             *t = ray.tmax;
         }
         let hits = intersect_lanes(
-            &ShearLanes::new(shears),
+            &ShearLanes::of_rays(rays),
             block,
             tri,
             F8::from_array(tmax),
