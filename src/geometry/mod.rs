@@ -280,7 +280,7 @@ impl Bvh {
         let mut visitor = ClosestLanes {
             bvh: self,
             rays,
-            shears: ShearLanes::of_rays(rays),
+            shears: LaneShears::new(ShearLanes::of_rays(rays)),
             closest: tmax.map(Closest::new),
             bound: tmax,
             accept,
@@ -302,7 +302,7 @@ impl Bvh {
         let mut visitor = OccludedLanes {
             bvh: self,
             rays,
-            shears: ShearLanes::of_rays(rays),
+            shears: LaneShears::new(ShearLanes::of_rays(rays)),
             bounds: std::array::from_fn(|lane| {
                 if mask & (1 << lane) != 0 {
                     rays[lane].tmax
@@ -413,13 +413,44 @@ fn lanes_pay(blocks: &[LeafTriangles], active: u32) -> bool {
     active.count_ones() as usize > triangles
 }
 
+/// A packet's watertight-test constants: in lanes, and each lane's taken out of them
+/// where first needed (by a single-ray test).
+#[cfg(target_arch = "x86_64")]
+struct LaneShears {
+    lanes: ShearLanes,
+    each: [RayShear; LANES],
+    /// Lanes whose `each` is taken.
+    taken: u32,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl LaneShears {
+    #[inline(always)]
+    fn new(lanes: ShearLanes) -> Self {
+        Self {
+            lanes,
+            each: [RayShear::default(); LANES],
+            taken: 0,
+        }
+    }
+
+    /// Lane `lane`'s constants.
+    #[inline(always)]
+    fn lane(&mut self, lane: usize) -> &RayShear {
+        if self.taken & (1 << lane) == 0 {
+            self.each[lane] = self.lanes.lane(lane);
+            self.taken |= 1 << lane;
+        }
+        &self.each[lane]
+    }
+}
+
 /// A closest-hit query of eight lanes: each lane's closest hit so far.
 #[cfg(target_arch = "x86_64")]
 struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
-    /// The rays' watertight-test constants.
-    shears: ShearLanes,
+    shears: LaneShears,
     closest: [Closest; LANES],
     /// Each lane's `Closest::bound`.
     bound: [f32; LANES],
@@ -439,7 +470,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], &self.shears.lane(lane));
+                let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
                 let closest = &mut self.closest[lane];
                 self.bvh
                     .leaf_closest(index, count, ray, shear, closest, accept);
@@ -454,7 +485,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             for tri in 0..leaf.block.triangles() {
                 let bound = F8::from_array(self.bound);
                 let Some(hits) =
-                    triangle::intersect_lanes(&self.shears, &leaf.block, tri, bound, active)
+                    triangle::intersect_lanes(&self.shears.lanes, &leaf.block, tri, bound, active)
                 else {
                     continue;
                 };
@@ -479,7 +510,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears.lane(lane));
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], self.shears.lane(lane));
         let closest = &mut self.closest[lane];
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         let tmax = closest.tmax;
@@ -496,8 +527,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
-    /// The rays' watertight-test constants.
-    shears: ShearLanes,
+    shears: LaneShears,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
     occluded: u32,
@@ -526,7 +556,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], &self.shears.lane(lane));
+                let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
                 if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
                     self.answer(lane);
                 }
@@ -537,7 +567,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         for leaf in blocks {
             for tri in 0..leaf.block.triangles() {
                 let Some(hits) =
-                    triangle::intersect_lanes(&self.shears, &leaf.block, tri, tmax, active)
+                    triangle::intersect_lanes(&self.shears.lanes, &leaf.block, tri, tmax, active)
                 else {
                     continue;
                 };
@@ -564,7 +594,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], &self.shears.lane(lane));
+        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], self.shears.lane(lane));
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         let mut occluded = false;
         bvh.bvh

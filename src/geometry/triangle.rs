@@ -100,9 +100,9 @@ impl BlockHits {
 /// Per-ray constants of the watertight test: the axis permutation (kx, ky, kz) that puts
 /// the ray's largest direction component on z, the origin's coordinates on those axes, and
 /// the shear (sx, sy, sz) that maps the ray onto +z. Kept as scalars (28 bytes, so that a
-/// packet's eight cost little to set up) and broadcast to four lanes where a block is
-/// tested, which costs what loading broadcast copies would.
-#[derive(Clone, Copy, Debug)]
+/// packet's lanes give theirs cheaply, [`ShearLanes::lane`]) and broadcast to four lanes
+/// where a block is tested, which costs what loading broadcast copies would.
+#[derive(Clone, Copy, Debug, Default)]
 pub struct RayShear {
     axes: [u32; 3],
     origin: [f32; 3],
@@ -279,18 +279,22 @@ impl ShearLanes {
     /// Lane `lane`'s constants, for its single-ray tests.
     #[inline(always)]
     pub(crate) fn lane(&self, lane: usize) -> RayShear {
-        let axis = |k: usize| {
-            let (x, y) = (
+        let mut shear = RayShear {
+            axes: [0; 3],
+            origin: [0.0; 3],
+            shear: [0.0; 3],
+        };
+        // Plain loops: closures would compile outside the packet kernel's AVX2 context.
+        for k in 0..3 {
+            let (is_x, is_y) = (
                 self.is_x[k].bits() >> lane & 1,
                 self.is_y[k].bits() >> lane & 1,
             );
-            2 - 2 * x - y
-        };
-        RayShear {
-            axes: [axis(0), axis(1), axis(2)],
-            origin: [0, 1, 2].map(|k| self.origin[k].to_array()[lane]),
-            shear: [0, 1, 2].map(|k| self.shear[k].to_array()[lane]),
+            shear.axes[k] = 2 - 2 * is_x - is_y;
+            shear.origin[k] = self.origin[k].to_array()[lane];
+            shear.shear[k] = self.shear[k].to_array()[lane];
         }
+        shear
     }
 
     /// Coordinate `k` of the permutation of `(x, y, z)` in each lane.
@@ -671,7 +675,7 @@ mod tests {
             let lanes = unsafe { shear_lanes(&rays) };
             for (lane, shear) in shears.iter().enumerate() {
                 let l = lanes.lane(lane);
-                assert_eq!(l.axes, shear.axes, "packet {k}, lane {lane}");
+                assert_eq!(l.axes, shear.axes, "packet {k}");
                 assert_eq!(l.origin.map(f32::to_bits), shear.origin.map(f32::to_bits));
                 assert_eq!(l.shear.map(f32::to_bits), shear.shear.map(f32::to_bits));
             }
