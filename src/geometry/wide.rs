@@ -378,12 +378,25 @@ impl LaneRays {
     /// within `[0, tmax]`: [`NodeRay::test`]'s operations, lane by lane (`tmax` finite).
     #[inline(always)]
     fn test(&self, node: &Node, c: usize, tmax: F8) -> (F8, M8) {
-        let b = &node.bounds;
-        let t =
-            |plane: usize, a: usize| (F8::splat(b[plane][c]) - self.origin[a]) * self.inv_dir[a];
-        let (x0, x1) = (t(0, 0), t(3, 0));
-        let (y0, y1) = (t(1, 1), t(4, 1));
-        let (z0, z1) = (t(2, 2), t(5, 2));
+        // Planes read as arrays (a vector's index is a match, compiled to a jump table), and
+        // no closure over vectors (it would compile outside the packet kernel's AVX2 context).
+        let mut planes = [0.0; 6];
+        for (plane, bounds) in planes.iter_mut().zip(&node.bounds) {
+            *plane = AsRef::<[f32; 4]>::as_ref(bounds)[c];
+        }
+        let (o, inv) = (&self.origin, &self.inv_dir);
+        let (x0, x1) = (
+            (F8::splat(planes[0]) - o[0]) * inv[0],
+            (F8::splat(planes[3]) - o[0]) * inv[0],
+        );
+        let (y0, y1) = (
+            (F8::splat(planes[1]) - o[1]) * inv[1],
+            (F8::splat(planes[4]) - o[1]) * inv[1],
+        );
+        let (z0, z1) = (
+            (F8::splat(planes[2]) - o[2]) * inv[2],
+            (F8::splat(planes[5]) - o[2]) * inv[2],
+        );
         let near = x0.min(x1).max(y0.min(y1)).max(z0.min(z1)).max(F8::ZERO);
         let far = x0.max(x1).min(y0.max(y1)).min(z0.max(z1)) * SLAB_ROBUSTNESS;
         (near, near.le(far.min(tmax)))
