@@ -11,7 +11,7 @@ pub mod triangle;
 pub mod wide;
 
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, LANES};
+use crate::simd::{F8, LANES, V3};
 use glam::Vec3;
 use obvhs::aabb::Aabb;
 use ray::Ray;
@@ -269,23 +269,18 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> [Option<Hit>; LANES] {
-        // An idle lane's negative bound keeps it out of every box.
-        let tmax: [f32; LANES] = std::array::from_fn(|l| {
-            if mask & (1 << l) != 0 {
-                rays[l].tmax
-            } else {
-                -1.0
-            }
-        });
+        let (origin, dir) = lanes_of(rays);
+        let tmax = bounds_of(rays, mask);
         let mut visitor = ClosestLanes {
             bvh: self,
             rays,
-            shears: LaneShears::new(ShearLanes::of_rays(rays)),
+            shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
             closest: tmax.map(Closest::new),
             bound: tmax,
             accept,
         };
-        self.bvh.traverse_lanes(&LaneRays::new(rays), &mut visitor);
+        let lane_rays = LaneRays::new(origin, dir);
+        self.bvh.traverse_lanes(&lane_rays, &mut visitor);
         visitor.closest.map(Closest::into_hit)
     }
 
@@ -299,21 +294,17 @@ impl Bvh {
         mask: u32,
         accept: F,
     ) -> u32 {
+        let (origin, dir) = lanes_of(rays);
         let mut visitor = OccludedLanes {
             bvh: self,
             rays,
-            shears: LaneShears::new(ShearLanes::of_rays(rays)),
-            bounds: std::array::from_fn(|lane| {
-                if mask & (1 << lane) != 0 {
-                    rays[lane].tmax
-                } else {
-                    -1.0
-                }
-            }),
+            shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
+            bounds: bounds_of(rays, mask),
             occluded: 0,
             accept,
         };
-        self.bvh.traverse_lanes(&LaneRays::new(rays), &mut visitor);
+        let lane_rays = LaneRays::new(origin, dir);
+        self.bvh.traverse_lanes(&lane_rays, &mut visitor);
         visitor.occluded
     }
 
@@ -399,6 +390,30 @@ fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
         s.shape
             .intersect(ray, ray.tmax)
             .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
+    })
+}
+
+/// The origins and directions of `rays`, one a lane.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lanes_of(rays: &[Ray; LANES]) -> (V3, V3) {
+    (
+        V3::from_lanes(&rays.map(|r| r.origin)),
+        V3::from_lanes(&rays.map(|r| r.dir)),
+    )
+}
+
+/// Each lane's bound for a packet query of the `mask` lanes of `rays`: its ray's, or -1 for
+/// an idle lane, which keeps it out of every box.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn bounds_of(rays: &[Ray; LANES], mask: u32) -> [f32; LANES] {
+    std::array::from_fn(|lane| {
+        if mask & (1 << lane) != 0 {
+            rays[lane].tmax
+        } else {
+            -1.0
+        }
     })
 }
 

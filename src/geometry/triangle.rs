@@ -4,7 +4,7 @@
 use super::PrimitiveHit;
 use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, LANES, M8};
+use crate::simd::{F8, LANES, M8, V3};
 use glam::{DVec3, Vec3, Vec4};
 
 /// The set bits of a lane mask, lowest first.
@@ -216,29 +216,12 @@ pub(crate) struct ShearLanes {
 
 #[cfg(target_arch = "x86_64")]
 impl ShearLanes {
-    /// The constants of `rays`: [`RayShear::new`]'s operations in lanes, so each lane's are
-    /// its ray's to the bit.
+    /// The constants of the rays from `origin` along `dir` (one a lane): [`RayShear::new`]'s
+    /// operations in lanes, so each lane's are its ray's to the bit.
     #[inline(always)]
-    pub(crate) fn of_rays(rays: &[Ray; LANES]) -> Self {
-        let (mut o, mut d) = ([[0.0; LANES]; 3], [[0.0; LANES]; 3]);
-        for (lane, ray) in rays.iter().enumerate() {
-            for axis in 0..3 {
-                o[axis][lane] = ray.origin[axis];
-                d[axis][lane] = ray.dir[axis];
-            }
-        }
-        // No closures over vectors here: one would compile outside the packet kernel's
-        // AVX2 context.
-        let (ox, oy, oz) = (
-            F8::from_array(o[0]),
-            F8::from_array(o[1]),
-            F8::from_array(o[2]),
-        );
-        let (dx, dy, dz) = (
-            F8::from_array(d[0]),
-            F8::from_array(d[1]),
-            F8::from_array(d[2]),
-        );
+    pub(crate) fn of_rays(origin: V3, dir: V3) -> Self {
+        let (ox, oy, oz) = (origin.x, origin.y, origin.z);
+        let (dx, dy, dz) = (dir.x, dir.y, dir.z);
         let (ax, ay, az) = (dx.abs(), dy.abs(), dz.abs());
         // kz is x where x is largest, y where y is above x and z, z otherwise.
         let kz_x = ay.lt(ax) & az.lt(ax);
@@ -712,10 +695,11 @@ mod tests {
         );
     }
 
-    /// [`ShearLanes::of_rays`], compiled for AVX2 and FMA.
+    /// [`ShearLanes::of_rays`] of `rays`, compiled for AVX2 and FMA.
     #[target_feature(enable = "avx2,fma")]
     fn shear_lanes(rays: &[Ray; LANES]) -> ShearLanes {
-        ShearLanes::of_rays(rays)
+        let (origin, dir) = (rays.map(|r| r.origin), rays.map(|r| r.dir));
+        ShearLanes::of_rays(V3::from_lanes(&origin), V3::from_lanes(&dir))
     }
 
     /// [`intersect_lanes`] of triangle `tri` for the packet `rays`, compiled for AVX2 and
@@ -731,13 +715,7 @@ mod tests {
         for (t, ray) in tmax.iter_mut().zip(rays) {
             *t = ray.tmax;
         }
-        let hits = intersect_lanes(
-            &ShearLanes::of_rays(rays),
-            block,
-            tri,
-            F8::from_array(tmax),
-            active,
-        );
+        let hits = intersect_lanes(&shear_lanes(rays), block, tri, F8::from_array(tmax), active);
         let mut out = [None; LANES];
         if let Some(h) = hits {
             for lane in Lanes(h.mask) {

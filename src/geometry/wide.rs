@@ -15,7 +15,7 @@ use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
 use super::triangle::Lanes;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, LANES, M8, U8};
+use crate::simd::{F8, LANES, M8, U8, V3};
 use glam::{Vec3, Vec3A, Vec4};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::builder::build_bvh2};
 use std::mem::MaybeUninit;
@@ -344,32 +344,19 @@ pub(crate) struct LaneRays {
 
 #[cfg(target_arch = "x86_64")]
 impl LaneRays {
-    /// The constants of `rays`, each lane's as [`NodeRay`] takes them (`slab_inv_dir`'s
-    /// operations in lanes).
+    /// The constants of the rays from `origin` along `dir` (one a lane), each lane's as
+    /// [`NodeRay`] takes them (`slab_inv_dir`'s operations in lanes).
     #[inline(always)]
-    pub(crate) fn new(rays: &[Ray; LANES]) -> Self {
-        // Plain loops: a closure would compile outside the packet kernel's AVX2 context.
-        let (mut origin, mut dir) = ([[0.0; LANES]; 3], [[0.0; LANES]; 3]);
-        for (lane, ray) in rays.iter().enumerate() {
-            for a in 0..3 {
-                origin[a][lane] = ray.origin[a];
-                dir[a][lane] = ray.dir[a];
-            }
-        }
-        let mut inv_dir = [F8::ZERO; 3];
-        for a in 0..3 {
-            let d = F8::from_array(dir[a]);
+    pub(crate) fn new(origin: V3, dir: V3) -> Self {
+        let mut inv_dir = [dir.x, dir.y, dir.z];
+        for d in &mut inv_dir {
             let tiny = d.abs().lt(F8::splat(1e-20));
             let sign = d.to_bits() & U8::splat(0x8000_0000);
             let huge = F8::from_bits(sign | F8::splat(1e20).to_bits());
-            inv_dir[a] = F8::select(tiny, huge, F8::ONE / d);
+            *d = F8::select(tiny, huge, F8::ONE / *d);
         }
         Self {
-            origin: [
-                F8::from_array(origin[0]),
-                F8::from_array(origin[1]),
-                F8::from_array(origin[2]),
-            ],
+            origin: [origin.x, origin.y, origin.z],
             inv_dir,
         }
     }
