@@ -16,6 +16,8 @@ use glam::Vec3;
 use obvhs::aabb::Aabb;
 use ray::Ray;
 #[cfg(target_arch = "x86_64")]
+use std::mem::MaybeUninit;
+#[cfg(target_arch = "x86_64")]
 use triangle::Lanes;
 #[cfg(target_arch = "x86_64")]
 use triangle::ShearLanes;
@@ -433,8 +435,9 @@ fn lanes_pay(blocks: &[LeafTriangles], active: u32) -> bool {
 #[cfg(target_arch = "x86_64")]
 struct LaneShears {
     lanes: ShearLanes,
-    each: [RayShear; LANES],
-    /// Lanes whose `each` is taken.
+    /// Lane i's constants, initialised where bit i of `taken` is set (left uninitialised
+    /// elsewhere, so that a query that never needs them pays nothing).
+    each: [MaybeUninit<RayShear>; LANES],
     taken: u32,
 }
 
@@ -444,7 +447,7 @@ impl LaneShears {
     fn new(lanes: ShearLanes) -> Self {
         Self {
             lanes,
-            each: [RayShear::default(); LANES],
+            each: [const { MaybeUninit::uninit() }; LANES],
             taken: 0,
         }
     }
@@ -453,10 +456,11 @@ impl LaneShears {
     #[inline(always)]
     fn lane(&mut self, lane: usize) -> &RayShear {
         if self.taken & (1 << lane) == 0 {
-            self.each[lane] = self.lanes.lane(lane);
+            self.each[lane] = MaybeUninit::new(self.lanes.lane(lane));
             self.taken |= 1 << lane;
         }
-        &self.each[lane]
+        // SAFETY: bit `lane` of `taken` is set, so the entry was initialised above or before.
+        unsafe { self.each[lane].assume_init_ref() }
     }
 }
 

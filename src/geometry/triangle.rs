@@ -56,9 +56,7 @@ impl TriangleBlock {
         }
         Self { coords }
     }
-}
 
-impl TriangleBlock {
     /// How many triangles the block holds (in its first lanes).
     #[inline(always)]
     pub fn triangles(&self) -> usize {
@@ -99,14 +97,12 @@ impl BlockHits {
 
 /// Per-ray constants of the watertight test: the axis permutation (kx, ky, kz) that puts
 /// the ray's largest direction component on z, the origin's coordinates on those axes, and
-/// the shear (sx, sy, sz) that maps the ray onto +z. Kept as scalars (28 bytes, so that a
-/// packet's lanes give theirs cheaply, [`ShearLanes::lane`]) and broadcast to four lanes
-/// where a block is tested, which costs what loading broadcast copies would.
+/// the shear (sx, sy, sz) that maps the ray onto +z, each broadcast to four lanes.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct RayShear {
-    axes: [u32; 3],
-    origin: [f32; 3],
-    shear: [f32; 3],
+    axes: [usize; 3],
+    origin: [Vec4; 3],
+    shear: [Vec4; 3],
 }
 
 impl RayShear {
@@ -128,9 +124,9 @@ impl RayShear {
         // with the same shear, not the shear's exact rounding.
         let sz = 1.0 / d[kz];
         Self {
-            axes: [kx as u32, ky as u32, kz as u32],
-            origin: [o[kx], o[ky], o[kz]],
-            shear: [d[kx] * sz, d[ky] * sz, sz],
+            axes: [kx, ky, kz],
+            origin: [kx, ky, kz].map(|k| Vec4::splat(o[k])),
+            shear: [d[kx] * sz, d[ky] * sz, sz].map(Vec4::splat),
         }
     }
 }
@@ -141,9 +137,8 @@ impl RayShear {
 /// barycentrics are the scalar test's to the bit.
 #[inline(always)]
 pub fn intersect(s: &RayShear, block: &TriangleBlock, tmax: f32) -> Option<BlockHits> {
-    let [kx, ky, kz] = s.axes.map(|k| k as usize);
-    let origin = s.origin.map(Vec4::splat);
-    let shear = s.shear.map(Vec4::splat);
+    let [kx, ky, kz] = s.axes;
+    let (origin, shear) = (&s.origin, &s.shear);
     // Vertex v relative to the origin, permuted and sheared, for the four triangles.
     let vertex = |v: usize| {
         let c = &block.coords[v];
@@ -262,20 +257,16 @@ impl ShearLanes {
     /// Lane `lane`'s constants, for its single-ray tests.
     #[inline(always)]
     pub(crate) fn lane(&self, lane: usize) -> RayShear {
-        let mut shear = RayShear {
-            axes: [0; 3],
-            origin: [0.0; 3],
-            shear: [0.0; 3],
-        };
+        let mut shear = RayShear::default();
         // Plain loops: closures would compile outside the packet kernel's AVX2 context.
         for k in 0..3 {
             let (is_x, is_y) = (
                 self.is_x[k].bits() >> lane & 1,
                 self.is_y[k].bits() >> lane & 1,
             );
-            shear.axes[k] = 2 - 2 * is_x - is_y;
-            shear.origin[k] = self.origin[k].to_array()[lane];
-            shear.shear[k] = self.shear[k].to_array()[lane];
+            shear.axes[k] = (2 - 2 * is_x - is_y) as usize;
+            shear.origin[k] = Vec4::splat(self.origin[k].to_array()[lane]);
+            shear.shear[k] = Vec4::splat(self.shear[k].to_array()[lane]);
         }
         shear
     }
@@ -659,8 +650,9 @@ mod tests {
             for (lane, shear) in shears.iter().enumerate() {
                 let l = lanes.lane(lane);
                 assert_eq!(l.axes, shear.axes, "packet {k}");
-                assert_eq!(l.origin.map(f32::to_bits), shear.origin.map(f32::to_bits));
-                assert_eq!(l.shear.map(f32::to_bits), shear.shear.map(f32::to_bits));
+                let bits = |v: [Vec4; 3]| v.map(|v| v.to_array().map(f32::to_bits));
+                assert_eq!(bits(l.origin), bits(shear.origin));
+                assert_eq!(bits(l.shear), bits(shear.shear));
             }
             // Some lanes bounded at exactly their aimed triangle's distance, which is out.
             for (lane, ray) in rays.iter_mut().enumerate() {

@@ -404,10 +404,10 @@ impl WideBvh {
     /// Visits the leaves that eight rays overlap, the rays as one packet (Wald et al. 2001,
     /// "Interactive Rendering with Coherent Ray Tracing", on four-wide nodes): a node's four
     /// boxes are tested against the eight lanes at once, and its hit children are taken
-    /// nearest first by the least lane distance. A subtree that fewer than
+    /// nearest first by the least lane distance. An inner node that fewer than
     /// [`PACKET_MIN_LANES`] lanes enter goes to the single-ray traversal lane by lane
     /// (Benthin et al. 2012, "Combining Single and Packet-Ray Tracing for Arbitrary Ray
-    /// Distributions"), so incoherent rays cost little more than single rays.
+    /// Distributions"), so that lanes which part ways do not pay for each other's nodes.
     ///
     /// Each lane meets the boxes of [`WideBvh::traverse`] with the same test and culls them
     /// by its own bound, so it finds the hits a single-ray traversal finds; only the order
