@@ -23,8 +23,8 @@ use triangle::Lanes;
 use triangle::ShearLanes;
 use triangle::{RayShear, TriangleBlock};
 #[cfg(target_arch = "x86_64")]
-use wide::{LaneRays, LaneVisitor, Subtree};
-use wide::{LeafResult, WideBvh};
+use wide::{LaneRays, LaneVisitor};
+use wide::{LeafResult, Subtree, WideBvh};
 
 /// A primitive the BVH holds.
 #[derive(Clone, Copy, Debug)]
@@ -237,26 +237,56 @@ impl Bvh {
         ray: &Ray,
         mut accept: F,
     ) -> Option<Hit> {
-        let shear = RayShear::new(ray);
         let mut closest = Closest::new(ray.tmax);
-        self.bvh.traverse(ray, |index, count, _| {
-            self.leaf_closest(index, count, ray, &shear, &mut closest, &mut accept)
-        });
+        let shear = RayShear::new(ray);
+        self.closest_in(self.bvh.root(), ray, &shear, &mut closest, &mut accept);
         closest.into_hit()
     }
 
     /// True if anything accepted lies along `ray` in `(0, ray.tmax)`; stops at the first hit.
     pub fn occluded<F: FnMut(u32, &PrimitiveHit) -> bool>(&self, ray: &Ray, mut accept: F) -> bool {
         let shear = RayShear::new(ray);
+        self.occludes_in(self.bvh.root(), ray, &shear, &mut accept)
+    }
+
+    /// Lowers `closest` to the closest hit along `ray` in `subtree` (`shear` is the ray's):
+    /// the single-ray closest-hit traversal, of the whole BVH or of a packet's lane.
+    #[inline(always)]
+    fn closest_in<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        subtree: Subtree,
+        ray: &Ray,
+        shear: &RayShear,
+        closest: &mut Closest,
+        accept: &mut F,
+    ) {
+        let tmax = closest.tmax;
+        self.bvh
+            .traverse_from(subtree, ray, tmax, |index, count, _| {
+                self.leaf_closest(index, count, ray, shear, closest, accept)
+            });
+    }
+
+    /// Whether `subtree` holds an accepted hit along `ray` (`shear` is the ray's): the
+    /// single-ray occlusion traversal, stopping at the first hit.
+    #[inline(always)]
+    fn occludes_in<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        subtree: Subtree,
+        ray: &Ray,
+        shear: &RayShear,
+        accept: &mut F,
+    ) -> bool {
         let mut occluded = false;
-        self.bvh.traverse(ray, |index, count, _| {
-            occluded = self.leaf_occludes(index, count, ray, &shear, &mut accept);
-            if occluded {
-                LeafResult::Stop
-            } else {
-                LeafResult::Miss
-            }
-        });
+        self.bvh
+            .traverse_from(subtree, ray, ray.tmax, |index, count, _| {
+                occluded = self.leaf_occludes(index, count, ray, shear, accept);
+                if occluded {
+                    LeafResult::Stop
+                } else {
+                    LeafResult::Miss
+                }
+            });
         occluded
     }
 
@@ -471,7 +501,8 @@ struct ClosestLanes<'a, F> {
     rays: &'a [Ray; LANES],
     shears: LaneShears,
     closest: [Closest; LANES],
-    /// Each lane's `Closest::bound`.
+    /// Each lane's `Closest::bound`, kept beside `closest` so that testing a triangle
+    /// against the lanes reads it as one vector instead of deriving it eight times.
     bound: [f32; LANES],
     accept: F,
 }
@@ -529,14 +560,10 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], self.shears.lane(lane));
+        let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
         let closest = &mut self.closest[lane];
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-        let tmax = closest.tmax;
-        bvh.bvh
-            .traverse_from(subtree, ray, tmax, |index, count, _| {
-                bvh.leaf_closest(index, count, ray, shear, closest, accept)
-            });
+        self.bvh.closest_in(subtree, ray, shear, closest, accept);
         self.bound[lane] = closest.bound();
     }
 }
@@ -603,29 +630,21 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 }
             }
         }
-        for lane in Lanes::new(if shapes.is_empty() { 0 } else { active }) {
-            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-            if shapes_occlude(shapes, &self.rays[lane], accept) {
-                self.answer(lane);
+        if !shapes.is_empty() {
+            for lane in Lanes::new(active) {
+                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                if shapes_occlude(shapes, &self.rays[lane], accept) {
+                    self.answer(lane);
+                }
             }
         }
     }
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (bvh, ray, shear) = (self.bvh, &self.rays[lane], self.shears.lane(lane));
+        let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-        let mut occluded = false;
-        bvh.bvh
-            .traverse_from(subtree, ray, ray.tmax, |index, count, _| {
-                occluded = bvh.leaf_occludes(index, count, ray, shear, accept);
-                if occluded {
-                    LeafResult::Stop
-                } else {
-                    LeafResult::Miss
-                }
-            });
-        if occluded {
+        if self.bvh.occludes_in(subtree, ray, shear, accept) {
             self.answer(lane);
         }
     }

@@ -166,8 +166,8 @@ pub enum LeafResult {
     Stop,
 }
 
-/// A subtree of a [`WideBvh`]: where a packet traversal hands a lane over to the
-/// single-ray traversal ([`LaneVisitor::single`]).
+/// A subtree of a [`WideBvh`], where a single-ray traversal starts: the root, or where a
+/// packet traversal hands a lane over ([`LaneVisitor::single`]).
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Subtree(Child);
 
@@ -231,7 +231,13 @@ impl WideBvh {
     /// saved 4 % of the Cornell box's occlusion instructions).
     #[inline(always)]
     pub fn traverse<F: FnMut(u32, u32, f32) -> LeafResult>(&self, ray: &Ray, leaf: F) -> f32 {
-        self.traverse_from(Subtree(self.root), ray, ray.tmax, leaf)
+        self.traverse_from(self.root(), ray, ray.tmax, leaf)
+    }
+
+    /// The whole BVH as a subtree, for [`WideBvh::traverse_from`].
+    #[inline(always)]
+    pub(crate) fn root(&self) -> Subtree {
+        Subtree(self.root)
     }
 
     /// [`WideBvh::traverse`] of `subtree` alone, from the bound `tmax`.
