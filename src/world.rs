@@ -167,7 +167,7 @@ pub struct World {
     pub objects: Objects,
     /// The lights as the packet kernel's lanes sample them, built when it first runs.
     #[cfg(target_arch = "x86_64")]
-    triangle_lights: std::sync::OnceLock<crate::light::lanes::TriangleLights>,
+    area_lights: std::sync::OnceLock<crate::light::lanes::AreaLights>,
 }
 
 /// The named objects of the scene, and which object each hit primitive belongs to: the
@@ -804,15 +804,15 @@ impl World {
             light_groups: std::mem::take(&mut scene.light_groups),
             objects,
             #[cfg(target_arch = "x86_64")]
-            triangle_lights: std::sync::OnceLock::new(),
+            area_lights: std::sync::OnceLock::new(),
         })
     }
 
-    /// The triangle lights laid out for the packet kernel's lanes (built on first use).
+    /// The area lights laid out for the packet kernel's lanes (built on first use).
     #[cfg(target_arch = "x86_64")]
-    pub(crate) fn triangle_lights(&self) -> &crate::light::lanes::TriangleLights {
-        self.triangle_lights.get_or_init(|| {
-            crate::light::lanes::TriangleLights::new(&self.lights.lights, |prim| {
+    pub(crate) fn area_lights(&self) -> &crate::light::lanes::AreaLights {
+        self.area_lights.get_or_init(|| {
+            crate::light::lanes::AreaLights::new(&self.lights.lights, |prim| {
                 self.surfaces.untextured_emission(prim)
             })
         })

@@ -16,7 +16,9 @@
 //! instructions (988 M to 823 M at 64×64, 16 spp), and 17 % less time than the scalar
 //! kernel. The lanes' rays are traced as packets of eight (`World::intersect_lanes`,
 //! `World::occluded_lanes`): 5.6 % fewer of the Cornell box's instructions, with the same
-//! hits. The other shading points and the other lights' samples go through the scalar
+//! hits. Sphere lights are sampled in their cones in lanes too (`light::lanes`): 15 % fewer
+//! of the MIS plates' instructions, 23 % less time. The other shading points and the other
+//! lights' samples go through the scalar
 //! code lane by lane, so every scene the scalar kernel renders renders here too.
 //!
 //! The estimator is the scalar kernel's, sample for sample: every path takes the same
@@ -41,7 +43,7 @@ use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
 use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
 use crate::geometry::triangle::Lanes;
-use crate::light::lanes::TriangleLights;
+use crate::light::lanes::{self as light_lanes, AreaLights};
 use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf};
@@ -157,10 +159,13 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
     filter: &'a PixelFilter,
     /// A sampler of the render's kind and seed, which camera samples start from.
     sampler: Sampler,
-    /// The triangle lights the lanes sample; `None` where none is (no triangle light of
-    /// untextured emission, or triangles sampled by solid angle, which the scalar code
-    /// does).
-    triangle_lights: Option<&'a TriangleLights>,
+    /// The area lights the lanes sample; `None` where none is (no triangle or sphere light
+    /// of untextured emission, or none of the kinds the lanes sample under the render's
+    /// light sampling).
+    area_lights: Option<&'a AreaLights>,
+    /// The kinds of light the lanes sample (`light::lanes::TRIANGLES`, `SPHERES`):
+    /// triangles unless sampled by solid angle, spheres where sampled in their cones.
+    lane_light_kinds: u32,
     /// Whether the pass learns the split counts (`split` is then `FirstSplit::learning`):
     /// samples record their parts as the scalar kernel's do.
     learning: bool,
@@ -321,6 +326,16 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         learning: bool,
         filter: &'a PixelFilter,
     ) -> Self {
+        let sampling = settings.light_sampling;
+        let lane_light_kinds = if sampling.triangles_by_solid_angle() {
+            0
+        } else {
+            light_lanes::TRIANGLES
+        } | if sampling.spheres_by_cone() {
+            light_lanes::SPHERES
+        } else {
+            0
+        };
         Self {
             world,
             settings,
@@ -328,9 +343,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             learning,
             filter,
             sampler: Sampler::new(settings.sampler, settings.seed),
-            triangle_lights: (!settings.light_sampling.triangles_by_solid_angle())
-                .then(|| world.triangle_lights())
-                .filter(|t| t.any()),
+            area_lights: Some(world.area_lights()).filter(|t| t.any(lane_light_kinds)),
+            lane_light_kinds,
             mesh_bsdfs: world
                 .surfaces
                 .meshes
@@ -715,12 +729,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let rounds = v.rounds(nee_lanes, counts.nee);
         let (n_nee, n_bsdf) = (v.counts(counts.nee), v.counts(counts.bsdf));
         let beta = betas(lanes);
-        let triangle_lights = self.triangle_lights;
+        let area_lights = self.area_lights;
         for j in 0..rounds {
-            let mut sampled = 0u32;
-            let (mut wi, mut radiance) = ([Vec3::Z; LANES], [Vec3::ZERO; LANES]);
-            let (mut p_light, mut delta) = ([1.0f32; LANES], 0u32);
-            let mut shadow = [Ray::new(Vec3::ZERO, Vec3::Z); LANES];
+            let mut scalar = ScalarLightSamples::new();
             // Lanes whose chosen light the lanes sample: the light, its selection
             // probability and the numbers.
             let mut area = 0u32;
@@ -741,63 +752,56 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 let Some((index, p_select)) = lights.select(u_select, p, v.normals[lane]) else {
                     continue;
                 };
-                if let Some(table) = triangle_lights
-                    && table.lanes_sample(index)
+                if let Some(table) = area_lights
+                    && table.lanes_sample(index, self.lane_light_kinds)
                 {
                     (light[lane], p_select_area[lane]) = (index as u32, p_select);
                     (u_area[0][lane], u_area[1][lane]) = (u_light.x, u_light.y);
                     area |= 1 << lane;
                     continue;
                 }
-                let ng = v.ng.lane(lane);
-                let Some(ls) = sample_chosen_light(world, self.settings, p, ng, index, u_light)
-                else {
-                    continue;
-                };
-                (wi[lane], radiance[lane], p_light[lane]) = (ls.wi, ls.radiance, p_select * ls.pdf);
-                let origin = v.origin[lane];
-                shadow[lane] = match ls.target {
-                    Some(target) => Ray {
-                        origin,
-                        dir: target - origin,
-                        tmax: 1.0,
-                    },
-                    None => Ray::new(origin, ls.wi),
-                };
-                if ls.delta {
-                    delta |= 1 << lane;
-                }
-                sampled |= 1 << lane;
+                self.scalar_light_sample(v, lane, index, p_select, u_light, &mut scalar);
             }
+            // The lanes' own samples; lanes they leave to the scalar code take its samples.
+            let area_samples = match area_lights {
+                Some(table) if area != 0 => {
+                    let u = [F8::from_array(u_area[0]), F8::from_array(u_area[1])];
+                    let s = table.sample(U8::from_array(light), v.p, v.ng, u, area);
+                    for lane in Lanes::new(s.scalar) {
+                        let (index, p_select) = (light[lane] as usize, p_select_area[lane]);
+                        let u_light = Vec2::new(u_area[0][lane], u_area[1][lane]);
+                        self.scalar_light_sample(v, lane, index, p_select, u_light, &mut scalar);
+                    }
+                    Some(s)
+                }
+                _ => None,
+            };
             // The scalar code's samples in lanes, then the lanes' own samples over them.
-            let (mut wi, mut radiance, mut p_light) = if sampled != 0 {
+            let (mut wi, mut radiance, mut p_light) = if scalar.sampled != 0 {
                 (
-                    V3::from_lanes(&wi),
-                    V3::from_lanes(&radiance),
-                    F8::from_array(p_light),
+                    V3::from_lanes(&scalar.wi),
+                    V3::from_lanes(&scalar.radiance),
+                    F8::from_array(scalar.p_light),
                 )
             } else {
                 (V3::ZERO, V3::ZERO, F8::ONE)
             };
-            if let Some(table) = triangle_lights
-                && area != 0
-            {
-                let u = [F8::from_array(u_area[0]), F8::from_array(u_area[1])];
-                let s = table.sample(U8::from_array(light), v.p, v.ng, u, area);
+            if let Some(s) = area_samples {
                 let valid = M8::from_bits(s.valid);
                 wi = V3::select(valid, s.wi, wi);
                 radiance = V3::select(valid, s.radiance, radiance);
                 p_light = F8::select(valid, F8::from_array(p_select_area) * s.pdf, p_light);
                 let dir = (s.target - v.origin_lanes).to_lanes();
                 for lane in Lanes::new(s.valid) {
-                    shadow[lane] = Ray {
+                    scalar.shadow[lane] = Ray {
                         origin: v.origin[lane],
                         dir: dir[lane],
                         tmax: 1.0,
                     };
                 }
-                sampled |= s.valid;
+                scalar.sampled |= s.valid;
             }
+            let mut sampled = scalar.sampled;
             if sampled == 0 {
                 continue;
             }
@@ -811,13 +815,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 slot.rays += 1;
                 self.count_part_ray(slot, lanes[lane].state.depth, false);
             }
-            let lit = sampled & !world.occluded_lanes(&shadow, sampled);
+            let lit = sampled & !world.occluded_lanes(&scalar.shadow, sampled);
             rays.shadow += sampled.count_ones() as u64;
             if lit == 0 {
                 continue;
             }
             let no_bsdf = if EMITTERS {
-                M8::from_bits(delta)
+                M8::from_bits(scalar.delta)
             } else {
                 M8::all()
             };
@@ -835,6 +839,39 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 Self::contribute(slot, value.lane(lane));
             }
         }
+    }
+
+    /// The scalar code's sample of light `index` (chosen with probability `p_select`) at
+    /// numbers `u_light` for scattering lane `lane`, into `out`.
+    #[inline(always)]
+    fn scalar_light_sample(
+        &self,
+        v: &Vertices,
+        lane: usize,
+        index: usize,
+        p_select: f32,
+        u_light: Vec2,
+        out: &mut ScalarLightSamples,
+    ) {
+        let (p, ng) = (v.points[lane], v.ng.lane(lane));
+        let Some(ls) = sample_chosen_light(self.world, self.settings, p, ng, index, u_light) else {
+            return;
+        };
+        (out.wi[lane], out.radiance[lane]) = (ls.wi, ls.radiance);
+        out.p_light[lane] = p_select * ls.pdf;
+        let origin = v.origin[lane];
+        out.shadow[lane] = match ls.target {
+            Some(target) => Ray {
+                origin,
+                dir: target - origin,
+                tmax: 1.0,
+            },
+            None => Ray::new(origin, ls.wi),
+        };
+        if ls.delta {
+            out.delta |= 1 << lane;
+        }
+        out.sampled |= 1 << lane;
     }
 
     /// Samples the BSDF at every scattering lane for its continuations (the first vertex's
@@ -939,6 +976,32 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         for lane in Lanes::new(v.mask & !continued) {
             *active &= !(1 << lane);
             self.end_path(parents[lane].sample, buffers);
+        }
+    }
+}
+
+/// A round's light samples lane by lane: the scalar code's direction, radiance, density
+/// (selection included) and delta lights; the shadow rays and sampling lanes of both the
+/// scalar code's and the lanes' own samples.
+struct ScalarLightSamples {
+    wi: [Vec3; LANES],
+    radiance: [Vec3; LANES],
+    p_light: [f32; LANES],
+    shadow: [Ray; LANES],
+    sampled: u32,
+    delta: u32,
+}
+
+impl ScalarLightSamples {
+    #[inline(always)]
+    fn new() -> Self {
+        Self {
+            wi: [Vec3::Z; LANES],
+            radiance: [Vec3::ZERO; LANES],
+            p_light: [1.0; LANES],
+            shadow: [Ray::new(Vec3::ZERO, Vec3::Z); LANES],
+            sampled: 0,
+            delta: 0,
         }
     }
 }

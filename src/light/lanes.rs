@@ -1,39 +1,50 @@
-//! Triangle lights laid out for the packet kernel (`integrator::packet`): each light's
-//! vertices, normal, area and emission in one record, so that eight lanes' area samples are
-//! eight gathers a field instead of eight trips through [`Light::sample`]. A lane's sample
-//! is the scalar code's to the bit: [`TriangleLights::sample`] performs `Light::sample`'s
-//! and `integrator::path::sample_light`'s operations in their order.
+//! Area lights laid out for the packet kernel (`integrator::packet`): each triangle's
+//! vertices, normal, area and emission, and each sphere's centre, radius and emission, in
+//! one record, so that eight lanes' light samples are eight gathers a field instead of
+//! eight trips through [`Light::sample`]. A lane's sample is the scalar code's to the bit:
+//! [`AreaLights::sample`] performs `Light::sample`'s and
+//! `integrator::path::sample_chosen_light`'s operations in their order.
 //!
 //! Built once per render, the first time the packet kernel runs (see
-//! `World::triangle_lights`), and only then: 68 bytes a light.
+//! `World::area_lights`), and only then: 68 bytes a light.
 
 use super::Light;
+use super::solid_angle::SPHERE_CONE_SMALL;
+use crate::geometry::frame::frame_from_normal_lanes;
 use crate::geometry::ray::offset_ray_origin_lanes;
 use crate::simd::{F8, M8, U8, V3};
 use glam::Vec3;
+use std::f32::consts::PI;
 
-/// Floats a record holds: vertices 0, 1, 2 (three each), the unit front normal, the area,
-/// the emitted radiance.
+/// Floats a record holds. A triangle: vertices 0, 1, 2 (three each), the unit front
+/// normal, the area, the emitted radiance. A sphere: the centre, the radius, the emitted
+/// radiance.
 const RECORD: u32 = 16;
 const NORMAL: u32 = 9;
 const AREA: u32 = 12;
+const CENTRE: u32 = 0;
+const RADIUS: u32 = 3;
 const EMISSION: u32 = 13;
 
-/// Flag bits: the lanes sample the light (a triangle of untextured emission); it emits
-/// from both sides.
-const LANES_SAMPLE: u32 = 1;
+/// Which lights the lanes sample, as [`AreaLights::lanes_sample`] takes them: triangles of
+/// untextured emission by area, spheres of untextured emission in the cone they subtend.
+pub const TRIANGLES: u32 = 1;
+pub const SPHERES: u32 = 4;
+/// Flag bit: the light emits from both sides.
 const TWO_SIDED: u32 = 2;
 
 /// The records of a scene's lights, by light index (zero records for the lights the lanes
 /// leave to the scalar code).
-pub struct TriangleLights {
+pub struct AreaLights {
     records: Vec<f32>,
+    /// The light's kind ([`TRIANGLES`] or [`SPHERES`], 0 for the scalar code's) and
+    /// [`TWO_SIDED`].
     flags: Vec<u32>,
-    /// Whether the lanes sample any light.
-    any: bool,
+    /// The kinds of light present.
+    kinds: u32,
 }
 
-/// Eight lanes' area samples.
+/// Eight lanes' light samples.
 pub struct AreaSamples {
     /// Unit direction towards the sampled point.
     pub wi: V3,
@@ -44,68 +55,88 @@ pub struct AreaSamples {
     pub pdf: F8,
     /// Lanes whose sample counts (the scalar code's `Some`, and not useless).
     pub valid: u32,
+    /// Lanes the scalar code must sample: points inside a sphere, or on it, which sample
+    /// its whole area instead of a cone.
+    pub scalar: u32,
 }
 
-impl TriangleLights {
+impl AreaLights {
     /// The records of `lights`; `emission(prim)` is the emitted radiance of a primitive
     /// whose emission is untextured, `None` otherwise.
     pub fn new(lights: &[Light], emission: impl Fn(u32) -> Option<Vec3>) -> Self {
         let mut records = vec![0.0; lights.len() * RECORD as usize];
         let mut flags = vec![0; lights.len()];
         for (i, light) in lights.iter().enumerate() {
-            let Light::Triangle(t) = light else { continue };
-            let Some(e) = emission(t.prim) else { continue };
             let record = &mut records[i * RECORD as usize..(i + 1) * RECORD as usize];
-            for (v, p) in t.p.iter().enumerate() {
-                record[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
-            }
-            record[NORMAL as usize..NORMAL as usize + 3].copy_from_slice(&t.n.to_array());
-            record[AREA as usize] = t.area;
+            let (kind, prim, two_sided) = match light {
+                Light::Triangle(t) => {
+                    for (v, p) in t.p.iter().enumerate() {
+                        record[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
+                    }
+                    record[NORMAL as usize..NORMAL as usize + 3].copy_from_slice(&t.n.to_array());
+                    record[AREA as usize] = t.area;
+                    (TRIANGLES, t.prim, t.two_sided)
+                }
+                Light::Sphere(sp) => {
+                    record[CENTRE as usize..CENTRE as usize + 3]
+                        .copy_from_slice(&sp.centre.to_array());
+                    record[RADIUS as usize] = sp.radius;
+                    (SPHERES, sp.prim, sp.two_sided)
+                }
+                _ => continue,
+            };
+            let Some(e) = emission(prim) else { continue };
             record[EMISSION as usize..EMISSION as usize + 3].copy_from_slice(&e.to_array());
-            flags[i] = LANES_SAMPLE | if t.two_sided { TWO_SIDED } else { 0 };
+            flags[i] = kind | if two_sided { TWO_SIDED } else { 0 };
         }
-        let any = flags.iter().any(|&f| f & LANES_SAMPLE != 0);
+        let kinds = flags.iter().fold(0, |k, f| k | f) & (TRIANGLES | SPHERES);
         Self {
             records,
             flags,
-            any,
+            kinds,
         }
     }
 
-    /// Whether the lanes sample any light.
-    pub fn any(&self) -> bool {
-        self.any
+    /// Whether the lanes sample any light of `kinds` ([`TRIANGLES`], [`SPHERES`]).
+    pub fn any(&self, kinds: u32) -> bool {
+        self.kinds & kinds != 0
     }
 
-    /// Whether the lanes sample light `light` (otherwise the scalar code does).
+    /// Whether the lanes sample light `light` when they take the lights of `kinds`
+    /// (otherwise the scalar code does).
     #[inline(always)]
-    pub fn lanes_sample(&self, light: usize) -> bool {
-        self.flags[light] & LANES_SAMPLE != 0
+    pub fn lanes_sample(&self, light: usize, kinds: u32) -> bool {
+        self.flags[light] & kinds != 0
     }
 
-    /// Area samples of lights `light` (each one the lanes sample) from points `p` with
-    /// geometric normals `ng`, at numbers `u`, for the lanes of `mask`: per lane,
-    /// `Light::sample` by area and `sample_light`'s emission and checks.
+    /// Samples of lights `light` (each one the lanes sample) from points `p` with geometric
+    /// normals `ng`, at numbers `u`, for the lanes of `mask`: per lane, `Light::sample`
+    /// (triangles by area, spheres by cone) and `sample_chosen_light`'s emission and checks.
     #[inline(always)]
     pub fn sample(&self, light: U8, p: V3, ng: V3, u: [F8; 2], mask: u32) -> AreaSamples {
         let base = light.wrapping_mul(U8::splat(RECORD));
         let records = &self.records[..];
-        let (p0, p1, p2) = (
-            vector(records, base, 0),
-            vector(records, base, 3),
-            vector(records, base, 6),
-        );
-        let n = vector(records, base, NORMAL);
+        let flags = light.gather(&self.flags);
         let two = U8::splat(TWO_SIDED);
-        let two_sided = (light.gather(&self.flags) & two).eq(two);
-        // warp::square_to_uniform_triangle, both branches and a select.
-        let half = F8::splat(2.0);
-        let first = u[0].lt(u[1]);
-        let (b0_first, b1_second) = (u[0] / half, u[1] / half);
-        let b0 = F8::select(first, b0_first, u[0] - b1_second);
-        let b1 = F8::select(first, u[1] - b0_first, b1_second);
-        let (bx, by) = (b1, F8::ONE - b0 - b1);
-        let y = p0 * (F8::ONE - bx - by) + p1 * bx + p2 * by;
+        let two_sided = (flags & two).eq(two);
+        let spheres = if self.kinds & SPHERES != 0 {
+            (flags & U8::splat(SPHERES)).eq(U8::splat(SPHERES)).bits() & mask
+        } else {
+            0
+        };
+        let triangles = mask & !spheres;
+        let (mut y, mut n, mut pdf_of, mut scalar) = (V3::ZERO, V3::ZERO, F8::ZERO, 0);
+        let cone = spheres != 0;
+        if triangles != 0 {
+            (y, n) = triangle_points(records, base, u);
+        }
+        if cone {
+            let s = sphere_points(records, base, p, u);
+            let m = M8::from_bits(spheres);
+            (y, n) = (V3::select(m, s.y, y), V3::select(m, s.n, n));
+            pdf_of = s.pdf;
+            scalar = spheres & !s.cone;
+        }
         // area_sample.
         let to_light = y - p;
         let d2 = to_light.length_squared();
@@ -115,8 +146,11 @@ impl TriangleLights {
         let facing_away = cos_light.le(zero) & !two_sided;
         let sampled = d2.gt(zero) & !(facing_away | cos_light.eq(zero));
         let target = offset_ray_origin_lanes(y, V3::select(cos_light.gt(zero), n, -n));
-        let pdf = d2 / cos_light.abs() / field(records, base, AREA);
-        // sample_light: a zero emission or a point behind the shading point is useless.
+        let mut pdf = d2 / cos_light.abs() / field(records, base, AREA);
+        if cone {
+            pdf = F8::select(M8::from_bits(spheres), pdf_of, pdf);
+        }
+        // sample_chosen_light: a zero emission or a point behind the shading point is useless.
         let radiance = vector(records, base, EMISSION);
         let black = radiance.x.eq(zero) & radiance.y.eq(zero) & radiance.z.eq(zero);
         let useless: M8 = black | wi.dot(ng).le(zero);
@@ -125,8 +159,73 @@ impl TriangleLights {
             target,
             radiance,
             pdf,
-            valid: sampled.and_not(useless).bits() & mask,
+            valid: sampled.and_not(useless).bits() & mask & !scalar,
+            scalar,
         }
+    }
+}
+
+/// Points on triangle lights at `u` (`warp::square_to_uniform_triangle`, both branches and
+/// a select) and their normals.
+#[inline(always)]
+fn triangle_points(records: &[f32], base: U8, u: [F8; 2]) -> (V3, V3) {
+    let (p0, p1, p2) = (
+        vector(records, base, 0),
+        vector(records, base, 3),
+        vector(records, base, 6),
+    );
+    let half = F8::splat(2.0);
+    let first = u[0].lt(u[1]);
+    let (b0_first, b1_second) = (u[0] / half, u[1] / half);
+    let b0 = F8::select(first, b0_first, u[0] - b1_second);
+    let b1 = F8::select(first, u[1] - b0_first, b1_second);
+    let (bx, by) = (b1, F8::ONE - b0 - b1);
+    let y = p0 * (F8::ONE - bx - by) + p1 * bx + p2 * by;
+    (y, vector(records, base, NORMAL))
+}
+
+/// Points on sphere lights sampled in their cones from `p`.
+struct SpherePoints {
+    y: V3,
+    n: V3,
+    /// The cone's solid-angle density.
+    pdf: F8,
+    /// Lanes where `p` sees a cone (outside the sphere); the others sample by area.
+    cone: u32,
+}
+
+/// `solid_angle::sphere_cone`, `sample_sphere_cone` and `sphere_cone_pdf` lane by lane.
+#[inline(always)]
+fn sphere_points(records: &[f32], base: U8, p: V3, u: [F8; 2]) -> SpherePoints {
+    let (c, r) = (vector(records, base, CENTRE), field(records, base, RADIUS));
+    let one = F8::ONE;
+    let zero = F8::ZERO;
+    // sphere_cone.
+    let axis = c - p;
+    let d2 = axis.length_squared();
+    let sin2 = r * r / d2;
+    let small = F8::splat(0.5) * sin2 + F8::splat(0.125) * sin2 * sin2;
+    let large = one - (one - sin2).sqrt();
+    let omc_max = F8::select(sin2.lt(F8::splat(SPHERE_CONE_SMALL)), small, large);
+    let cone = sin2.lt(one) & omc_max.gt(zero);
+    // sample_sphere_cone.
+    let dc = d2.sqrt();
+    let sin2_max = (r / dc) * (r / dc);
+    let sin_max = sin2_max.sqrt();
+    let omc = u[0] * omc_max;
+    let cos_theta = one - omc;
+    let sin2_theta = (omc * (F8::splat(2.0) - omc)).max(zero);
+    let cos_alpha =
+        sin2_theta / sin_max + cos_theta * (one - sin2_theta / sin2_max).max(zero).sqrt();
+    let sin_alpha = (one - cos_alpha * cos_alpha).max(zero).sqrt();
+    let (sin_phi, cos_phi) = (F8::splat(2.0 * PI) * u[1]).sin_cos();
+    let [s, t, w] = frame_from_normal_lanes((axis / dc).normalize());
+    let n = -(s * (sin_alpha * cos_phi) + t * (sin_alpha * sin_phi) + w * cos_alpha);
+    SpherePoints {
+        y: c + n * r,
+        n,
+        pdf: one / (F8::splat(2.0 * PI) * omc_max),
+        cone: cone.bits(),
     }
 }
 
@@ -151,12 +250,14 @@ fn vector(records: &[f32], base: U8, f: u32) -> V3 {
 mod tests {
     use super::*;
     use crate::integrator::LightSampling;
-    use crate::light::TriangleLight;
+    use crate::light::{SphereLight, TriangleLight, solid_angle};
     use crate::sampling::pcg::Pcg32;
 
-    /// Every lane's sample is the scalar code's to the bit: `Light::sample` by area, the
-    /// emission, and `sample_light`'s checks, for one- and two-sided lights seen from both
-    /// sides, grazing and from their own plane, and a light of zero emission.
+    /// Every lane's sample is the scalar code's to the bit: `Light::sample` (triangles by
+    /// area, spheres by cone), the emission, and `sample_chosen_light`'s checks, for one-
+    /// and two-sided lights seen from both sides, grazing and from their own plane, a light
+    /// of zero emission, a sphere small enough for the cone's series; lanes inside or on a
+    /// sphere are left to the scalar code, which samples its area.
     #[test]
     fn lanes_are_the_scalar_light_samples() {
         if !crate::simd::avx2_or_skip() {
@@ -170,6 +271,16 @@ mod tests {
                 n: n.normalize(),
                 area: 0.5 * n.length(),
                 two_sided,
+                mean_radiance: Vec3::ONE,
+            })
+        };
+        let sphere = |centre: Vec3, radius: f32, two_sided: bool, prim: u32| {
+            Light::Sphere(SphereLight {
+                prim,
+                centre,
+                radius,
+                two_sided,
+                textured: false,
                 mean_radiance: Vec3::ONE,
             })
         };
@@ -197,21 +308,34 @@ mod tests {
                 position: Vec3::ONE,
                 intensity: Vec3::ONE,
             },
+            sphere(Vec3::new(0.5, 0.5, 1.5), 0.6, false, 4),
+            sphere(Vec3::new(-1.0, 1.0, 0.0), 0.01, true, 5),
         ];
         let emission = |prim: u32| match prim {
             0 => Some(Vec3::new(3.0, 2.0, 1.0)),
-            1 => Some(Vec3::splat(0.7)),
+            1 | 5 => Some(Vec3::splat(0.7)),
+            4 => Some(Vec3::new(0.5, 1.0, 2.0)),
             _ => Some(Vec3::ZERO),
         };
-        let table = TriangleLights::new(&lights, emission);
-        assert!(table.any() && !table.lanes_sample(3));
+        let table = AreaLights::new(&lights, emission);
+        let kinds = TRIANGLES | SPHERES;
+        assert!(table.any(SPHERES) && table.any(TRIANGLES) && !table.lanes_sample(3, kinds));
+        let sampled_by_lanes = [0, 1, 2, 4, 5];
         let mut rng = Pcg32::new(9, 9);
-        let mut checked = [0usize; 2];
+        // Lanes whose sample counted, that did not, and that the scalar code took.
+        let mut checked = [0usize; 3];
         for round in 0..5_000 {
-            let pick: [u32; 8] = std::array::from_fn(|_| rng.next_u32() % 3);
-            let ps: [Vec3; 8] = std::array::from_fn(|l| match (round + l) % 5 {
+            let pick: [u32; 8] =
+                std::array::from_fn(|_| sampled_by_lanes[rng.next_u32() as usize % 5]);
+            let ps: [Vec3; 8] = std::array::from_fn(|l| match (round + l) % 7 {
                 // In the first light's plane.
                 0 => Vec3::new(rng.next_f32() * 2.0 - 0.5, rng.next_f32() * 2.0 - 0.5, 0.0),
+                // Inside the first sphere, or on it.
+                1 => {
+                    let d = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5;
+                    let r = if rng.next_f32() < 0.5 { 0.6 } else { 0.3 };
+                    Vec3::new(0.5, 0.5, 1.5) + d.normalize_or(Vec3::Z) * r
+                }
                 _ => Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0,
             });
             let ngs: [Vec3; 8] = std::array::from_fn(|_| {
@@ -228,6 +352,15 @@ mod tests {
                 0xff,
             );
             for l in 0..8 {
+                if s.scalar & (1 << l) != 0 {
+                    let Light::Sphere(sp) = &lights[pick[l] as usize] else {
+                        panic!("lane {l}: only spheres are left to the scalar code");
+                    };
+                    assert!(solid_angle::sphere_cone(ps[l], sp.centre, sp.radius).is_none());
+                    assert_eq!(s.valid & (1 << l), 0);
+                    checked[2] += 1;
+                    continue;
+                }
                 let u = glam::Vec2::new(us[l][0], us[l][1]);
                 let scalar = lights[pick[l] as usize]
                     .sample(ps[l], None, LightSampling::Auto, u)
@@ -254,7 +387,10 @@ mod tests {
                 assert_eq!(s.pdf.to_array()[l].to_bits(), ls.pdf.to_bits());
             }
         }
-        // Both outcomes occur often.
-        assert!(checked.iter().all(|&c| c > 5_000), "{checked:?}");
+        // Every outcome occurs often.
+        assert!(
+            checked[0] > 5_000 && checked[1] > 5_000 && checked[2] > 500,
+            "{checked:?}"
+        );
     }
 }

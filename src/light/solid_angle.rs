@@ -92,6 +92,9 @@ pub fn barycentrics(t: &[Vec3; 3], y: Vec3) -> Vec2 {
     }
 }
 
+/// Below this `sin² θmax`, [`sphere_cone`] takes `1 - cos θmax` from its series.
+pub(crate) const SPHERE_CONE_SMALL: f32 = 1e-3;
+
 /// The cone a sphere (centre `c`, radius `r`) subtends from outside point `p`:
 /// `1 - cos θmax`, computed without cancellation for small spheres; `None` from inside.
 #[inline]
@@ -102,7 +105,7 @@ pub fn sphere_cone(p: Vec3, c: Vec3, r: f32) -> Option<f32> {
         return None;
     }
     // For small cones 1 - sqrt(1 - x) ≈ x/2 + x²/8 keeps the digits the subtraction loses.
-    let one_minus_cos = if sin2 < 1e-3 {
+    let one_minus_cos = if sin2 < SPHERE_CONE_SMALL {
         0.5 * sin2 + 0.125 * sin2 * sin2
     } else {
         1.0 - (1.0 - sin2).sqrt()
@@ -124,8 +127,10 @@ pub fn sample_sphere_cone(p: Vec3, c: Vec3, r: f32, one_minus_cos_max: f32, u: V
     let cos_alpha =
         sin2_theta / sin_max + cos_theta * (1.0 - sin2_theta / sin2_max).max(0.0).sqrt();
     let sin_alpha = (1.0 - cos_alpha * cos_alpha).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.y;
-    let local = Vec3::new(sin_alpha * phi.cos(), sin_alpha * phi.sin(), cos_alpha);
+    // The shared sine and cosine, so that the packet kernel's lanes (`light::lanes`) take
+    // the same points.
+    let (sin_phi, cos_phi) = crate::sampling::warp::sin_cos(2.0 * PI * u.y);
+    let local = Vec3::new(sin_alpha * cos_phi, sin_alpha * sin_phi, cos_alpha);
     let frame = Frame::from_normal(((c - p) / dc).normalize());
     -frame.to_world(local)
 }
