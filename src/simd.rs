@@ -242,6 +242,29 @@ impl F8 {
         }
     }
 
+    /// For lanes in [0, 1): the bin `(u as f64 * n as f64) as usize` (at most `n - 1`) and
+    /// the fraction past it, `(x - bin as f64) as f32`, computed in f64 as the scalar alias
+    /// table's `sample` computes them, so that both choose the same outcome.
+    #[inline(always)]
+    pub fn bin_and_fraction(self, n: u32) -> (U8, F8) {
+        #[inline(always)]
+        fn fraction(x: __m256d, bin: __m128i) -> __m128 {
+            // SAFETY: as for the module's other intrinsics.
+            unsafe { _mm256_cvtpd_ps(_mm256_sub_pd(x, _mm256_cvtepi32_pd(bin))) }
+        }
+        // SAFETY: as for the module's other intrinsics.
+        unsafe {
+            let count = _mm256_set1_pd(n as f64);
+            let low = _mm256_mul_pd(_mm256_cvtps_pd(_mm256_castps256_ps128(self.0)), count);
+            let high = _mm256_mul_pd(_mm256_cvtps_pd(_mm256_extractf128_ps::<1>(self.0)), count);
+            let bins = _mm256_set_m128i(_mm256_cvttpd_epi32(high), _mm256_cvttpd_epi32(low));
+            let bins = _mm256_min_epu32(bins, _mm256_set1_epi32(n as i32 - 1));
+            let low = fraction(low, _mm256_castsi256_si128(bins));
+            let high = fraction(high, _mm256_extracti128_si256::<1>(bins));
+            (U8(bins), F8(_mm256_set_m128(high, low)))
+        }
+    }
+
     /// 1.0 with the sign of each lane (as `1.0f32.copysign(x)`).
     #[inline(always)]
     pub fn sign_of(x: F8) -> F8 {
@@ -344,7 +367,6 @@ impl U8 {
     }
 
     /// The lanes as an array.
-    #[cfg(test)]
     #[inline(always)]
     pub fn to_array(self) -> [u32; 8] {
         // SAFETY: as in `from_array`.

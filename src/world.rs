@@ -812,7 +812,7 @@ impl World {
     #[cfg(target_arch = "x86_64")]
     pub(crate) fn area_lights(&self) -> &crate::light::lanes::AreaLights {
         self.area_lights.get_or_init(|| {
-            crate::light::lanes::AreaLights::new(&self.lights.lights, |prim| {
+            crate::light::lanes::AreaLights::new(&self.lights, |prim| {
                 self.surfaces.untextured_emission(prim)
             })
         })

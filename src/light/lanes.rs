@@ -1,17 +1,20 @@
 //! Area lights laid out for the packet kernel (`integrator::packet`): each triangle's
 //! vertices, normal, area and emission, and each sphere's centre, radius and emission, in
 //! one record, so that eight lanes' light samples are eight gathers a field instead of
-//! eight trips through [`Light::sample`]. A lane's sample is the scalar code's to the bit:
-//! [`AreaLights::sample`] performs `Light::sample`'s and
-//! `integrator::path::sample_chosen_light`'s operations in their order.
+//! eight trips through [`Light::sample`]; and the alias table of selection by power, so
+//! that eight lanes choose their lights at once. A lane's sample is the scalar code's to
+//! the bit: [`AreaLights::sample`] performs `Light::sample`'s and
+//! `integrator::path::sample_chosen_light`'s operations in their order, and
+//! [`PowerSelection::select`] `LightSet::select`'s.
 //!
 //! Built once per render, the first time the packet kernel runs (see
-//! `World::area_lights`), and only then: 68 bytes a light.
+//! `World::area_lights`), and only then: 80 bytes a light.
 
-use super::Light;
 use super::solid_angle::SPHERE_CONE_SMALL;
+use super::{Light, LightSet};
 use crate::geometry::frame::frame_from_normal_lanes;
 use crate::geometry::ray::offset_ray_origin_lanes;
+use crate::sampling::distribution::AliasTable;
 use crate::simd::{F8, M8, U8, V3};
 use glam::Vec3;
 use std::f32::consts::PI;
@@ -42,6 +45,38 @@ pub struct AreaLights {
     flags: Vec<u32>,
     /// The kinds of light present.
     kinds: u32,
+    /// Selection by power in lanes, where the lights are selected by power.
+    selection: Option<PowerSelection>,
+}
+
+/// The alias table of selection by power laid out for lanes: per light, the probability
+/// of keeping its bin, the light taken otherwise, and its probability.
+pub struct PowerSelection {
+    keep: Vec<f32>,
+    alias: Vec<u32>,
+    pmf: Vec<f32>,
+}
+
+impl PowerSelection {
+    fn new(table: &AliasTable) -> Self {
+        let (mut keep, mut alias, mut pmf) = (Vec::new(), Vec::new(), Vec::new());
+        for (k, a, p) in table.bins() {
+            keep.push(k);
+            alias.push(a);
+            pmf.push(p);
+        }
+        Self { keep, alias, pmf }
+    }
+
+    /// The lights chosen with numbers `u` in [0, 1), and their probabilities:
+    /// `AliasTable::sample` lane by lane, to the bit.
+    #[inline(always)]
+    pub fn select(&self, u: F8) -> (U8, F8) {
+        let (bin, fraction) = u.bin_and_fraction(self.keep.len() as u32);
+        let keep = fraction.lt(F8::gather(&self.keep, bin));
+        let chosen = U8::select(keep, bin, bin.gather(&self.alias));
+        (chosen, F8::gather(&self.pmf, chosen))
+    }
 }
 
 /// Eight lanes' light samples.
@@ -61,9 +96,10 @@ pub struct AreaSamples {
 }
 
 impl AreaLights {
-    /// The records of `lights`; `emission(prim)` is the emitted radiance of a primitive
-    /// whose emission is untextured, `None` otherwise.
-    pub fn new(lights: &[Light], emission: impl Fn(u32) -> Option<Vec3>) -> Self {
+    /// The records of the lights of `set`, and its selection by power; `emission(prim)` is
+    /// the emitted radiance of a primitive whose emission is untextured, `None` otherwise.
+    pub fn new(set: &LightSet, emission: impl Fn(u32) -> Option<Vec3>) -> Self {
+        let lights = &set.lights;
         let mut records = vec![0.0; lights.len() * RECORD as usize];
         let mut flags = vec![0; lights.len()];
         for (i, light) in lights.iter().enumerate() {
@@ -94,7 +130,13 @@ impl AreaLights {
             records,
             flags,
             kinds,
+            selection: set.power_table().map(PowerSelection::new),
         }
+    }
+
+    /// Selection by power in lanes; `None` under the other strategies.
+    pub fn selection(&self) -> Option<&PowerSelection> {
+        self.selection.as_ref()
     }
 
     /// Whether the lanes sample any light of `kinds` ([`TRIANGLES`], [`SPHERES`]).
@@ -102,11 +144,12 @@ impl AreaLights {
         self.kinds & kinds != 0
     }
 
-    /// Whether the lanes sample light `light` when they take the lights of `kinds`
-    /// (otherwise the scalar code does).
+    /// The lanes whose light `light` the lanes sample when they take the lights of `kinds`
+    /// (the scalar code samples the others).
     #[inline(always)]
-    pub fn lanes_sample(&self, light: usize, kinds: u32) -> bool {
-        self.flags[light] & kinds != 0
+    pub fn lanes_sample(&self, light: U8, kinds: u32) -> u32 {
+        let kinds = U8::splat(kinds);
+        !(light.gather(&self.flags) & kinds).eq(U8::splat(0)).bits() & 0xff
     }
 
     /// Samples of lights `light` (each one the lanes sample) from points `p` with geometric
@@ -249,9 +292,60 @@ fn vector(records: &[f32], base: U8, f: u32) -> V3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrator::LightSampling;
+    use crate::integrator::{LightSampling, LightSelect};
     use crate::light::{SphereLight, TriangleLight, solid_angle};
+    use crate::sampling::distribution::AliasTable;
     use crate::sampling::pcg::Pcg32;
+
+    /// The lanes choose the alias table's lights with its probabilities, to the bit: tables
+    /// of 1 to 40 random weights (some zero), numbers at random and just below and at each
+    /// bin's edge, where the product's rounding in f32 would take the next bin.
+    #[test]
+    fn lane_selection_is_the_alias_tables() {
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let mut rng = Pcg32::new(3, 7);
+        let mut below_edge = 0;
+        for n in 1..=40u32 {
+            let weights: Vec<f32> = (0..n)
+                .map(|i| {
+                    if i % 7 == 3 {
+                        0.0
+                    } else {
+                        rng.next_f32() * 10.0
+                    }
+                })
+                .collect();
+            let Some(table) = AliasTable::new(&weights) else {
+                continue;
+            };
+            let selection = PowerSelection::new(&table);
+            let mut us: Vec<f32> = (0..200).map(|_| rng.next_f32()).collect();
+            for k in 1..n {
+                let edge = k as f32 / n as f32;
+                us.extend([edge, f32::from_bits(edge.to_bits() - 1)]);
+                below_edge += usize::from((edge.next_down() * n as f32) as u32 == k);
+            }
+            us.resize(us.len().next_multiple_of(8), 0.0);
+            for chunk in us.chunks_exact(8) {
+                let u: [f32; 8] = chunk.try_into().expect("eight numbers");
+                let (light, p) = selection.select(F8::from_array(u));
+                let (light, p) = (light.to_array(), p.to_array());
+                for l in 0..8 {
+                    let (index, pmf) = table.sample(u[l]);
+                    assert_eq!(
+                        (light[l] as usize, p[l].to_bits()),
+                        (index, pmf.to_bits()),
+                        "n {n}, u {}",
+                        u[l]
+                    );
+                }
+            }
+        }
+        // Numbers whose product rounds up to the bin edge in f32 occur.
+        assert!(below_edge > 10, "{below_edge}");
+    }
 
     /// Every lane's sample is the scalar code's to the bit: `Light::sample` (triangles by
     /// area, spheres by cone), the emission, and `sample_chosen_light`'s checks, for one-
@@ -317,9 +411,13 @@ mod tests {
             4 => Some(Vec3::new(0.5, 1.0, 2.0)),
             _ => Some(Vec3::ZERO),
         };
-        let table = AreaLights::new(&lights, emission);
+        let set = LightSet::new(lights.to_vec(), None, 10.0, LightSelect::Power);
+        let table = AreaLights::new(&set, emission);
         let kinds = TRIANGLES | SPHERES;
-        assert!(table.any(SPHERES) && table.any(TRIANGLES) && !table.lanes_sample(3, kinds));
+        assert!(table.any(SPHERES) && table.any(TRIANGLES) && table.selection().is_some());
+        let every_light = U8::from_array([0, 1, 2, 3, 4, 5, 0, 0]);
+        assert_eq!(table.lanes_sample(every_light, kinds), 0xff & !(1 << 3));
+        assert_eq!(table.lanes_sample(every_light, SPHERES), 0b11_0000);
         let sampled_by_lanes = [0, 1, 2, 4, 5];
         let mut rng = Pcg32::new(9, 9);
         // Lanes whose sample counted, that did not, and that the scalar code took.

@@ -208,6 +208,14 @@ impl LightSet {
         }
     }
 
+    /// The alias table of selection by power (`None` under other strategies).
+    pub fn power_table(&self) -> Option<&AliasTable> {
+        match self.selector.as_ref()? {
+            Selector::Power(table) => Some(table),
+            _ => None,
+        }
+    }
+
     /// True if there is nothing to sample.
     pub fn is_empty(&self) -> bool {
         self.selector.is_none()

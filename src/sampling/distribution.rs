@@ -77,6 +77,15 @@ impl AliasTable {
     pub fn pmf(&self, i: usize) -> f32 {
         self.pmf[i]
     }
+
+    /// Per outcome: the probability of keeping its bin, the outcome taken otherwise, and
+    /// its probability (for a copy laid out for SIMD lanes, `light::lanes`).
+    pub fn bins(&self) -> impl Iterator<Item = (f32, u32, f32)> + '_ {
+        self.bins
+            .iter()
+            .zip(&self.pmf)
+            .map(|(&(keep, alias), &pmf)| (keep, alias, pmf))
+    }
 }
 
 /// A piecewise-constant density on [0, 1) with `n` equal bins.
