@@ -220,6 +220,48 @@ impl Camera {
         }
     }
 
+    /// A pinhole perspective camera's primary rays through film positions `(x, y)` in
+    /// eight lanes: [`Camera::generate_ray`]'s operations lane by lane, so each lane's ray
+    /// is the scalar one to the bit (origins, unit directions, ray lengths). `None` for
+    /// other cameras, whose rays the scalar code generates. Only for code compiled with
+    /// AVX2 (see `crate::simd`).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn pinhole_rays_lanes(
+        &self,
+        x: crate::simd::F8,
+        y: crate::simd::F8,
+    ) -> Option<(crate::simd::V3, crate::simd::V3, crate::simd::F8)> {
+        use crate::simd::{F8, V3};
+        let Kind::Perspective {
+            tan_half_x,
+            tan_half_y,
+        } = self.kind
+        else {
+            return None;
+        };
+        if self.lens_radius > 0.0 {
+            return None;
+        }
+        let one = F8::ONE;
+        let ndc_x = x * self.film_to_ndc.x - one;
+        let ndc_y = one - y * self.film_to_ndc.y;
+        let (dx, dy) = (ndc_x * tan_half_x, ndc_y * tan_half_y);
+        // A function, not a closure: closures compile outside the caller's AVX2 code.
+        #[inline(always)]
+        fn axis(v: Vec3) -> V3 {
+            V3::new(F8::splat(v.x), F8::splat(v.y), F8::splat(v.z))
+        }
+        let world = axis(self.right) * dx + axis(self.up) * dy + axis(self.forward) * one;
+        let length = (dx * dx + dy * dy + one * one).sqrt();
+        let dir = world * (one / length);
+        let (near, far) = (length * self.clip_near, length * self.clip_far);
+        // The scalar code adds the lens offset (zero) in camera space to the origin first.
+        let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
+        let origin = axis(self.origin + to_world(Vec3::ZERO)) + dir * near;
+        Some((origin, dir, far - near))
+    }
+
     /// Distance of render-space point `p` along the viewing axis, in world units (the
     /// depth AOV's Z).
     #[inline]
@@ -247,6 +289,48 @@ mod tests {
         };
         let space = RenderSpace::from_bounds(DVec3::splat(-4.0), DVec3::splat(6.0));
         Camera::new(&c, &space, 64, 48)
+    }
+
+    /// A pinhole camera's rays in lanes are the scalar rays to the bit, over the film and
+    /// at its edges; other cameras leave their rays to the scalar code.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn pinhole_lanes_are_the_scalar_rays() {
+        use crate::simd::F8;
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let perspective = Projection::Perspective {
+            yfov: 0.8,
+            aspect: None,
+        };
+        let cam = camera(perspective.clone(), 0.0);
+        let mut rng = crate::sampling::pcg::Pcg32::new(5, 1);
+        for round in 0..2_000 {
+            let film: [Vec2; 8] = std::array::from_fn(|l| match (round + l) % 4 {
+                0 => Vec2::new(0.0, 48.0 * rng.next_f32()),
+                1 => Vec2::new(64.0 * rng.next_f32(), 48.0),
+                _ => Vec2::new(64.0 * rng.next_f32(), 48.0 * rng.next_f32()),
+            });
+            let (x, y) = (film.map(|f| f.x), film.map(|f| f.y));
+            let (origin, dir, tmax) = cam
+                .pinhole_rays_lanes(F8::from_array(x), F8::from_array(y))
+                .expect("a pinhole camera");
+            for (l, &f) in film.iter().enumerate() {
+                let ray = cam.generate_ray(f, Vec2::splat(0.5));
+                let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+                assert_eq!(bits(origin.lane(l)), bits(ray.origin), "film {f}");
+                assert_eq!(bits(dir.lane(l)), bits(ray.dir), "film {f}");
+                assert_eq!(tmax.to_array()[l].to_bits(), ray.tmax.to_bits(), "film {f}");
+            }
+        }
+        let orthographic = Projection::Orthographic {
+            xmag: 2.0,
+            ymag: 1.5,
+        };
+        for cam in [camera(perspective, 0.3), camera(orthographic, 0.0)] {
+            assert!(cam.pinhole_rays_lanes(F8::ONE, F8::ONE).is_none());
+        }
     }
 
     /// Every ray has a unit direction, starts on the near clipping plane and ends on the far

@@ -147,6 +147,14 @@ impl Sampler {
         }
     }
 
+    /// What the camera's Sobol set starts from: the sample's bit-reversed index and the
+    /// set's seed, so that [`sobol_4d_lanes`] computes eight samples' camera numbers at once
+    /// ([`Sampler::camera`]'s to the bit); `None` for the independent sampler.
+    #[inline]
+    pub(crate) fn camera_sobol(&self) -> Option<(u32, u32)> {
+        (self.kind == SamplerKind::Sobol).then(|| (self.index_rev, self.set_seed(0)))
+    }
+
     /// Numbers for path vertex `depth` (0 = the first hit from the camera) of branch
     /// `branch` (0: the main path).
     #[inline]
