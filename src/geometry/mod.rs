@@ -306,6 +306,8 @@ impl Bvh {
         let mut visitor = ClosestLanes {
             bvh: self,
             rays,
+            origin,
+            dir,
             shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
             closest: tmax.map(Closest::new),
             bound: tmax,
@@ -330,6 +332,8 @@ impl Bvh {
         let mut visitor = OccludedLanes {
             bvh: self,
             rays,
+            origin,
+            dir,
             shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
             bounds: bounds_of(rays, mask),
             occluded: 0,
@@ -425,6 +429,19 @@ fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
     })
 }
 
+/// Lane `lane`'s hit of a sphere at distance `t`, arriving from outside where `front` has
+/// its bit.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sphere_hit(t: f32, front: u32, lane: usize) -> PrimitiveHit {
+    PrimitiveHit {
+        t,
+        b1: 0.0,
+        b2: 0.0,
+        front: front & (1 << lane) != 0,
+    }
+}
+
 /// The origins and directions of `rays`, one a lane.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
@@ -499,6 +516,9 @@ impl LaneShears {
 struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
+    /// The rays' origins and directions in lanes (for spheres).
+    origin: V3,
+    dir: V3,
     shears: LaneShears,
     closest: [Closest; LANES],
     /// Each lane's `Closest::bound`, kept beside `closest` so that testing a triangle
@@ -548,11 +568,28 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
                 }
             }
         }
-        if !shapes.is_empty() {
-            for lane in Lanes::new(active) {
+        // Shape by shape: each lane still takes the shapes in the single-ray test's order.
+        for s in shapes {
+            let Shape::Sphere { centre, radius } = s.shape else {
+                for lane in Lanes::new(active) {
+                    let closest = &mut self.closest[lane];
+                    if let Some(hit) = s.shape.intersect(&self.rays[lane], closest.bound()) {
+                        let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                        closest.consider(hit, s.prim, s.flags, accept);
+                        self.bound[lane] = closest.bound();
+                    }
+                }
+                continue;
+            };
+            let bound = F8::from_array(self.bound);
+            let (hits, t, front) =
+                sphere::intersect_lanes(self.origin, self.dir, centre, radius, bound, active);
+            let (t, front) = (t.to_array(), front.bits());
+            for lane in Lanes::new(hits) {
+                let hit = sphere_hit(t[lane], front, lane);
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
                 let closest = &mut self.closest[lane];
-                shapes_closest(shapes, &self.rays[lane], closest, accept);
+                closest.consider(hit, s.prim, s.flags, accept);
                 self.bound[lane] = closest.bound();
             }
         }
@@ -573,6 +610,9 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
     rays: &'a [Ray; LANES],
+    /// The rays' origins and directions in lanes (for spheres).
+    origin: V3,
+    dir: V3,
     shears: LaneShears,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
@@ -630,11 +670,33 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 }
             }
         }
-        if !shapes.is_empty() {
-            for lane in Lanes::new(active) {
+        // Shape by shape; a lane is answered by the first shape that occludes it.
+        for s in shapes {
+            if active == 0 {
+                return;
+            }
+            let Shape::Sphere { centre, radius } = s.shape else {
+                for lane in Lanes::new(active) {
+                    let ray = &self.rays[lane];
+                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                    if let Some(hit) = s.shape.intersect(ray, ray.tmax)
+                        && accepted(&hit, s.prim, s.flags, accept)
+                    {
+                        self.answer(lane);
+                        active &= !(1 << lane);
+                    }
+                }
+                continue;
+            };
+            let tmax = F8::from_array(self.bounds);
+            let (hits, t, front) =
+                sphere::intersect_lanes(self.origin, self.dir, centre, radius, tmax, active);
+            let (t, front) = (t.to_array(), front.bits());
+            for lane in Lanes::new(hits) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                if shapes_occlude(shapes, &self.rays[lane], accept) {
+                if accepted(&sphere_hit(t[lane], front, lane), s.prim, s.flags, accept) {
                     self.answer(lane);
+                    active &= !(1 << lane);
                 }
             }
         }
