@@ -825,19 +825,11 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let mut scalar = ScalarLightSamples::new();
             let round = v.round_lanes(nee_lanes, j, counts.nee);
             // The numbers of each lane's light sample: the point on the light, and the choice.
-            let mut u = [[0.0f32; LANES]; 3];
-            for lane in Lanes::new(round) {
+            let split = if counts.nee > 1 { round & v.first } else { 0 };
+            let mut u = self.split_points(lanes, split, SplitKind::Light, j, buffers);
+            for lane in Lanes::new(round & !split) {
                 let vs = v.lane(lane);
-                let path = &lanes[lane];
-                let (u_light, u_select) = if v.first & (1 << lane) == 0 || counts.nee == 1 {
-                    (vs.light, vs.light_select)
-                } else {
-                    let slot = &buffers.slots[path.sample as usize];
-                    let point = slot.split_points.point(SplitKind::Light, j);
-                    let p = slot.sampler.first_split_point(SplitKind::Light, point);
-                    (Vec2::new(p[0], p[1]), p[2])
-                };
-                (u[0][lane], u[1][lane], u[2][lane]) = (u_light.x, u_light.y, u_select);
+                (u[0][lane], u[1][lane], u[2][lane]) = (vs.light.x, vs.light.y, vs.light_select);
             }
             let (light, p_select, chosen) = self.select_lights(v, round, &u[2]);
             // Lanes whose chosen light the lanes sample; the scalar code samples the others.
@@ -930,6 +922,49 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
     }
 
+    /// Point `j` of the first vertex's split samples of `kind` for the lanes of `mask`
+    /// (each at its path's first vertex), one array a dimension: the scalar code's points,
+    /// with eight lanes' Sobol points scrambled at once where three or more lanes take one.
+    #[inline(always)]
+    fn split_points(
+        &self,
+        lanes: &[Path; LANES],
+        mask: u32,
+        kind: SplitKind,
+        j: u32,
+        buffers: &PacketBuffers,
+    ) -> [[f32; LANES]; 4] {
+        let mut u = [[0.0f32; LANES]; 4];
+        if mask == 0 {
+            return u;
+        }
+        let (mut sobol, mut rev, mut seed) = (0u32, [0u32; LANES], [0u32; LANES]);
+        for lane in Lanes::new(mask) {
+            let slot = &buffers.slots[lanes[lane].sample as usize];
+            let point = slot.split_points.point(kind, j);
+            match slot.sampler.first_split_sobol(kind, point) {
+                Some((r, s)) if mask.count_ones() >= 3 => {
+                    (rev[lane], seed[lane]) = (r, s);
+                    sobol |= 1 << lane;
+                }
+                _ => {
+                    let p = slot.sampler.first_split_point(kind, point);
+                    for (dim, x) in u.iter_mut().zip(p) {
+                        dim[lane] = x;
+                    }
+                }
+            }
+        }
+        if sobol != 0 {
+            let points = sobol_4d_lanes(U8::from_array(rev), U8::from_array(seed));
+            let m = M8::from_bits(sobol);
+            for (dim, p) in u.iter_mut().zip(points) {
+                *dim = F8::select(m, p, F8::from_array(*dim)).to_array();
+            }
+        }
+        u
+    }
+
     /// The lights the lanes of `round` choose with numbers `u_select` (in lanes where
     /// lights are selected by power, else lane by lane), their selection probabilities, and
     /// the lanes that chose one.
@@ -1000,34 +1035,19 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let beta = betas(&parents);
         let n_bsdf = v.counts(counts.bsdf);
         let weight = F8::ONE / n_bsdf;
-        let split = |lane: usize| v.first & (1 << lane) != 0 && counts.bsdf > 1;
         let mut continued = 0u32;
         for k in 0..rounds {
             let round = v.round_lanes(v.mask, k, counts.bsdf);
-            let mut u = [[0.0f32; 4]; LANES];
-            for lane in Lanes::new(round) {
-                let path = &parents[lane];
-                u[lane] = if !split(lane) {
-                    let vs = v.lane(lane);
-                    [vs.bsdf.x, vs.bsdf.y, vs.lobe, vs.rr]
-                } else {
-                    let slot = &buffers.slots[path.sample as usize];
-                    let point = slot.split_points.point(SplitKind::Bsdf, k);
-                    slot.sampler.first_split_point(SplitKind::Bsdf, point)
-                };
+            let split = if counts.bsdf > 1 { round & v.first } else { 0 };
+            let mut u = self.split_points(&parents, split, SplitKind::Bsdf, k, buffers);
+            for lane in Lanes::new(round & !split) {
+                let vs = v.lane(lane);
+                (u[0][lane], u[1][lane]) = (vs.bsdf.x, vs.bsdf.y);
+                (u[2][lane], u[3][lane]) = (vs.lobe, vs.rr);
             }
-            let lane_u = |i: usize| {
-                let mut x = [0.0; LANES];
-                for (x, u) in x.iter_mut().zip(&u) {
-                    *x = u[i];
-                }
-                F8::from_array(x)
-            };
+            let u = u.map(F8::from_array);
             // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
-            let s = unsafe {
-                v.bsdf
-                    .sample(v.wo, lane_u(2), [lane_u(0), lane_u(1)], round)
-            };
+            let s = unsafe { v.bsdf.sample(v.wo, u[2], [u[0], u[1]], round) };
             let wi = v.to_world(s.wi);
             let ok = (s.valid & wi.dot(v.ng).gt(F8::ZERO)).bits() & round;
             let new_beta = beta * s.weight * weight;
@@ -1037,7 +1057,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 new_beta.z.to_array(),
             );
             let delta = s.delta.bits();
-            let (pdf, u_rr) = ((s.pdf * n_bsdf).to_array(), lane_u(3).to_array());
+            let (pdf, u_rr) = ((s.pdf * n_bsdf).to_array(), u[3].to_array());
             for lane in Lanes::new(ok) {
                 let parent = &parents[lane];
                 let mut b = Vec3::new(bx[lane], by[lane], bz[lane]);

@@ -258,6 +258,21 @@ impl Sampler {
         }
     }
 
+    /// What [`Sampler::first_split_point`]'s Sobol point starts from: its bit-reversed
+    /// index and its seed, so that [`sobol_4d_lanes`] computes eight lanes' points at once;
+    /// `None` for the independent sampler.
+    #[inline]
+    pub(crate) fn first_split_sobol(
+        &self,
+        kind: SplitKind,
+        (stream, point): (u32, u64),
+    ) -> Option<(u32, u32)> {
+        (self.kind == SamplerKind::Sobol).then(|| {
+            let (seed, rev) = sobol_position(self.pixel_key, point);
+            (rev, seed ^ split_key(kind, stream))
+        })
+    }
+
     /// The index of the current sample in its pixel.
     #[inline]
     pub fn sample_index(&self) -> u32 {
