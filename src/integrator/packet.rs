@@ -275,18 +275,43 @@ struct Vertices<'b> {
     origin: [Vec3; LANES],
     points: [Vec3; LANES],
     normals: [Vec3; LANES],
-    vs: [Option<VertexSample>; LANES],
+    /// The lanes' random numbers (`VertexSample`'s), a dimension a vector: see [`Dim`].
+    numbers: [F8; Dim::COUNT],
+}
+
+/// The dimensions of a vertex's random numbers in [`Vertices::numbers`]: the light
+/// sample's point and choice, roulette, the BSDF sample's direction and lobe.
+struct Dim;
+
+impl Dim {
+    const LIGHT_X: usize = 0;
+    const LIGHT_Y: usize = 1;
+    const LIGHT_SELECT: usize = 2;
+    const RR: usize = 3;
+    const BSDF_X: usize = 4;
+    const BSDF_Y: usize = 5;
+    const LOBE: usize = 6;
+    const COUNT: usize = 7;
+
+    /// Writes `vs` into lane `lane` of `numbers`.
+    #[inline(always)]
+    fn set(numbers: &mut [[f32; LANES]; Dim::COUNT], lane: usize, vs: &VertexSample) {
+        let values = [
+            vs.light.x,
+            vs.light.y,
+            vs.light_select,
+            vs.rr,
+            vs.bsdf.x,
+            vs.bsdf.y,
+            vs.lobe,
+        ];
+        for (dim, x) in numbers.iter_mut().zip(values) {
+            dim[lane] = x;
+        }
+    }
 }
 
 impl Vertices<'_> {
-    /// The random numbers of scattering lane `lane`.
-    #[inline(always)]
-    fn lane(&self, lane: usize) -> &VertexSample {
-        self.vs[lane]
-            .as_ref()
-            .unwrap_or_else(|| unreachable!("lane {lane} does not scatter"))
-    }
-
     /// The lanes of `lanes` in round `j` of the first vertex's `count` samples: a deeper
     /// vertex takes one. Decided from masks, not lane by lane: the lanes' depths are
     /// unpredictable branches.
@@ -731,7 +756,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         buffers: &mut PacketBuffers,
     ) -> Vertices<'b> {
         let mut dir = [Vec3::Z; LANES];
-        let mut vs = [None; LANES];
+        // Numbers the scalar code takes (deep vertices, the independent sampler).
+        let mut scalar_numbers = [[0.0f32; LANES]; Dim::COUNT];
         // Lanes whose numbers are Sobol sets: their inputs, scrambled eight at a time below.
         let (mut sobol, mut index_rev, mut seeds) = (0u32, [0u32; LANES], [[0u32; LANES]; 2]);
         let mut first = 0u32;
@@ -750,31 +776,38 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     (index_rev[lane], seeds[0][lane], seeds[1][lane]) = (rev, a, b);
                     sobol |= 1 << lane;
                 }
-                None => vs[lane] = Some(sampler.vertex(depth, branch)),
+                None => Dim::set(&mut scalar_numbers, lane, &sampler.vertex(depth, branch)),
             }
         }
-        // Below three Sobol lanes, their scalar sets: eight lanes' scrambling and the
-        // transposes around it cost about as many instructions as three scalar sets.
+        // Below three Sobol lanes, their scalar sets: eight lanes' scrambling costs about as
+        // many instructions as three scalar sets.
+        let mut numbers = [F8::ZERO; Dim::COUNT];
+        for (n, values) in numbers.iter_mut().zip(scalar_numbers) {
+            *n = F8::from_array(values);
+        }
         if sobol.count_ones() < 3 {
+            let mut scalar = [[0.0f32; LANES]; Dim::COUNT];
             for lane in Lanes::new(sobol) {
                 let lane_seeds = [seeds[0][lane], seeds[1][lane]];
-                vs[lane] = Some(sobol_vertex(index_rev[lane], lane_seeds));
+                Dim::set(
+                    &mut scalar,
+                    lane,
+                    &sobol_vertex(index_rev[lane], lane_seeds),
+                );
+            }
+            let m = M8::from_bits(sobol);
+            for (n, s) in numbers.iter_mut().zip(scalar) {
+                *n = F8::select(m, F8::from_array(s), *n);
             }
         } else {
             let rev = U8::from_array(index_rev);
-            let mut sets = [[[0.0f32; LANES]; 4]; 2];
-            for (set, seeds) in sets.iter_mut().zip(&seeds) {
-                let numbers = sobol_4d_lanes(rev, U8::from_array(*seeds));
-                for (dim, n) in set.iter_mut().zip(&numbers) {
-                    *dim = n.to_array();
-                }
-            }
-            let [a, b] = &sets;
-            for lane in Lanes::new(sobol) {
-                vs[lane] = Some(VertexSample::from_sets(
-                    [a[0][lane], a[1][lane], a[2][lane], a[3][lane]],
-                    [b[0][lane], b[1][lane], b[2][lane], b[3][lane]],
-                ));
+            let a = sobol_4d_lanes(rev, U8::from_array(seeds[0]));
+            let b = sobol_4d_lanes(rev, U8::from_array(seeds[1]));
+            // VertexSample::from_sets: set a's four numbers, then set b's first three.
+            let sets = [a[0], a[1], a[2], a[3], b[0], b[1], b[2]];
+            let m = M8::from_bits(sobol);
+            for (n, s) in numbers.iter_mut().zip(sets) {
+                *n = F8::select(m, s, *n);
             }
         }
         let dir = V3::from_lanes(&dir);
@@ -792,7 +825,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             origin: origin.to_lanes(),
             points: points.p.to_lanes(),
             normals: points.frame[2].to_lanes(),
-            vs,
+            numbers,
         };
         v.wo = v.to_local(-dir);
         v
@@ -827,9 +860,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             // The numbers of each lane's light sample: the point on the light, and the choice.
             let split = if counts.nee > 1 { round & v.first } else { 0 };
             let mut u = self.split_points(lanes, split, SplitKind::Light, j, buffers);
-            for lane in Lanes::new(round & !split) {
-                let vs = v.lane(lane);
-                (u[0][lane], u[1][lane], u[2][lane]) = (vs.light.x, vs.light.y, vs.light_select);
+            let own = [Dim::LIGHT_X, Dim::LIGHT_Y, Dim::LIGHT_SELECT];
+            let split_lanes = M8::from_bits(split);
+            for (u, d) in u.iter_mut().zip(own) {
+                *u = F8::select(split_lanes, F8::from_array(*u), v.numbers[d]).to_array();
             }
             let (light, p_select, chosen) = self.select_lights(v, round, &u[2]);
             // Lanes whose chosen light the lanes sample; the scalar code samples the others.
@@ -1039,13 +1073,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         for k in 0..rounds {
             let round = v.round_lanes(v.mask, k, counts.bsdf);
             let split = if counts.bsdf > 1 { round & v.first } else { 0 };
-            let mut u = self.split_points(&parents, split, SplitKind::Bsdf, k, buffers);
-            for lane in Lanes::new(round & !split) {
-                let vs = v.lane(lane);
-                (u[0][lane], u[1][lane]) = (vs.bsdf.x, vs.bsdf.y);
-                (u[2][lane], u[3][lane]) = (vs.lobe, vs.rr);
+            let points = self.split_points(&parents, split, SplitKind::Bsdf, k, buffers);
+            let own = [Dim::BSDF_X, Dim::BSDF_Y, Dim::LOBE, Dim::RR];
+            let split_lanes = M8::from_bits(split);
+            let mut u = [F8::ZERO; 4];
+            for ((u, p), d) in u.iter_mut().zip(points).zip(own) {
+                *u = F8::select(split_lanes, F8::from_array(p), v.numbers[d]);
             }
-            let u = u.map(F8::from_array);
             // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
             let s = unsafe { v.bsdf.sample(v.wo, u[2], [u[0], u[1]], round) };
             let wi = v.to_world(s.wi);
