@@ -1053,8 +1053,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     }
 
     /// Samples the BSDF at every scattering lane for its continuations (the first vertex's
-    /// split count at depth 0), with Russian roulette: the first continuation stays in its
-    /// lane, the others wait for a lane; lanes whose paths end are freed.
+    /// split count at depth 0), with Russian roulette: the first continuation takes over its
+    /// parent's lane (updated in place), the others wait for a lane; lanes whose paths end
+    /// are freed.
     #[inline(always)]
     fn continue_paths(
         &self,
@@ -1064,16 +1065,24 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         buffers: &mut PacketBuffers,
     ) {
         let counts = self.split.at(0);
-        let parents = *lanes;
         let rounds = v.rounds(v.mask, counts.bsdf);
-        let beta = betas(&parents);
+        let beta = betas(lanes);
         let n_bsdf = v.counts(counts.bsdf);
         let weight = F8::ONE / n_bsdf;
+        // What the first vertex's further BSDF paths (rounds past the first) take from their
+        // parents, whose lanes the first round updates: the parents are at depth 0, on
+        // branch 0, so only their lobe shares.
+        let mut parent_lobes = [[Vec3::ZERO; 3]; LANES];
+        if rounds > 1 {
+            for lane in Lanes::new(v.mask & v.first) {
+                parent_lobes[lane] = lanes[lane].state.lobes;
+            }
+        }
         let mut continued = 0u32;
         for k in 0..rounds {
             let round = v.round_lanes(v.mask, k, counts.bsdf);
             let split = if counts.bsdf > 1 { round & v.first } else { 0 };
-            let points = self.split_points(&parents, split, SplitKind::Bsdf, k, buffers);
+            let points = self.split_points(lanes, split, SplitKind::Bsdf, k, buffers);
             let own = [Dim::BSDF_X, Dim::BSDF_Y, Dim::LOBE, Dim::RR];
             let split_lanes = M8::from_bits(split);
             let mut u = [F8::ZERO; 4];
@@ -1093,12 +1102,14 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let delta = s.delta.bits();
             let (pdf, u_rr) = ((s.pdf * n_bsdf).to_array(), u[3].to_array());
             for lane in Lanes::new(ok) {
-                let parent = &parents[lane];
+                // Rounds past the first are the first vertex's: their children are at depth 1.
+                let depth = if k == 0 {
+                    lanes[lane].state.depth + 1
+                } else {
+                    1
+                };
                 let mut b = Vec3::new(bx[lane], by[lane], bz[lane]);
-                let survival = self
-                    .settings
-                    .rr
-                    .survival(crate::color::luminance(b), parent.state.depth + 1);
+                let survival = self.settings.rr.survival(crate::color::luminance(b), depth);
                 if survival < 1.0 {
                     if !(u_rr[lane] < survival) {
                         continue;
@@ -1108,37 +1119,45 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 if !(b.max_element() > 0.0) {
                     continue;
                 }
-                let child = Path {
-                    ray: Ray::new(v.origin[lane], wi.lane(lane)),
-                    state: PathState {
-                        beta: b,
-                        depth: parent.state.depth + 1,
-                        branch: if k == 0 { parent.state.branch } else { k },
-                        prev_p: v.points[lane],
-                        prev_n: v.normals[lane],
-                        prev_pdf: pdf[lane],
-                        prev_delta: delta & (1 << lane) != 0,
-                        prev_nee_count: if v.first & (1 << lane) != 0 {
-                            counts.nee
-                        } else {
-                            1
-                        },
-                        lobes: parent.state.lobes,
-                    },
-                    sample: parent.sample,
+                let ray = Ray::new(v.origin[lane], wi.lane(lane));
+                let prev_nee_count = if v.first & (1 << lane) != 0 {
+                    counts.nee
+                } else {
+                    1
                 };
                 if k == 0 {
-                    lanes[lane] = child;
+                    let path = &mut lanes[lane];
+                    path.ray = ray;
+                    let state = &mut path.state;
+                    (state.beta, state.depth) = (b, depth);
+                    (state.prev_p, state.prev_n) = (v.points[lane], v.normals[lane]);
+                    (state.prev_pdf, state.prev_delta) = (pdf[lane], delta & (1 << lane) != 0);
+                    state.prev_nee_count = prev_nee_count;
                     continued |= 1 << lane;
                 } else {
-                    buffers.slots[parent.sample as usize].paths += 1;
-                    buffers.waiting.push(child);
+                    let sample = lanes[lane].sample;
+                    buffers.slots[sample as usize].paths += 1;
+                    buffers.waiting.push(Path {
+                        ray,
+                        state: PathState {
+                            beta: b,
+                            depth,
+                            branch: k,
+                            prev_p: v.points[lane],
+                            prev_n: v.normals[lane],
+                            prev_pdf: pdf[lane],
+                            prev_delta: delta & (1 << lane) != 0,
+                            prev_nee_count,
+                            lobes: parent_lobes[lane],
+                        },
+                        sample,
+                    });
                 }
             }
         }
         for lane in Lanes::new(v.mask & !continued) {
             *active &= !(1 << lane);
-            self.end_path(parents[lane].sample, buffers);
+            self.end_path(lanes[lane].sample, buffers);
         }
     }
 }
