@@ -21,9 +21,9 @@
 //! lanes: 3.8 % fewer of the Cornell box's instructions, 3 % fewer of the plates'. Camera
 //! samples start eight at a time (their Sobol sets, and a pinhole camera's rays through
 //! the box filter, in lanes; `Camera::pinhole_rays_lanes`) and wait for lanes in order:
-//! 4.7 % fewer of the plates' instructions, 1.6 % fewer of the Cornell box's. The other shading points and the other
-//! lights' samples go through the scalar
-//! code lane by lane, so every scene the scalar kernel renders renders here too.
+//! 4.7 % fewer of the plates' instructions, 1.6 % fewer of the Cornell box's. The other
+//! shading points and the other lights' samples go through the scalar code lane by lane,
+//! so every scene the scalar kernel renders renders here too.
 //!
 //! The estimator is the scalar kernel's, sample for sample: every path takes the same
 //! random numbers (the sampler is a pure function of pixel, sample index, depth and
@@ -779,12 +779,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 None => Dim::set(&mut scalar_numbers, lane, &sampler.vertex(depth, branch)),
             }
         }
-        // Below three Sobol lanes, their scalar sets: eight lanes' scrambling costs about as
-        // many instructions as three scalar sets.
         let mut numbers = [F8::ZERO; Dim::COUNT];
         for (n, values) in numbers.iter_mut().zip(scalar_numbers) {
             *n = F8::from_array(values);
         }
+        // Below three Sobol lanes, their scalar sets: eight lanes' scrambling costs about as
+        // many instructions as three scalar sets.
         if sobol.count_ones() < 3 {
             let mut scalar = [[0.0f32; LANES]; Dim::COUNT];
             for lane in Lanes::new(sobol) {

@@ -168,16 +168,15 @@ impl AreaLights {
             0
         };
         let triangles = mask & !spheres;
-        let (mut y, mut n, mut pdf_of, mut scalar) = (V3::ZERO, V3::ZERO, F8::ZERO, 0);
-        let cone = spheres != 0;
+        let (mut y, mut n, mut cone_pdf, mut scalar) = (V3::ZERO, V3::ZERO, F8::ZERO, 0);
         if triangles != 0 {
             (y, n) = triangle_points(records, base, u);
         }
-        if cone {
+        if spheres != 0 {
             let s = sphere_points(records, base, p, u);
             let m = M8::from_bits(spheres);
             (y, n) = (V3::select(m, s.y, y), V3::select(m, s.n, n));
-            pdf_of = s.pdf;
+            cone_pdf = s.pdf;
             scalar = spheres & !s.cone;
         }
         // area_sample.
@@ -190,8 +189,8 @@ impl AreaLights {
         let sampled = d2.gt(zero) & !(facing_away | cos_light.eq(zero));
         let target = offset_ray_origin_lanes(y, V3::select(cos_light.gt(zero), n, -n));
         let mut pdf = d2 / cos_light.abs() / field(records, base, AREA);
-        if cone {
-            pdf = F8::select(M8::from_bits(spheres), pdf_of, pdf);
+        if spheres != 0 {
+            pdf = F8::select(M8::from_bits(spheres), cone_pdf, pdf);
         }
         // sample_chosen_light: a zero emission or a point behind the shading point is useless.
         let radiance = vector(records, base, EMISSION);
