@@ -12,9 +12,10 @@ use glam::{DVec3, Vec3, Vec4};
 pub struct Lanes(u32);
 
 impl Lanes {
-    /// The set bits of `mask`.
+    /// The set bits of `mask`, a mask of [`LANES`] lanes.
     #[inline(always)]
     pub fn new(mask: u32) -> Self {
+        debug_assert!(mask >> LANES == 0, "lane mask {mask:#x}");
         Self(mask)
     }
 }
@@ -27,7 +28,9 @@ impl Iterator for Lanes {
         if self.0 == 0 {
             return None;
         }
-        let lane = self.0.trailing_zeros() as usize;
+        // Masked to the lanes (a no-op for a lane mask), so that indexing an array of LANES
+        // by it needs no bounds check (0.6 % of the Cornell box's instructions).
+        let lane = self.0.trailing_zeros() as usize & (LANES - 1);
         self.0 &= self.0 - 1;
         Some(lane)
     }
