@@ -20,7 +20,7 @@ use std::mem::MaybeUninit;
 #[cfg(target_arch = "x86_64")]
 use triangle::Lanes;
 #[cfg(target_arch = "x86_64")]
-use triangle::ShearLanes;
+use triangle::{LaneHits, ShearLanes};
 use triangle::{RayShear, TriangleBlock};
 #[cfg(target_arch = "x86_64")]
 use wide::{LaneRays, LaneVisitor};
@@ -429,19 +429,6 @@ fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
     })
 }
 
-/// Lane `lane`'s hit of a sphere at distance `t`, arriving from outside where `front` has
-/// its bit.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn sphere_hit(t: f32, front: u32, lane: usize) -> PrimitiveHit {
-    PrimitiveHit {
-        t,
-        b1: 0.0,
-        b2: 0.0,
-        front: front & (1 << lane) != 0,
-    }
-}
-
 /// The origins and directions of `rays`, one a lane.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
@@ -528,6 +515,20 @@ struct ClosestLanes<'a, F> {
 }
 
 #[cfg(target_arch = "x86_64")]
+impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> ClosestLanes<'_, F> {
+    /// Each hit lane's closest hit considers its hit of primitive `prim`.
+    #[inline(always)]
+    fn consider(&mut self, hits: &LaneHits, prim: u32, flags: u8) {
+        for lane in Lanes::new(hits.mask) {
+            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+            let closest = &mut self.closest[lane];
+            closest.consider(hits.get(lane), prim, flags, accept);
+            self.bound[lane] = closest.bound();
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
 impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'_, F> {
     #[inline(always)]
     fn bounds(&self) -> F8 {
@@ -559,13 +560,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
                 else {
                     continue;
                 };
-                let (prim, flags) = (leaf.prims[tri], leaf.flags[tri]);
-                for lane in Lanes::new(hits.mask) {
-                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                    let closest = &mut self.closest[lane];
-                    closest.consider(hits.get(lane), prim, flags, accept);
-                    self.bound[lane] = closest.bound();
-                }
+                self.consider(&hits, leaf.prims[tri], leaf.flags[tri]);
             }
         }
         // Shape by shape: each lane still takes the shapes in the single-ray test's order.
@@ -582,16 +577,9 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
                 continue;
             };
             let bound = F8::from_array(self.bound);
-            let (hits, t, front) =
+            let hits =
                 sphere::intersect_lanes(self.origin, self.dir, centre, radius, bound, active);
-            let (t, front) = (t.to_array(), front.bits());
-            for lane in Lanes::new(hits) {
-                let hit = sphere_hit(t[lane], front, lane);
-                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let closest = &mut self.closest[lane];
-                closest.consider(hit, s.prim, s.flags, accept);
-                self.bound[lane] = closest.bound();
-            }
+            self.consider(&hits, s.prim, s.flags);
         }
     }
 
@@ -627,6 +615,20 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> OccludedLanes<'_, F> {
         self.occluded |= 1 << lane;
         self.bounds[lane] = -1.0;
     }
+
+    /// Answers the lanes whose hit of primitive `prim` is accepted; returns them.
+    #[inline(always)]
+    fn answer_hits(&mut self, hits: &LaneHits, prim: u32, flags: u8) -> u32 {
+        let mut answered = 0;
+        for lane in Lanes::new(hits.mask) {
+            let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+            if accepted(&hits.get(lane), prim, flags, accept) {
+                self.answer(lane);
+                answered |= 1 << lane;
+            }
+        }
+        answered
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -657,14 +659,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 else {
                     continue;
                 };
-                let (prim, flags) = (leaf.prims[tri], leaf.flags[tri]);
-                for lane in Lanes::new(hits.mask) {
-                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                    if accepted(&hits.get(lane), prim, flags, accept) {
-                        self.answer(lane);
-                        active &= !(1 << lane);
-                    }
-                }
+                active &= !self.answer_hits(&hits, leaf.prims[tri], leaf.flags[tri]);
                 if active == 0 {
                     return;
                 }
@@ -689,16 +684,8 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 continue;
             };
             let tmax = F8::from_array(self.bounds);
-            let (hits, t, front) =
-                sphere::intersect_lanes(self.origin, self.dir, centre, radius, tmax, active);
-            let (t, front) = (t.to_array(), front.bits());
-            for lane in Lanes::new(hits) {
-                let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                if accepted(&sphere_hit(t[lane], front, lane), s.prim, s.flags, accept) {
-                    self.answer(lane);
-                    active &= !(1 << lane);
-                }
-            }
+            let hits = sphere::intersect_lanes(self.origin, self.dir, centre, radius, tmax, active);
+            active &= !self.answer_hits(&hits, s.prim, s.flags);
         }
     }
 

@@ -5,7 +5,9 @@
 use super::PrimitiveHit;
 use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, M8, V3};
+use super::triangle::LaneHits;
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{F8, V3};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -48,9 +50,9 @@ pub fn intersect(ray: &Ray, centre: Vec3, radius: f32, tmax: f32) -> Option<Prim
 }
 
 /// Eight rays' [`intersect`] with one sphere (origins `origin`, directions `dir`) for the
-/// lanes of `mask`, each bounded by its lane of `tmax`: the lanes that hit, their distances
-/// and whether they arrive from outside, each the scalar test's to the bit (the same
-/// operations lane by lane). Only for code compiled with AVX2 (see `crate::simd`).
+/// lanes of `mask`, each bounded by its lane of `tmax`: each lane's hit is the scalar
+/// test's to the bit (the same operations lane by lane). Only for code compiled with AVX2
+/// (see `crate::simd`).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) fn intersect_lanes(
@@ -60,7 +62,7 @@ pub(crate) fn intersect_lanes(
     radius: f32,
     tmax: F8,
     mask: u32,
-) -> (u32, F8, M8) {
+) -> LaneHits {
     let zero = F8::ZERO;
     let length = dir.length_squared().sqrt();
     let d = dir / length;
@@ -87,7 +89,7 @@ pub(crate) fn intersect_lanes(
     let t = F8::select(t0.gt(zero), t0, t1);
     let hit = zero.le(discriminant) & t.gt(zero) & t.lt(tmax);
     let front = (o + d * (t * length)).dot(d).lt(zero);
-    (hit.bits() & mask, t, front)
+    LaneHits::of_shape(hit.bits() & mask, t, front.bits())
 }
 
 /// Texture coordinates of the point with outward unit normal `n`: the lat-long convention

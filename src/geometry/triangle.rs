@@ -305,6 +305,19 @@ pub(crate) struct LaneHits {
 
 #[cfg(target_arch = "x86_64")]
 impl LaneHits {
+    /// Hits of an analytic shape, which have no barycentric coordinates: the lanes of `mask`
+    /// at distances `t`, arriving on the front in the lanes of `front`.
+    #[inline(always)]
+    pub fn of_shape(mask: u32, t: F8, front: u32) -> Self {
+        Self {
+            mask,
+            t,
+            b1: F8::ZERO,
+            b2: F8::ZERO,
+            front,
+        }
+    }
+
     /// Lane `lane`'s hit (meaningful when its bit in `mask` is set).
     #[inline(always)]
     pub fn get(&self, lane: usize) -> PrimitiveHit {
