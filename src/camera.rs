@@ -247,18 +247,14 @@ impl Camera {
         let ndc_x = x * self.film_to_ndc.x - one;
         let ndc_y = one - y * self.film_to_ndc.y;
         let (dx, dy) = (ndc_x * tan_half_x, ndc_y * tan_half_y);
-        // A function, not a closure: closures compile outside the caller's AVX2 code.
-        #[inline(always)]
-        fn axis(v: Vec3) -> V3 {
-            V3::new(F8::splat(v.x), F8::splat(v.y), F8::splat(v.z))
-        }
-        let world = axis(self.right) * dx + axis(self.up) * dy + axis(self.forward) * one;
+        let world =
+            V3::splat(self.right) * dx + V3::splat(self.up) * dy + V3::splat(self.forward) * one;
         let length = (dx * dx + dy * dy + one * one).sqrt();
         let dir = world * (one / length);
         let (near, far) = (length * self.clip_near, length * self.clip_far);
         // The scalar code adds the lens offset (zero) in camera space to the origin first.
         let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
-        let origin = axis(self.origin + to_world(Vec3::ZERO)) + dir * near;
+        let origin = V3::splat(self.origin + to_world(Vec3::ZERO)) + dir * near;
         Some((origin, dir, far - near))
     }
 

@@ -462,6 +462,12 @@ impl V3 {
         V3 { x, y, z }
     }
 
+    /// The vector `v` in every lane.
+    #[inline(always)]
+    pub fn splat(v: Vec3) -> V3 {
+        V3::new(F8::splat(v.x), F8::splat(v.y), F8::splat(v.z))
+    }
+
     /// The same value in every component.
     #[inline(always)]
     pub fn broadcast(x: F8) -> V3 {

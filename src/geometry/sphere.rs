@@ -66,12 +66,7 @@ pub(crate) fn intersect_lanes(
     let zero = F8::ZERO;
     let length = dir.length_squared().sqrt();
     let d = dir / length;
-    let o = origin
-        - V3::new(
-            F8::splat(centre.x),
-            F8::splat(centre.y),
-            F8::splat(centre.z),
-        );
+    let o = origin - V3::splat(centre);
     let b = -o.dot(d);
     let f = o + d * b;
     let r2 = radius * radius;

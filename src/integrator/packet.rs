@@ -972,12 +972,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         if mask == 0 {
             return u;
         }
+        let in_lanes = mask.count_ones() >= 3;
         let (mut sobol, mut rev, mut seed) = (0u32, [0u32; LANES], [0u32; LANES]);
         for lane in Lanes::new(mask) {
             let slot = &buffers.slots[lanes[lane].sample as usize];
             let point = slot.split_points.point(kind, j);
             match slot.sampler.first_split_sobol(kind, point) {
-                Some((r, s)) if mask.count_ones() >= 3 => {
+                Some((r, s)) if in_lanes => {
                     (rev[lane], seed[lane]) = (r, s);
                     sobol |= 1 << lane;
                 }
