@@ -229,6 +229,81 @@ impl F8 {
         unsafe { F8(_mm256_castsi256_ps(bits.0)) }
     }
 
+    /// Rows into columns: lane j of the i-th result is lane i of row j (the 8×8
+    /// transpose of unpacks, shuffles and 128-bit permutes).
+    #[inline(always)]
+    pub fn transpose(rows: [F8; 8]) -> [F8; 8] {
+        let mut r = [unsafe { _mm256_setzero_ps() }; 8];
+        for (r, row) in r.iter_mut().zip(rows) {
+            *r = row.0;
+        }
+        unsafe {
+            let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+            let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+            let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+            let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+            let t4 = _mm256_unpacklo_ps(r[4], r[5]);
+            let t5 = _mm256_unpackhi_ps(r[4], r[5]);
+            let t6 = _mm256_unpacklo_ps(r[6], r[7]);
+            let t7 = _mm256_unpackhi_ps(r[6], r[7]);
+            let u0 = _mm256_shuffle_ps::<0x44>(t0, t2);
+            let u1 = _mm256_shuffle_ps::<0xee>(t0, t2);
+            let u2 = _mm256_shuffle_ps::<0x44>(t1, t3);
+            let u3 = _mm256_shuffle_ps::<0xee>(t1, t3);
+            let u4 = _mm256_shuffle_ps::<0x44>(t4, t6);
+            let u5 = _mm256_shuffle_ps::<0xee>(t4, t6);
+            let u6 = _mm256_shuffle_ps::<0x44>(t5, t7);
+            let u7 = _mm256_shuffle_ps::<0xee>(t5, t7);
+            [
+                F8(_mm256_permute2f128_ps::<0x20>(u0, u4)),
+                F8(_mm256_permute2f128_ps::<0x20>(u1, u5)),
+                F8(_mm256_permute2f128_ps::<0x20>(u2, u6)),
+                F8(_mm256_permute2f128_ps::<0x20>(u3, u7)),
+                F8(_mm256_permute2f128_ps::<0x31>(u0, u4)),
+                F8(_mm256_permute2f128_ps::<0x31>(u1, u5)),
+                F8(_mm256_permute2f128_ps::<0x31>(u2, u6)),
+                F8(_mm256_permute2f128_ps::<0x31>(u3, u7)),
+            ]
+        }
+    }
+
+    /// Lanes of eight consecutive floats of `floats`, from `at` (unaligned).
+    #[inline(always)]
+    pub fn load(floats: &[f32], at: usize) -> F8 {
+        assert!(at + LANES <= floats.len());
+        // SAFETY: the eight floats are in the slice (checked above).
+        unsafe { F8(_mm256_loadu_ps(floats.as_ptr().add(at))) }
+    }
+
+    /// Stores the first `lanes` lanes at `at` of `floats` (unaligned), leaving the floats
+    /// after them as they are.
+    #[inline(always)]
+    pub fn store(self, floats: &mut [f32], at: usize, lanes: usize) {
+        assert!(lanes <= LANES && at + lanes <= floats.len());
+        // SAFETY: the stored floats are in the slice (checked above).
+        unsafe {
+            let ptr = floats.as_mut_ptr().add(at);
+            if lanes == LANES {
+                _mm256_storeu_ps(ptr, self.0);
+            } else {
+                let first = _mm256_cmpgt_epi32(
+                    _mm256_set1_epi32(lanes as i32),
+                    _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
+                );
+                _mm256_maskstore_ps(ptr, first, self.0);
+            }
+        }
+    }
+
+    /// Each lane takes the next lane's value; the last keeps its own.
+    #[inline(always)]
+    pub fn shift_down(self) -> F8 {
+        unsafe {
+            let next = _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7);
+            F8(_mm256_permutevar8x32_ps(self.0, next))
+        }
+    }
+
     /// `table[index[i]]` in each lane; an index past the end reads the last entry.
     /// `table` must not be empty.
     #[inline(always)]
@@ -474,14 +549,36 @@ impl V3 {
         V3::new(x, x, x)
     }
 
-    /// Lanes from eight vectors.
+    /// Lanes from eight vectors: six loads of the 24 floats and five shuffles (Intel's
+    /// three-way deinterleave), where copying component by component would cost 24 scalar
+    /// stores and three vector loads that wait for them.
     #[inline(always)]
     pub fn from_lanes(v: &[Vec3; 8]) -> V3 {
-        let (mut x, mut y, mut z) = ([0.0; LANES], [0.0; LANES], [0.0; LANES]);
-        for lane in 0..LANES {
-            (x[lane], y[lane], z[lane]) = (v[lane].x, v[lane].y, v[lane].z);
+        // glam's Vec3 is three f32s (repr(C), 12 bytes): the array is x0 y0 z0 x1 … z7.
+        // Floats `at` to `at + 3` and `at + 12` to `at + 15` of `p` (a function, not a closure,
+        // so that it compiles in the caller's AVX2 context).
+        #[inline(always)]
+        unsafe fn halves(p: *const f32, at: usize) -> __m256 {
+            unsafe {
+                _mm256_insertf128_ps::<1>(
+                    _mm256_castps128_ps256(_mm_loadu_ps(p.add(at))),
+                    _mm_loadu_ps(p.add(at + 12)),
+                )
+            }
         }
-        V3::new(F8::from_array(x), F8::from_array(y), F8::from_array(z))
+        let p = v.as_ptr().cast::<f32>();
+        unsafe {
+            // x0 y0 z0 x1 | x4 y4 z4 x5;  y1 z1 x2 y2 | y5 z5 x6 y6;  z2 x3 y3 z3 | z6 x7 y7 z7.
+            let (m03, m14, m25) = (halves(p, 0), halves(p, 4), halves(p, 8));
+            // x2 y2 x3 y3 | x6 y6 x7 y7;  y0 z0 y1 z1 | y4 z4 y5 z5.
+            let xy = _mm256_shuffle_ps::<0b10_01_11_10>(m14, m25);
+            let yz = _mm256_shuffle_ps::<0b01_00_10_01>(m03, m14);
+            V3::new(
+                F8(_mm256_shuffle_ps::<0b10_00_11_00>(m03, xy)),
+                F8(_mm256_shuffle_ps::<0b11_01_10_00>(yz, xy)),
+                F8(_mm256_shuffle_ps::<0b11_00_11_01>(yz, m25)),
+            )
+        }
     }
 
     /// Lane `lane` as a vector.
@@ -512,11 +609,27 @@ impl V3 {
         self * (F8::ONE / self.length_squared().sqrt())
     }
 
-    /// The lanes as eight vectors.
+    /// The lanes as eight vectors: [`V3::from_lanes`]'s shuffles backwards, and six stores.
     #[inline(always)]
     pub fn to_lanes(self) -> [Vec3; 8] {
-        let (x, y, z) = (self.x.to_array(), self.y.to_array(), self.z.to_array());
-        std::array::from_fn(|lane| Vec3::new(x[lane], y[lane], z[lane]))
+        let (x, y, z) = (self.x.0, self.y.0, self.z.0);
+        let mut out = [Vec3::ZERO; 8];
+        let p = out.as_mut_ptr().cast::<f32>();
+        unsafe {
+            // x0 x2 y0 y2;  y1 y3 z1 z3;  z0 z2 x1 x3 (and lanes 4 to 7 in the high halves).
+            let xy = _mm256_shuffle_ps::<0b10_00_10_00>(x, y);
+            let yz = _mm256_shuffle_ps::<0b11_01_11_01>(y, z);
+            let zx = _mm256_shuffle_ps::<0b11_01_10_00>(z, x);
+            // x0 y0 z0 x1;  y1 z1 x2 y2;  z2 x3 y3 z3.
+            let m03 = _mm256_shuffle_ps::<0b10_00_10_00>(xy, zx);
+            let m14 = _mm256_shuffle_ps::<0b11_01_10_00>(yz, xy);
+            let m25 = _mm256_shuffle_ps::<0b11_01_11_01>(zx, yz);
+            for (i, m) in [m03, m14, m25].into_iter().enumerate() {
+                _mm_storeu_ps(p.add(4 * i), _mm256_castps256_ps128(m));
+                _mm_storeu_ps(p.add(12 + 4 * i), _mm256_extractf128_ps::<1>(m));
+            }
+        }
+        out
     }
 
     /// The unit vector where glam's `normalize_or` gives one (a finite, positive inverse
@@ -663,6 +776,44 @@ mod tests {
                     assert_eq!(s.to_array()[l].to_bits(), es.to_bits());
                     assert_eq!(c.to_array()[l].to_bits(), ec.to_bits());
                 }
+            }
+        });
+    }
+
+    /// The transpose takes lane j of row i to lane i of row j.
+    #[test]
+    fn transpose_swaps_rows_and_columns() {
+        with_avx2(|| {
+            let rows: [F8; 8] = std::array::from_fn(|i| {
+                F8::from_array(std::array::from_fn(|j| (8 * i + j) as f32))
+            });
+            let columns = F8::transpose(rows);
+            for (i, column) in columns.iter().enumerate() {
+                let expected: [f32; 8] = std::array::from_fn(|j| (8 * j + i) as f32);
+                assert_eq!(column.to_array(), expected, "column {i}");
+            }
+        });
+    }
+
+    /// Eight vectors go into lanes and back as they are, bit for bit (NaNs and signed zeros
+    /// included), lane i the i-th vector.
+    #[test]
+    fn lanes_of_vectors_round_trip() {
+        with_avx2(|| {
+            let special = [f32::NAN, -0.0, f32::INFINITY, f32::MIN_POSITIVE / 4.0];
+            let v: [Vec3; 8] = std::array::from_fn(|i| {
+                let c = |k: usize| (i * 3 + k) as f32 + 0.25;
+                Vec3::new(c(0), -c(1), if i < 4 { special[i] } else { c(2) })
+            });
+            let lanes = V3::from_lanes(&v);
+            let bits = |f: f32| f.to_bits();
+            for (i, u) in v.iter().enumerate() {
+                let got = [lanes.x, lanes.y, lanes.z].map(|c| c.to_array()[i]);
+                assert_eq!(got.map(bits), u.to_array().map(bits), "lane {i}");
+            }
+            let back = lanes.to_lanes();
+            for (u, w) in v.iter().zip(&back) {
+                assert_eq!(w.to_array().map(bits), u.to_array().map(bits));
             }
         });
     }

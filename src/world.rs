@@ -15,6 +15,8 @@ use crate::geometry::frame::Frame;
 use crate::geometry::instances::{InstancedBvh, Placement, transformed_bounds};
 use crate::geometry::quadric::Quadric;
 use crate::geometry::ray::Ray;
+#[cfg(target_arch = "x86_64")]
+use crate::geometry::ray::RayLanes;
 use crate::geometry::triangle::geometric_normal;
 use crate::geometry::{
     ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, quadric, sphere,
@@ -859,15 +861,22 @@ impl World {
     #[inline(always)]
     pub(crate) fn intersect_lanes(
         &self,
-        rays: &[Ray; crate::simd::LANES],
+        rays: &RayLanes,
         mask: u32,
     ) -> [Option<Hit>; crate::simd::LANES] {
+        // The rays one by one, for alpha tests and placed instances, where first needed (no
+        // closure taking them out: it would compile outside the packet kernel's AVX2 context).
+        let mut each = None;
         let mut hits = self.bvh.intersect_lanes(rays, mask, |lane, prim, hit| {
-            self.surfaces.alpha_passes(prim, hit, &rays[lane])
+            if each.is_none() {
+                each = Some(rays.to_rays());
+            }
+            each.is_some_and(|e| self.surfaces.alpha_passes(prim, hit, &e[lane]))
         });
         if let Some(placed) = &self.placed {
+            let each = rays.to_rays();
             for lane in crate::geometry::triangle::Lanes::new(mask) {
-                let ray = &rays[lane];
+                let ray = &each[lane];
                 let nearer = Ray {
                     tmax: hits[lane].map_or(ray.tmax, |h| h.t),
                     ..*ray
@@ -886,13 +895,18 @@ impl World {
     /// only inside the packet kernel.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    pub(crate) fn occluded_lanes(&self, rays: &[Ray; crate::simd::LANES], mask: u32) -> u32 {
+    pub(crate) fn occluded_lanes(&self, rays: &RayLanes, mask: u32) -> u32 {
+        let mut each = None;
         let mut occluded = self.bvh.occluded_lanes(rays, mask, |lane, prim, hit| {
-            self.surfaces.alpha_passes(prim, hit, &rays[lane])
+            if each.is_none() {
+                each = Some(rays.to_rays());
+            }
+            each.is_some_and(|e| self.surfaces.alpha_passes(prim, hit, &e[lane]))
         });
         if let Some(placed) = &self.placed {
+            let each = rays.to_rays();
             for lane in crate::geometry::triangle::Lanes::new(mask & !occluded) {
-                let blocked = placed.occluded(&rays[lane], |placement, prim, hit, object_ray| {
+                let blocked = placed.occluded(&each[lane], |placement, prim, hit, object_ray| {
                     self.surfaces
                         .placed_alpha_passes(placement, prim, hit, object_ray)
                 });
@@ -924,6 +938,7 @@ impl World {
         let mut hits = 0;
         for chunk in rays.chunks(LANES) {
             let packet: [Ray; LANES] = std::array::from_fn(|l| chunk[l.min(chunk.len() - 1)]);
+            let packet = RayLanes::of_rays(&packet);
             let mask = (1u32 << chunk.len()) - 1;
             hits += if occlusion {
                 self.occluded_lanes(&packet, mask).count_ones() as usize

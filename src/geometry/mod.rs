@@ -11,10 +11,12 @@ pub mod triangle;
 pub mod wide;
 
 #[cfg(target_arch = "x86_64")]
-use crate::simd::{F8, LANES, V3};
+use crate::simd::{F8, LANES, M8};
 use glam::Vec3;
 use obvhs::aabb::Aabb;
 use ray::Ray;
+#[cfg(target_arch = "x86_64")]
+use ray::RayLanes;
 #[cfg(target_arch = "x86_64")]
 use std::mem::MaybeUninit;
 #[cfg(target_arch = "x86_64")]
@@ -297,23 +299,20 @@ impl Bvh {
     #[inline(always)]
     pub(crate) fn intersect_lanes<F: FnMut(usize, u32, &PrimitiveHit) -> bool>(
         &self,
-        rays: &[Ray; LANES],
+        rays: &RayLanes,
         mask: u32,
         accept: F,
     ) -> [Option<Hit>; LANES] {
-        let (origin, dir) = lanes_of(rays);
         let tmax = bounds_of(rays, mask);
         let mut visitor = ClosestLanes {
             bvh: self,
-            rays,
-            origin,
-            dir,
-            shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
+            rays: EachRay::new(rays),
+            shears: LaneShears::new(ShearLanes::of_rays(rays.origin, rays.dir)),
             closest: tmax.map(Closest::new),
             bound: tmax,
             accept,
         };
-        let lane_rays = LaneRays::new(origin, dir);
+        let lane_rays = LaneRays::new(rays.origin, rays.dir);
         self.bvh.traverse_lanes(&lane_rays, &mut visitor);
         visitor.closest.map(Closest::into_hit)
     }
@@ -324,22 +323,19 @@ impl Bvh {
     #[inline(always)]
     pub(crate) fn occluded_lanes<F: FnMut(usize, u32, &PrimitiveHit) -> bool>(
         &self,
-        rays: &[Ray; LANES],
+        rays: &RayLanes,
         mask: u32,
         accept: F,
     ) -> u32 {
-        let (origin, dir) = lanes_of(rays);
         let mut visitor = OccludedLanes {
             bvh: self,
-            rays,
-            origin,
-            dir,
-            shears: LaneShears::new(ShearLanes::of_rays(origin, dir)),
+            rays: EachRay::new(rays),
+            shears: LaneShears::new(ShearLanes::of_rays(rays.origin, rays.dir)),
             bounds: bounds_of(rays, mask),
             occluded: 0,
             accept,
         };
-        let lane_rays = LaneRays::new(origin, dir);
+        let lane_rays = LaneRays::new(rays.origin, rays.dir);
         self.bvh.traverse_lanes(&lane_rays, &mut visitor);
         visitor.occluded
     }
@@ -429,28 +425,46 @@ fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
     })
 }
 
-/// The origins and directions of `rays`, one a lane.
-#[cfg(target_arch = "x86_64")]
-#[inline(always)]
-fn lanes_of(rays: &[Ray; LANES]) -> (V3, V3) {
-    (
-        V3::from_lanes(&rays.map(|r| r.origin)),
-        V3::from_lanes(&rays.map(|r| r.dir)),
-    )
-}
-
 /// Each lane's bound for a packet query of the `mask` lanes of `rays`: its ray's, or -1 for
 /// an idle lane, which keeps it out of every box.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn bounds_of(rays: &[Ray; LANES], mask: u32) -> [f32; LANES] {
-    std::array::from_fn(|lane| {
-        if mask & (1 << lane) != 0 {
-            rays[lane].tmax
-        } else {
-            -1.0
+fn bounds_of(rays: &RayLanes, mask: u32) -> [f32; LANES] {
+    F8::select(M8::from_bits(mask), rays.tmax, F8::splat(-1.0)).to_array()
+}
+
+/// A packet's rays one by one for the single-ray tests, taken out of the lanes together
+/// where first needed.
+#[cfg(target_arch = "x86_64")]
+struct EachRay<'a> {
+    lanes: &'a RayLanes,
+    each: MaybeUninit<[Ray; LANES]>,
+    taken: bool,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<'a> EachRay<'a> {
+    #[inline(always)]
+    fn new(lanes: &'a RayLanes) -> Self {
+        Self {
+            lanes,
+            each: MaybeUninit::uninit(),
+            taken: false,
         }
-    })
+    }
+
+    /// Lane `lane`'s ray.
+    #[inline(always)]
+    fn get(&mut self, lane: usize) -> &Ray {
+        // No closure (`Option::get_or_insert_with`): it would compile outside the packet
+        // kernel's AVX2 context.
+        if !self.taken {
+            self.each = MaybeUninit::new(self.lanes.to_rays());
+            self.taken = true;
+        }
+        // SAFETY: `taken` is set, so the rays were written above or before.
+        unsafe { &self.each.assume_init_ref()[lane] }
+    }
 }
 
 /// Whether a leaf's triangles are tested for the `active` lanes faster one triangle
@@ -502,10 +516,7 @@ impl LaneShears {
 #[cfg(target_arch = "x86_64")]
 struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
-    rays: &'a [Ray; LANES],
-    /// The rays' origins and directions in lanes (for spheres).
-    origin: V3,
-    dir: V3,
+    rays: EachRay<'a>,
     shears: LaneShears,
     closest: [Closest; LANES],
     /// Each lane's `Closest::bound`, kept beside `closest` so that testing a triangle
@@ -541,7 +552,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
+                let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
                 let closest = &mut self.closest[lane];
                 self.bvh
                     .leaf_closest(index, count, ray, shear, closest, accept);
@@ -568,7 +579,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
                     let closest = &mut self.closest[lane];
-                    if let Some(hit) = s.shape.intersect(&self.rays[lane], closest.bound()) {
+                    if let Some(hit) = s.shape.intersect(self.rays.get(lane), closest.bound()) {
                         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
                         closest.consider(hit, s.prim, s.flags, accept);
                         self.bound[lane] = closest.bound();
@@ -577,15 +588,15 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
                 continue;
             };
             let bound = F8::from_array(self.bound);
-            let hits =
-                sphere::intersect_lanes(self.origin, self.dir, centre, radius, bound, active);
+            let (origin, dir) = (self.rays.lanes.origin, self.rays.lanes.dir);
+            let hits = sphere::intersect_lanes(origin, dir, centre, radius, bound, active);
             self.consider(&hits, s.prim, s.flags);
         }
     }
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
+        let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
         let closest = &mut self.closest[lane];
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         self.bvh.closest_in(subtree, ray, shear, closest, accept);
@@ -597,10 +608,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 #[cfg(target_arch = "x86_64")]
 struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
-    rays: &'a [Ray; LANES],
-    /// The rays' origins and directions in lanes (for spheres).
-    origin: V3,
-    dir: V3,
+    rays: EachRay<'a>,
     shears: LaneShears,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
@@ -644,7 +652,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
+                let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
                 if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
                     self.answer(lane);
                 }
@@ -672,9 +680,9 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
             }
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
-                    let ray = &self.rays[lane];
+                    let ray = *self.rays.get(lane);
                     let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                    if let Some(hit) = s.shape.intersect(ray, ray.tmax)
+                    if let Some(hit) = s.shape.intersect(&ray, ray.tmax)
                         && accepted(&hit, s.prim, s.flags, accept)
                     {
                         self.answer(lane);
@@ -684,14 +692,15 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 continue;
             };
             let tmax = F8::from_array(self.bounds);
-            let hits = sphere::intersect_lanes(self.origin, self.dir, centre, radius, tmax, active);
+            let (origin, dir) = (self.rays.lanes.origin, self.rays.lanes.dir);
+            let hits = sphere::intersect_lanes(origin, dir, centre, radius, tmax, active);
             active &= !self.answer_hits(&hits, s.prim, s.flags);
         }
     }
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (ray, shear) = (&self.rays[lane], self.shears.lane(lane));
+        let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
         if self.bvh.occludes_in(subtree, ray, shear, accept) {
             self.answer(lane);
@@ -948,9 +957,10 @@ mod tests {
     #[target_feature(enable = "avx2,fma")]
     fn query_lanes(bvh: &Bvh, rays: &[Ray; LANES], mask: u32) -> ([Option<Hit>; LANES], u32) {
         let accept = |_: usize, prim: u32, _: &PrimitiveHit| !prim.is_multiple_of(3);
+        let rays = RayLanes::of_rays(rays);
         (
-            bvh.intersect_lanes(rays, mask, accept),
-            bvh.occluded_lanes(rays, mask, accept),
+            bvh.intersect_lanes(&rays, mask, accept),
+            bvh.occluded_lanes(&rays, mask, accept),
         )
     }
 

@@ -1,13 +1,72 @@
 //! Rays and robust ray origins.
 
+#[cfg(target_arch = "x86_64")]
+use crate::simd::{F8, LANES, V3};
 use glam::Vec3;
 
 /// A ray `origin + t * dir` for `t` in `(0, tmax)`. `dir` need not be normalised.
+/// Laid out as seven floats (origin, direction, bound), which [`RayLanes::of_rays`] reads.
 #[derive(Clone, Copy, Debug)]
+#[repr(C)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
     pub tmax: f32,
+}
+
+/// Eight rays in lanes (lane i: ray i), as packet queries take them
+/// (`World::intersect_lanes`, `World::occluded_lanes`). Only inside the packet kernel (see
+/// `crate::simd`).
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct RayLanes {
+    pub origin: V3,
+    pub dir: V3,
+    pub tmax: F8,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RayLanes {
+    /// The rays of an array. Each ray's seven floats are one row of an 8×8 transpose, so
+    /// that no component is copied on its own (24 scalar stores that the vector loads
+    /// would wait for).
+    #[inline(always)]
+    pub(crate) fn of_rays(rays: &[Ray; LANES]) -> Self {
+        const FLOATS: usize = std::mem::size_of::<Ray>() / 4;
+        const { assert!(FLOATS == 7 && std::mem::align_of::<Ray>() == 4) };
+        // SAFETY: Ray is repr(C) of seven f32s (checked above), so the array is 56 floats.
+        let floats: &[f32; FLOATS * LANES] = unsafe { &*rays.as_ptr().cast() };
+        let mut rows = [F8::ZERO; LANES];
+        for (i, row) in rows.iter_mut().enumerate().take(LANES - 1) {
+            *row = F8::load(floats, FLOATS * i);
+        }
+        // The last ray's floats end the array: read from one float earlier and shift down.
+        rows[LANES - 1] = F8::load(floats, FLOATS * (LANES - 1) - 1).shift_down();
+        let [ox, oy, oz, dx, dy, dz, tmax, _] = F8::transpose(rows);
+        Self {
+            origin: V3::new(ox, oy, oz),
+            dir: V3::new(dx, dy, dz),
+            tmax,
+        }
+    }
+
+    /// The rays as an array: [`RayLanes::of_rays`] backwards. Each row of the transpose is
+    /// a ray's seven floats and the next ray's first, stored whole in ray order (the last
+    /// ray's seven alone), so that a later read of a ray's fields finds them in one store.
+    #[inline(always)]
+    pub(crate) fn to_rays(self) -> [Ray; LANES] {
+        const FLOATS: usize = std::mem::size_of::<Ray>() / 4;
+        let (o, d) = (self.origin, self.dir);
+        let rows = F8::transpose([o.x, o.y, o.z, d.x, d.y, d.z, self.tmax, o.x.shift_down()]);
+        let mut floats = [0.0f32; FLOATS * LANES];
+        for (i, row) in rows.into_iter().enumerate() {
+            let lanes = if i + 1 < LANES { LANES } else { FLOATS };
+            row.store(&mut floats, FLOATS * i, lanes);
+        }
+        // SAFETY: Ray is repr(C) of seven f32s (checked in `of_rays`), so the 56 floats are
+        // eight rays.
+        unsafe { std::mem::transmute::<[f32; FLOATS * LANES], [Ray; LANES]>(floats) }
+    }
 }
 
 impl Ray {
@@ -90,6 +149,45 @@ mod tests {
                 assert!((q - p).dot(n) > 0.0, "scale {scale} n {n}");
                 assert!((q - p).length() < 1e-3 * scale.max(1.0));
             }
+        }
+    }
+
+    /// Lane i of the packet is ray i: origin, direction and bound, bit for bit (NaN,
+    /// infinity and signed zero included; the last ray is read apart from the others), and
+    /// the lanes give back the rays.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn ray_lanes_are_the_rays() {
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let special = [f32::NAN, f32::INFINITY, -0.0, 1e-40];
+        let rays: [Ray; 8] = std::array::from_fn(|i| {
+            let c = |k: usize| (7 * i + k) as f32 * if k.is_multiple_of(2) { 1.0 } else { -0.5 };
+            Ray {
+                origin: Vec3::new(c(0), c(1), c(2)),
+                dir: Vec3::new(c(3), c(4), special[i % 4]),
+                tmax: if i == 7 { f32::INFINITY } else { c(6) },
+            }
+        });
+        let lanes = RayLanes::of_rays(&rays);
+        let back = lanes.to_rays();
+        let bits = |v: Vec3| v.to_array().map(f32::to_bits);
+        for (i, (ray, lane)) in rays.iter().zip(&back).enumerate() {
+            assert_eq!(
+                bits(lanes.origin.lane(i)),
+                bits(ray.origin),
+                "origin lane {i}"
+            );
+            assert_eq!(bits(lanes.dir.lane(i)), bits(ray.dir), "direction lane {i}");
+            assert_eq!(
+                lanes.tmax.to_array()[i].to_bits(),
+                ray.tmax.to_bits(),
+                "bound lane {i}"
+            );
+            assert_eq!(bits(lane.origin), bits(ray.origin), "origin {i}");
+            assert_eq!(bits(lane.dir), bits(ray.dir), "direction {i}");
+            assert_eq!(lane.tmax.to_bits(), ray.tmax.to_bits(), "bound {i}");
         }
     }
 

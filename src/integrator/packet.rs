@@ -45,7 +45,7 @@ use super::settings::Settings;
 use super::split::{FirstSplit, PixelParts, SampleParts, SamplePoints, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
-use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
+use crate::geometry::ray::{Ray, RayLanes, offset_ray_origin_lanes};
 use crate::geometry::triangle::Lanes;
 use crate::light::lanes::{self as light_lanes, AreaLights, PowerSelection};
 use crate::material::lambert::Lambert;
@@ -671,7 +671,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         rays.closest += active.count_ones() as u64;
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
-        let hits = world.intersect_lanes(&std::array::from_fn(|l| lanes[l].ray), *active);
+        let packet = RayLanes::of_rays(&std::array::from_fn(|l| lanes[l].ray));
+        let hits = world.intersect_lanes(&packet, *active);
         for lane in Lanes::new(*active) {
             let path = &lanes[lane];
             let slot = &mut buffers.slots[path.sample as usize];
@@ -891,29 +892,31 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 }
                 _ => None,
             };
-            // The scalar code's samples in lanes, then the lanes' own samples over them.
-            let (mut wi, mut radiance, mut p_light) = if scalar.sampled != 0 {
+            // The scalar code's samples in lanes, then the lanes' own samples over them. Every
+            // shadow ray leaves its vertex's ray origin.
+            let (mut wi, mut radiance, mut p_light, mut shadow) = if scalar.sampled != 0 {
                 (
                     V3::from_lanes(&scalar.wi),
                     V3::from_lanes(&scalar.radiance),
                     F8::from_array(scalar.p_light),
+                    RayLanes::of_rays(&scalar.shadow),
                 )
             } else {
-                (V3::ZERO, V3::ZERO, F8::ONE)
+                let shadow = RayLanes {
+                    origin: v.origin_lanes,
+                    dir: V3::ZERO,
+                    tmax: F8::ONE,
+                };
+                (V3::ZERO, V3::ZERO, F8::ONE, shadow)
             };
             if let Some(s) = area_samples {
                 let valid = M8::from_bits(s.valid);
                 wi = V3::select(valid, s.wi, wi);
                 radiance = V3::select(valid, s.radiance, radiance);
                 p_light = F8::select(valid, p_select * s.pdf, p_light);
-                let dir = (s.target - v.origin_lanes).to_lanes();
-                for lane in Lanes::new(s.valid) {
-                    scalar.shadow[lane] = Ray {
-                        origin: v.origin[lane],
-                        dir: dir[lane],
-                        tmax: 1.0,
-                    };
-                }
+                shadow.origin = v.origin_lanes;
+                shadow.dir = V3::select(valid, s.target - v.origin_lanes, shadow.dir);
+                shadow.tmax = F8::select(valid, F8::ONE, shadow.tmax);
                 scalar.sampled |= s.valid;
             }
             let mut sampled = scalar.sampled;
@@ -930,7 +933,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 slot.rays += 1;
                 self.count_part_ray(slot, lanes[lane].state.depth, false);
             }
-            let lit = sampled & !world.occluded_lanes(&scalar.shadow, sampled);
+            let lit = sampled & !world.occluded_lanes(&shadow, sampled);
             rays.shadow += sampled.count_ones() as u64;
             if lit == 0 {
                 continue;
