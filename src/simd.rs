@@ -141,6 +141,23 @@ impl F8 {
         unsafe { std::mem::transmute::<F8, [f32; 8]>(self) }
     }
 
+    /// Lane `lane` (taken modulo the lane count), read where the vector lies (no copy of
+    /// the whole vector, as indexing `to_array()` may make).
+    #[inline(always)]
+    pub fn lane(&self, lane: usize) -> f32 {
+        // SAFETY: F8 is an __m256, which is eight f32s.
+        let lanes = unsafe { &*(self as *const F8).cast::<[f32; LANES]>() };
+        lanes[lane & (LANES - 1)]
+    }
+
+    /// Sets lane `lane` (taken modulo the lane count) to `x`.
+    #[inline(always)]
+    pub fn set_lane(&mut self, lane: usize, x: f32) {
+        // SAFETY: F8 is an __m256, which is eight f32s; any bits are a valid f32.
+        let lanes = unsafe { &mut *(self as *mut F8).cast::<[f32; LANES]>() };
+        lanes[lane & (LANES - 1)] = x;
+    }
+
     #[inline(always)]
     pub fn min(self, o: F8) -> F8 {
         unsafe { F8(_mm256_min_ps(self.0, o.0)) }
@@ -442,6 +459,13 @@ impl U8 {
     }
 
     /// The lanes as an array.
+    /// Lanes where `self` is above `o`, compared as unsigned integers.
+    #[inline(always)]
+    pub fn gt(self, o: U8) -> M8 {
+        let most = unsafe { U8(_mm256_max_epu32(self.0, o.0)) };
+        !most.eq(o)
+    }
+
     #[inline(always)]
     pub fn to_array(self) -> [u32; 8] {
         // SAFETY: as in `from_array`.
@@ -581,14 +605,24 @@ impl V3 {
         }
     }
 
+    /// `color::luminance` of each lane, with its operations in its order.
+    #[inline(always)]
+    pub fn luminance(self) -> F8 {
+        self.x * 0.2126 + self.y * 0.7152 + self.z * 0.0722
+    }
+
+    /// Sets lane `lane` to `v`.
+    #[inline(always)]
+    pub fn set_lane(&mut self, lane: usize, v: Vec3) {
+        self.x.set_lane(lane, v.x);
+        self.y.set_lane(lane, v.y);
+        self.z.set_lane(lane, v.z);
+    }
+
     /// Lane `lane` as a vector.
     #[inline(always)]
     pub fn lane(&self, lane: usize) -> Vec3 {
-        Vec3::new(
-            self.x.to_array()[lane],
-            self.y.to_array()[lane],
-            self.z.to_array()[lane],
-        )
+        Vec3::new(self.x.lane(lane), self.y.lane(lane), self.z.lane(lane))
     }
 
     /// The dot product, in glam's order of operations (so that it rounds as the scalar

@@ -268,8 +268,8 @@ impl ShearLanes {
                 self.is_y[k].bits() >> lane & 1,
             );
             shear.axes[k] = (2 - 2 * is_x - is_y) as usize;
-            shear.origin[k] = Vec4::splat(self.origin[k].to_array()[lane]);
-            shear.shear[k] = Vec4::splat(self.shear[k].to_array()[lane]);
+            shear.origin[k] = Vec4::splat(self.origin[k].lane(lane));
+            shear.shear[k] = Vec4::splat(self.shear[k].lane(lane));
         }
         shear
     }
@@ -322,9 +322,9 @@ impl LaneHits {
     #[inline(always)]
     pub fn get(&self, lane: usize) -> PrimitiveHit {
         PrimitiveHit {
-            t: self.t.to_array()[lane],
-            b1: self.b1.to_array()[lane],
-            b2: self.b2.to_array()[lane],
+            t: self.t.lane(lane),
+            b1: self.b1.lane(lane),
+            b2: self.b2.lane(lane),
             front: self.front & (1 << lane) != 0,
         }
     }

@@ -53,12 +53,6 @@ fn schlick(f0: V3, cos: F8) -> V3 {
     f0 + (V3::broadcast(F8::ONE) - f0) * w
 }
 
-/// `color::luminance` of each lane.
-#[inline(always)]
-fn luminance(c: V3) -> F8 {
-    c.x * 0.2126 + c.y * 0.7152 + c.z * 0.0722
-}
-
 /// `square_to_cosine_hemisphere` (concentric disk, lifted to the hemisphere) in lanes.
 #[inline(always)]
 fn cosine_hemisphere(u: [F8; 2]) -> V3 {
@@ -198,8 +192,8 @@ impl<'a> BsdfLanes<'a> {
     /// The glTF lobe probabilities (specular, diffuse) at `wo`.
     #[inline(always)]
     fn lobe_probabilities(&self, wo: V3) -> (F8, F8) {
-        let s = luminance(self.specular_fresnel(wo.z));
-        let d = luminance(self.diffuse_weight(wo.z));
+        let s = self.specular_fresnel(wo.z).luminance();
+        let d = self.diffuse_weight(wo.z).luminance();
         let total = s + d;
         let positive = total.gt(F8::ZERO);
         (
