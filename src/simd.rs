@@ -150,6 +150,16 @@ impl F8 {
         lanes[lane & (LANES - 1)]
     }
 
+    /// The lanes of `m` take `new`'s values. Written back with a plain store: a select into
+    /// a vector in memory otherwise compiles to a masked store (`vmaskmovps`), which AMD's
+    /// cores execute as microcode, many times slower than a blend and a store.
+    #[inline(always)]
+    pub fn merge(&mut self, m: M8, new: F8) {
+        let merged = F8::select(m, new, *self);
+        // SAFETY: `self` is a valid, aligned F8.
+        unsafe { std::ptr::write_volatile(self, merged) }
+    }
+
     /// Sets lane `lane` (taken modulo the lane count) to `x`.
     #[inline(always)]
     pub fn set_lane(&mut self, lane: usize, x: f32) {
@@ -292,23 +302,21 @@ impl F8 {
         unsafe { F8(_mm256_loadu_ps(floats.as_ptr().add(at))) }
     }
 
-    /// Stores the first `lanes` lanes at `at` of `floats` (unaligned), leaving the floats
-    /// after them as they are.
+    /// Stores the lanes at `at` of `floats` (unaligned).
     #[inline(always)]
-    pub fn store(self, floats: &mut [f32], at: usize, lanes: usize) {
-        assert!(lanes <= LANES && at + lanes <= floats.len());
-        // SAFETY: the stored floats are in the slice (checked above).
+    pub fn store(self, floats: &mut [f32], at: usize) {
+        assert!(at + LANES <= floats.len());
+        // SAFETY: the eight floats are in the slice (checked above).
+        unsafe { _mm256_storeu_ps(floats.as_mut_ptr().add(at), self.0) }
+    }
+
+    /// Each lane takes the previous lane's value; the first takes `first`.
+    #[inline(always)]
+    pub fn shift_up(self, first: f32) -> F8 {
         unsafe {
-            let ptr = floats.as_mut_ptr().add(at);
-            if lanes == LANES {
-                _mm256_storeu_ps(ptr, self.0);
-            } else {
-                let first = _mm256_cmpgt_epi32(
-                    _mm256_set1_epi32(lanes as i32),
-                    _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7),
-                );
-                _mm256_maskstore_ps(ptr, first, self.0);
-            }
+            let previous = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
+            let shifted = _mm256_permutevar8x32_ps(self.0, previous);
+            F8(_mm256_blend_ps::<1>(shifted, _mm256_set1_ps(first)))
         }
     }
 
@@ -459,6 +467,30 @@ impl U8 {
     }
 
     /// The lanes as an array.
+    /// Lane `lane` (taken modulo the lane count), read where the vector lies.
+    #[inline(always)]
+    pub fn lane(&self, lane: usize) -> u32 {
+        // SAFETY: U8 is an __m256i, which is eight u32s.
+        let lanes = unsafe { &*(self as *const U8).cast::<[u32; LANES]>() };
+        lanes[lane & (LANES - 1)]
+    }
+
+    /// Sets lane `lane` (taken modulo the lane count) to `x`.
+    #[inline(always)]
+    pub fn set_lane(&mut self, lane: usize, x: u32) {
+        // SAFETY: U8 is an __m256i, which is eight u32s; any bits are a valid u32.
+        let lanes = unsafe { &mut *(self as *mut U8).cast::<[u32; LANES]>() };
+        lanes[lane & (LANES - 1)] = x;
+    }
+
+    /// The lanes of `m` take `new`'s values ([`F8::merge`]).
+    #[inline(always)]
+    pub fn merge(&mut self, m: M8, new: U8) {
+        let merged = U8::select(m, new, *self);
+        // SAFETY: `self` is a valid, aligned U8.
+        unsafe { std::ptr::write_volatile(self, merged) }
+    }
+
     /// Lanes where `self` is above `o`, compared as unsigned integers.
     #[inline(always)]
     pub fn gt(self, o: U8) -> M8 {
@@ -609,6 +641,14 @@ impl V3 {
     #[inline(always)]
     pub fn luminance(self) -> F8 {
         self.x * 0.2126 + self.y * 0.7152 + self.z * 0.0722
+    }
+
+    /// The lanes of `m` take `new`'s values ([`F8::merge`]).
+    #[inline(always)]
+    pub fn merge(&mut self, m: M8, new: V3) {
+        self.x.merge(m, new.x);
+        self.y.merge(m, new.y);
+        self.z.merge(m, new.z);
     }
 
     /// Sets lane `lane` to `v`.
@@ -811,6 +851,39 @@ mod tests {
                     assert_eq!(c.to_array()[l].to_bits(), ec.to_bits());
                 }
             }
+        });
+    }
+
+    /// Lanes read and written one at a time, merged under a mask and shifted, and unsigned
+    /// comparisons (above 2^31 too).
+    #[test]
+    fn lane_access_merges_and_shifts() {
+        with_avx2(|| {
+            let mut x = F8::from_array(std::array::from_fn(|l| l as f32));
+            x.set_lane(3, -7.5);
+            assert_eq!(x.lane(3), -7.5);
+            assert_eq!(x.lane(4), 4.0);
+            let m = M8::from_bits(0b1010_0101);
+            x.merge(m, F8::splat(100.0));
+            assert_eq!(
+                x.to_array(),
+                [100.0, 1.0, 100.0, -7.5, 4.0, 100.0, 6.0, 100.0]
+            );
+            assert_eq!(
+                x.shift_up(-1.0).to_array(),
+                [-1.0, 100.0, 1.0, 100.0, -7.5, 4.0, 100.0, 6.0]
+            );
+            assert_eq!(
+                x.shift_down().to_array(),
+                [1.0, 100.0, -7.5, 4.0, 100.0, 6.0, 100.0, 100.0]
+            );
+            let big = [0, 1, 8, 9, u32::MAX, 1 << 31, 7, 3];
+            let mut u = U8::from_array(big);
+            assert_eq!(u.gt(U8::splat(8)).bits(), 0b0011_1000);
+            u.set_lane(0, 42);
+            u.merge(M8::from_bits(0b1000_0000), U8::splat(5));
+            assert_eq!(u.lane(0), 42);
+            assert_eq!(u.to_array(), [42, 1, 8, 9, u32::MAX, 1 << 31, 7, 5]);
         });
     }
 

@@ -52,17 +52,19 @@ impl RayLanes {
 
     /// The rays as an array: [`RayLanes::of_rays`] backwards. Each row of the transpose is
     /// a ray's seven floats and the next ray's first, stored whole in ray order (the last
-    /// ray's seven alone), so that a later read of a ray's fields finds them in one store.
+    /// ray's after the bound before it, to end at the array's end), so that a later read
+    /// of a ray's fields finds them in one store.
     #[inline(always)]
     pub(crate) fn to_rays(self) -> [Ray; LANES] {
         const FLOATS: usize = std::mem::size_of::<Ray>() / 4;
         let (o, d) = (self.origin, self.dir);
         let rows = F8::transpose([o.x, o.y, o.z, d.x, d.y, d.z, self.tmax, o.x.shift_down()]);
         let mut floats = [0.0f32; FLOATS * LANES];
-        for (i, row) in rows.into_iter().enumerate() {
-            let lanes = if i + 1 < LANES { LANES } else { FLOATS };
-            row.store(&mut floats, FLOATS * i, lanes);
+        for (i, row) in rows.into_iter().enumerate().take(LANES - 1) {
+            row.store(&mut floats, FLOATS * i);
         }
+        let last = rows[LANES - 1].shift_up(self.tmax.lane(LANES - 2));
+        last.store(&mut floats, FLOATS * (LANES - 1) - 1);
         // SAFETY: Ray is repr(C) of seven f32s (checked in `of_rays`), so the 56 floats are
         // eight rays.
         unsafe { std::mem::transmute::<[f32; FLOATS * LANES], [Ray; LANES]>(floats) }

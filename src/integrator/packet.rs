@@ -120,9 +120,9 @@ struct PathLanes {
     prev_pdf: F8,
     /// Lanes whose previous vertex sampled a delta lobe.
     prev_delta: u32,
-    depth: [u32; LANES],
+    depth: U8,
     branch: [u32; LANES],
-    prev_nee_count: [u32; LANES],
+    prev_nee_count: U8,
     /// Sample slot of each lane's path.
     sample: [u32; LANES],
 }
@@ -140,9 +140,9 @@ impl PathLanes {
             prev_n: V3::ZERO,
             prev_pdf: F8::ZERO,
             prev_delta: 0,
-            depth: [0; LANES],
+            depth: U8::splat(0),
             branch: [0; LANES],
-            prev_nee_count: [0; LANES],
+            prev_nee_count: U8::splat(0),
             sample: [0; LANES],
         };
         for lane in 0..LANES {
@@ -168,9 +168,9 @@ impl PathLanes {
         } else {
             self.prev_delta & !bit
         };
-        self.depth[lane] = state.depth;
+        self.depth.set_lane(lane, state.depth);
         self.branch[lane] = state.branch;
-        self.prev_nee_count[lane] = state.prev_nee_count;
+        self.prev_nee_count.set_lane(lane, state.prev_nee_count);
         self.sample[lane] = path.sample;
     }
 
@@ -179,13 +179,13 @@ impl PathLanes {
     fn state(&self, lane: usize) -> PathState {
         PathState {
             beta: self.beta.lane(lane),
-            depth: self.depth[lane],
+            depth: self.depth.lane(lane),
             branch: self.branch[lane],
             prev_p: self.prev_p.lane(lane),
             prev_n: self.prev_n.lane(lane),
             prev_pdf: self.prev_pdf.lane(lane),
             prev_delta: self.prev_delta & (1 << lane) != 0,
-            prev_nee_count: self.prev_nee_count[lane],
+            prev_nee_count: self.prev_nee_count.lane(lane),
             lobes: [Vec3::ZERO; 3],
         }
     }
@@ -784,7 +784,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
         let hits = world.intersect_lanes(&lanes.rays(), *active);
         for lane in Lanes::new(*active) {
-            let (sample, depth) = (lanes.sample[lane], lanes.depth[lane]);
+            let (sample, depth) = (lanes.sample[lane], lanes.depth.lane(lane));
             let slot = &mut buffers.slots[sample as usize];
             slot.rays += 1;
             self.count_part_ray(slot, depth, true);
@@ -875,7 +875,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let mut first = 0u32;
         for lane in Lanes::new(mask) {
             let slot = &mut buffers.slots[lanes.sample[lane] as usize];
-            let (depth, branch) = (lanes.depth[lane], lanes.branch[lane]);
+            let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
             first |= u32::from(depth == 0) << lane;
             if self.learning && depth == 0 {
                 slot.parts.split = true;
@@ -970,11 +970,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let round = v.round_lanes(nee_lanes, j, counts.nee);
             // The numbers of each lane's light sample: the point on the light, and the choice.
             let split = if counts.nee > 1 { round & v.first } else { 0 };
-            let mut u = self.split_points(lanes, split, SplitKind::Light, j, buffers);
+            let points = self.split_points(lanes, split, SplitKind::Light, j, buffers);
             let own = [Dim::LIGHT_X, Dim::LIGHT_Y, Dim::LIGHT_SELECT];
             let split_lanes = M8::from_bits(split);
-            for (u, d) in u.iter_mut().zip(own) {
-                *u = F8::select(split_lanes, F8::from_array(*u), v.numbers[d]).to_array();
+            let mut u = [[0.0f32; LANES]; 3];
+            for ((u, p), d) in u.iter_mut().zip(points).zip(own) {
+                *u = F8::select(split_lanes, p, v.numbers[d]).to_array();
             }
             let (light, p_select, chosen) = self.select_lights(v, round, &u[2]);
             // Lanes whose chosen light the lanes sample; the scalar code samples the others.
@@ -1041,7 +1042,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             for lane in Lanes::new(sampled) {
                 let slot = &mut buffers.slots[lanes.sample[lane] as usize];
                 slot.rays += 1;
-                self.count_part_ray(slot, lanes.depth[lane], false);
+                self.count_part_ray(slot, lanes.depth.lane(lane), false);
             }
             let lit = sampled & !world.occluded_lanes(&shadow, sampled);
             rays.shadow += sampled.count_ones() as u64;
@@ -1059,7 +1060,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let w = mis_weights(self.settings.mis, Technique::Nee, own, p_bsdf * n_bsdf, lit);
             let value = value * w;
             for lane in Lanes::new(lit) {
-                let (depth, branch) = (lanes.depth[lane], lanes.branch[lane]);
+                let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
                 let slot = &mut buffers.slots[lanes.sample[lane] as usize];
                 // The first vertex's light estimate j, or the BSDF path a deeper vertex is on.
                 let current = if depth == 0 { j } else { branch };
@@ -1070,7 +1071,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     }
 
     /// Point `j` of the first vertex's split samples of `kind` for the lanes of `mask`
-    /// (each at its path's first vertex), one array a dimension: the scalar code's points,
+    /// (each at its path's first vertex), one vector a dimension: the scalar code's points,
     /// with eight lanes' Sobol points scrambled at once where three or more lanes take one.
     #[inline(always)]
     fn split_points(
@@ -1080,10 +1081,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         kind: SplitKind,
         j: u32,
         buffers: &PacketBuffers,
-    ) -> [[f32; LANES]; 4] {
+    ) -> [F8; 4] {
         let mut u = [[0.0f32; LANES]; 4];
         if mask == 0 {
-            return u;
+            return [F8::ZERO; 4];
         }
         let in_lanes = mask.count_ones() >= 3;
         let (mut sobol, mut rev, mut seed) = (0u32, [0u32; LANES], [0u32; LANES]);
@@ -1103,14 +1104,18 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 }
             }
         }
-        if sobol != 0 {
-            let points = sobol_4d_lanes(U8::from_array(rev), U8::from_array(seed));
-            let m = M8::from_bits(sobol);
-            for (dim, p) in u.iter_mut().zip(points) {
-                *dim = F8::select(m, p, F8::from_array(*dim)).to_array();
-            }
+        let sets = if sobol != 0 {
+            sobol_4d_lanes(U8::from_array(rev), U8::from_array(seed))
+        } else {
+            [F8::ZERO; 4]
+        };
+        // Into a new array: a select back into `u` would compile to a masked store (see
+        // `F8::merge`).
+        let (m, mut points) = (M8::from_bits(sobol), [F8::ZERO; 4]);
+        for ((p, set), scalar) in points.iter_mut().zip(sets).zip(u) {
+            *p = F8::select(m, set, F8::from_array(scalar));
         }
-        u
+        points
     }
 
     /// The lights the lanes of `round` choose with numbers `u_select` (in lanes where
@@ -1195,7 +1200,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let split_lanes = M8::from_bits(split);
             let mut u = [F8::ZERO; 4];
             for ((u, p), d) in u.iter_mut().zip(points).zip(own) {
-                *u = F8::select(split_lanes, F8::from_array(p), v.numbers[d]);
+                *u = F8::select(split_lanes, p, v.numbers[d]);
             }
             // SAFETY: this function runs inside `render_lanes`, on a CPU with AVX2 and FMA.
             let s = unsafe { v.bsdf.sample(v.wo, u[2], [u[0], u[1]], round) };
@@ -1204,7 +1209,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let new_beta = beta * s.weight * weight;
             // Rounds past the first are the first vertex's: their children are at depth 1.
             let depth = if k == 0 {
-                U8::from_array(lanes.depth) + U8::splat(1)
+                lanes.depth + U8::splat(1)
             } else {
                 U8::splat(1)
             };
@@ -1221,17 +1226,16 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if k == 0 {
                 // The paths go on in their lanes.
                 let m = M8::from_bits(alive);
-                lanes.origin = V3::select(m, v.origin_lanes, lanes.origin);
-                lanes.dir = V3::select(m, wi, lanes.dir);
-                lanes.tmax = F8::select(m, F8::splat(f32::INFINITY), lanes.tmax);
-                lanes.beta = V3::select(m, b, lanes.beta);
-                lanes.prev_p = V3::select(m, v.p, lanes.prev_p);
-                lanes.prev_n = V3::select(m, v.frame[2], lanes.prev_n);
-                lanes.prev_pdf = F8::select(m, pdf, lanes.prev_pdf);
+                lanes.origin.merge(m, v.origin_lanes);
+                lanes.dir.merge(m, wi);
+                lanes.tmax.merge(m, F8::splat(f32::INFINITY));
+                lanes.beta.merge(m, b);
+                lanes.prev_p.merge(m, v.p);
+                lanes.prev_n.merge(m, v.frame[2]);
+                lanes.prev_pdf.merge(m, pdf);
                 lanes.prev_delta = (lanes.prev_delta & !alive) | (delta & alive);
-                lanes.depth = U8::select(m, depth, U8::from_array(lanes.depth)).to_array();
-                let old_count = U8::from_array(lanes.prev_nee_count);
-                lanes.prev_nee_count = U8::select(m, nee_count, old_count).to_array();
+                lanes.depth.merge(m, depth);
+                lanes.prev_nee_count.merge(m, nee_count);
                 continued = alive;
                 continue;
             }

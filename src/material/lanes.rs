@@ -262,14 +262,16 @@ impl<'a> BsdfLanes<'a> {
         let wo_above = wo.z.gt(F8::ZERO);
         let cosine_wi = cosine_hemisphere(u);
         let cosine_pdf = cosine_wi.z.max(F8::ZERO) / F8::splat(PI);
-        let mut s = SampleLanes {
+        let lambert = SampleLanes {
             wi: cosine_wi,
             weight: self.base,
             pdf: cosine_pdf,
             delta: M8::none(),
             valid: self.lambert & wo_above & cosine_pdf.gt(F8::ZERO),
         };
-        if (self.pbr & M8::from_bits(lanes)).any() {
+        // A new value, not the Lambert lanes' overwritten: selects back into them compile to
+        // masked stores (see `F8::merge`).
+        let s = if (self.pbr & M8::from_bits(lanes)).any() {
             let probabilities = self.lobe_probabilities(wo);
             let specular = u_lobe.lt(probabilities.0);
             let mirror = specular & self.smooth;
@@ -290,14 +292,16 @@ impl<'a> BsdfLanes<'a> {
                 delta: mirror,
                 valid: wo_above & (mirror | glossy_valid),
             };
-            s = SampleLanes {
-                wi: V3::select(self.pbr, pbr.wi, s.wi),
-                weight: V3::select(self.pbr, pbr.weight, s.weight),
-                pdf: F8::select(self.pbr, pbr.pdf, s.pdf),
+            SampleLanes {
+                wi: V3::select(self.pbr, pbr.wi, lambert.wi),
+                weight: V3::select(self.pbr, pbr.weight, lambert.weight),
+                pdf: F8::select(self.pbr, pbr.pdf, lambert.pdf),
                 delta: self.pbr & pbr.delta,
-                valid: self.pbr & pbr.valid | s.valid,
-            };
-        }
+                valid: self.pbr & pbr.valid | lambert.valid,
+            }
+        } else {
+            lambert
+        };
         let scalar = self.scalar & lanes;
         if scalar == 0 {
             return s;
