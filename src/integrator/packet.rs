@@ -37,8 +37,8 @@
 //! path lengths. Between bounces the paths stay in lanes (`PathLanes`, a field a vector):
 //! a bounce reads rays and throughputs as vectors, and roulette and the continuation are
 //! selects, not eight records gathered and written back (the Cornell box: 5 % fewer
-//! instructions, the MIS plates 2 %). A camera sample's value is complete when its last path ends; it then goes
-//! to its pixel's accumulator as the scalar kernel's samples do.
+//! instructions, the MIS plates 2 %). A camera sample's value is complete when its last
+//! path ends; it then goes to its pixel's accumulator as the scalar kernel's samples do.
 
 use super::mis::{Mis, Technique};
 use super::path::{
