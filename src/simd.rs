@@ -117,6 +117,45 @@ impl Not for M8 {
     }
 }
 
+/// One lane read or written where the vector lies, and lanes merged under a mask, for a
+/// lane type (`F8`, `U8`) of element `$elem`.
+macro_rules! lane_access {
+    ($ty:ident, $elem:ty) => {
+        impl $ty {
+            /// Lane `lane` (taken modulo the lane count), read where the vector lies (no copy
+            /// of the whole vector, as indexing `to_array()` may make).
+            #[inline(always)]
+            pub fn lane(&self, lane: usize) -> $elem {
+                // SAFETY: the vector is eight elements of this type.
+                let lanes = unsafe { &*(self as *const $ty).cast::<[$elem; LANES]>() };
+                lanes[lane & (LANES - 1)]
+            }
+
+            /// Sets lane `lane` (taken modulo the lane count) to `x`.
+            #[inline(always)]
+            pub fn set_lane(&mut self, lane: usize, x: $elem) {
+                // SAFETY: the vector is eight elements of this type, and any bits are one.
+                let lanes = unsafe { &mut *(self as *mut $ty).cast::<[$elem; LANES]>() };
+                lanes[lane & (LANES - 1)] = x;
+            }
+
+            /// The lanes of `m` take `new`'s values. Written back with a plain store: a
+            /// select into a vector in memory otherwise compiles to a masked store
+            /// (`vmaskmovps`), which AMD's cores execute as microcode, many times slower
+            /// than a blend and a store.
+            #[inline(always)]
+            pub fn merge(&mut self, m: M8, new: $ty) {
+                let merged = $ty::select(m, new, *self);
+                // SAFETY: `self` is a valid, aligned vector.
+                unsafe { std::ptr::write_volatile(self, merged) }
+            }
+        }
+    };
+}
+
+lane_access!(F8, f32);
+lane_access!(U8, u32);
+
 impl F8 {
     pub const ZERO: F8 = F8::from_array([0.0; 8]);
     pub const ONE: F8 = F8::from_array([1.0; 8]);
@@ -139,33 +178,6 @@ impl F8 {
     pub fn to_array(self) -> [f32; 8] {
         // SAFETY: as in `from_array`.
         unsafe { std::mem::transmute::<F8, [f32; 8]>(self) }
-    }
-
-    /// Lane `lane` (taken modulo the lane count), read where the vector lies (no copy of
-    /// the whole vector, as indexing `to_array()` may make).
-    #[inline(always)]
-    pub fn lane(&self, lane: usize) -> f32 {
-        // SAFETY: F8 is an __m256, which is eight f32s.
-        let lanes = unsafe { &*(self as *const F8).cast::<[f32; LANES]>() };
-        lanes[lane & (LANES - 1)]
-    }
-
-    /// The lanes of `m` take `new`'s values. Written back with a plain store: a select into
-    /// a vector in memory otherwise compiles to a masked store (`vmaskmovps`), which AMD's
-    /// cores execute as microcode, many times slower than a blend and a store.
-    #[inline(always)]
-    pub fn merge(&mut self, m: M8, new: F8) {
-        let merged = F8::select(m, new, *self);
-        // SAFETY: `self` is a valid, aligned F8.
-        unsafe { std::ptr::write_volatile(self, merged) }
-    }
-
-    /// Sets lane `lane` (taken modulo the lane count) to `x`.
-    #[inline(always)]
-    pub fn set_lane(&mut self, lane: usize, x: f32) {
-        // SAFETY: F8 is an __m256, which is eight f32s; any bits are a valid f32.
-        let lanes = unsafe { &mut *(self as *mut F8).cast::<[f32; LANES]>() };
-        lanes[lane & (LANES - 1)] = x;
     }
 
     #[inline(always)]
@@ -300,24 +312,6 @@ impl F8 {
         assert!(at + LANES <= floats.len());
         // SAFETY: the eight floats are in the slice (checked above).
         unsafe { F8(_mm256_loadu_ps(floats.as_ptr().add(at))) }
-    }
-
-    /// Stores the lanes at `at` of `floats` (unaligned).
-    #[inline(always)]
-    pub fn store(self, floats: &mut [f32], at: usize) {
-        assert!(at + LANES <= floats.len());
-        // SAFETY: the eight floats are in the slice (checked above).
-        unsafe { _mm256_storeu_ps(floats.as_mut_ptr().add(at), self.0) }
-    }
-
-    /// Each lane takes the previous lane's value; the first takes `first`.
-    #[inline(always)]
-    pub fn shift_up(self, first: f32) -> F8 {
-        unsafe {
-            let previous = _mm256_setr_epi32(0, 0, 1, 2, 3, 4, 5, 6);
-            let shifted = _mm256_permutevar8x32_ps(self.0, previous);
-            F8(_mm256_blend_ps::<1>(shifted, _mm256_set1_ps(first)))
-        }
     }
 
     /// Each lane takes the next lane's value; the last keeps its own.
@@ -467,30 +461,6 @@ impl U8 {
     }
 
     /// The lanes as an array.
-    /// Lane `lane` (taken modulo the lane count), read where the vector lies.
-    #[inline(always)]
-    pub fn lane(&self, lane: usize) -> u32 {
-        // SAFETY: U8 is an __m256i, which is eight u32s.
-        let lanes = unsafe { &*(self as *const U8).cast::<[u32; LANES]>() };
-        lanes[lane & (LANES - 1)]
-    }
-
-    /// Sets lane `lane` (taken modulo the lane count) to `x`.
-    #[inline(always)]
-    pub fn set_lane(&mut self, lane: usize, x: u32) {
-        // SAFETY: U8 is an __m256i, which is eight u32s; any bits are a valid u32.
-        let lanes = unsafe { &mut *(self as *mut U8).cast::<[u32; LANES]>() };
-        lanes[lane & (LANES - 1)] = x;
-    }
-
-    /// The lanes of `m` take `new`'s values ([`F8::merge`]).
-    #[inline(always)]
-    pub fn merge(&mut self, m: M8, new: U8) {
-        let merged = U8::select(m, new, *self);
-        // SAFETY: `self` is a valid, aligned U8.
-        unsafe { std::ptr::write_volatile(self, merged) }
-    }
-
     /// Lanes where `self` is above `o`, compared as unsigned integers.
     #[inline(always)]
     pub fn gt(self, o: U8) -> M8 {
@@ -854,8 +824,8 @@ mod tests {
         });
     }
 
-    /// Lanes read and written one at a time, merged under a mask and shifted, and unsigned
-    /// comparisons (above 2^31 too).
+    /// Lanes read and written one at a time, merged under a mask and shifted down, and
+    /// unsigned comparisons (above 2^31 too).
     #[test]
     fn lane_access_merges_and_shifts() {
         with_avx2(|| {
@@ -868,10 +838,6 @@ mod tests {
             assert_eq!(
                 x.to_array(),
                 [100.0, 1.0, 100.0, -7.5, 4.0, 100.0, 6.0, 100.0]
-            );
-            assert_eq!(
-                x.shift_up(-1.0).to_array(),
-                [-1.0, 100.0, 1.0, 100.0, -7.5, 4.0, 100.0, 6.0]
             );
             assert_eq!(
                 x.shift_down().to_array(),

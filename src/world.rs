@@ -864,19 +864,12 @@ impl World {
         rays: &RayLanes,
         mask: u32,
     ) -> [Option<Hit>; crate::simd::LANES] {
-        // The rays one by one, for alpha tests and placed instances, where first needed (no
-        // closure taking them out: it would compile outside the packet kernel's AVX2 context).
-        let mut each = None;
         let mut hits = self.bvh.intersect_lanes(rays, mask, |lane, prim, hit| {
-            if each.is_none() {
-                each = Some(rays.to_rays());
-            }
-            each.is_some_and(|e| self.surfaces.alpha_passes(prim, hit, &e[lane]))
+            self.surfaces.alpha_passes(prim, hit, &rays.ray(lane))
         });
         if let Some(placed) = &self.placed {
-            let each = rays.to_rays();
             for lane in crate::geometry::triangle::Lanes::new(mask) {
-                let ray = &each[lane];
+                let ray = &rays.ray(lane);
                 let nearer = Ray {
                     tmax: hits[lane].map_or(ray.tmax, |h| h.t),
                     ..*ray
@@ -896,20 +889,16 @@ impl World {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
     pub(crate) fn occluded_lanes(&self, rays: &RayLanes, mask: u32) -> u32 {
-        let mut each = None;
         let mut occluded = self.bvh.occluded_lanes(rays, mask, |lane, prim, hit| {
-            if each.is_none() {
-                each = Some(rays.to_rays());
-            }
-            each.is_some_and(|e| self.surfaces.alpha_passes(prim, hit, &e[lane]))
+            self.surfaces.alpha_passes(prim, hit, &rays.ray(lane))
         });
         if let Some(placed) = &self.placed {
-            let each = rays.to_rays();
             for lane in crate::geometry::triangle::Lanes::new(mask & !occluded) {
-                let blocked = placed.occluded(&each[lane], |placement, prim, hit, object_ray| {
-                    self.surfaces
-                        .placed_alpha_passes(placement, prim, hit, object_ray)
-                });
+                let blocked =
+                    placed.occluded(&rays.ray(lane), |placement, prim, hit, object_ray| {
+                        self.surfaces
+                            .placed_alpha_passes(placement, prim, hit, object_ray)
+                    });
                 occluded |= u32::from(blocked) << lane;
             }
         }

@@ -306,7 +306,7 @@ impl Bvh {
         let tmax = bounds_of(rays, mask);
         let mut visitor = ClosestLanes {
             bvh: self,
-            rays: EachRay::new(rays),
+            rays,
             shears: LaneShears::new(ShearLanes::of_rays(rays.origin, rays.dir)),
             closest: tmax.map(Closest::new),
             bound: tmax,
@@ -329,7 +329,7 @@ impl Bvh {
     ) -> u32 {
         let mut visitor = OccludedLanes {
             bvh: self,
-            rays: EachRay::new(rays),
+            rays,
             shears: LaneShears::new(ShearLanes::of_rays(rays.origin, rays.dir)),
             bounds: bounds_of(rays, mask),
             occluded: 0,
@@ -433,40 +433,6 @@ fn bounds_of(rays: &RayLanes, mask: u32) -> [f32; LANES] {
     F8::select(M8::from_bits(mask), rays.tmax, F8::splat(-1.0)).to_array()
 }
 
-/// A packet's rays one by one for the single-ray tests, taken out of the lanes together
-/// where first needed.
-#[cfg(target_arch = "x86_64")]
-struct EachRay<'a> {
-    lanes: &'a RayLanes,
-    each: MaybeUninit<[Ray; LANES]>,
-    taken: bool,
-}
-
-#[cfg(target_arch = "x86_64")]
-impl<'a> EachRay<'a> {
-    #[inline(always)]
-    fn new(lanes: &'a RayLanes) -> Self {
-        Self {
-            lanes,
-            each: MaybeUninit::uninit(),
-            taken: false,
-        }
-    }
-
-    /// Lane `lane`'s ray.
-    #[inline(always)]
-    fn get(&mut self, lane: usize) -> &Ray {
-        // No closure (`Option::get_or_insert_with`): it would compile outside the packet
-        // kernel's AVX2 context.
-        if !self.taken {
-            self.each = MaybeUninit::new(self.lanes.to_rays());
-            self.taken = true;
-        }
-        // SAFETY: `taken` is set, so the rays were written above or before.
-        unsafe { &self.each.assume_init_ref()[lane] }
-    }
-}
-
 /// Whether a leaf's triangles are tested for the `active` lanes faster one triangle
 /// against all lanes ([`triangle::intersect_lanes`]) than one block of four triangles
 /// against each lane ([`triangle::intersect`]): when there are more lanes than triangles,
@@ -516,7 +482,7 @@ impl LaneShears {
 #[cfg(target_arch = "x86_64")]
 struct ClosestLanes<'a, F> {
     bvh: &'a Bvh,
-    rays: EachRay<'a>,
+    rays: &'a RayLanes,
     shears: LaneShears,
     closest: [Closest; LANES],
     /// Each lane's `Closest::bound`, kept beside `closest` so that testing a triangle
@@ -552,10 +518,10 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
+                let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
                 let closest = &mut self.closest[lane];
                 self.bvh
-                    .leaf_closest(index, count, ray, shear, closest, accept);
+                    .leaf_closest(index, count, &ray, shear, closest, accept);
                 self.bound[lane] = closest.bound();
             }
             return;
@@ -579,7 +545,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
                     let closest = &mut self.closest[lane];
-                    if let Some(hit) = s.shape.intersect(self.rays.get(lane), closest.bound()) {
+                    if let Some(hit) = s.shape.intersect(&self.rays.ray(lane), closest.bound()) {
                         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
                         closest.consider(hit, s.prim, s.flags, accept);
                         self.bound[lane] = closest.bound();
@@ -588,7 +554,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
                 continue;
             };
             let bound = F8::from_array(self.bound);
-            let (origin, dir) = (self.rays.lanes.origin, self.rays.lanes.dir);
+            let (origin, dir) = (self.rays.origin, self.rays.dir);
             let hits = sphere::intersect_lanes(origin, dir, centre, radius, bound, active);
             self.consider(&hits, s.prim, s.flags);
         }
@@ -596,10 +562,10 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
+        let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
         let closest = &mut self.closest[lane];
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-        self.bvh.closest_in(subtree, ray, shear, closest, accept);
+        self.bvh.closest_in(subtree, &ray, shear, closest, accept);
         self.bound[lane] = closest.bound();
     }
 }
@@ -608,7 +574,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
 #[cfg(target_arch = "x86_64")]
 struct OccludedLanes<'a, F> {
     bvh: &'a Bvh,
-    rays: EachRay<'a>,
+    rays: &'a RayLanes,
     shears: LaneShears,
     /// The rays' bounds; -1 once a lane is answered (or idle).
     bounds: [f32; LANES],
@@ -652,8 +618,8 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
         if !lanes_pay(blocks, active) {
             for lane in Lanes::new(active) {
                 let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
-                if self.bvh.leaf_occludes(index, count, ray, shear, accept) {
+                let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
+                if self.bvh.leaf_occludes(index, count, &ray, shear, accept) {
                     self.answer(lane);
                 }
             }
@@ -680,7 +646,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
             }
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
-                    let ray = *self.rays.get(lane);
+                    let ray = self.rays.ray(lane);
                     let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
                     if let Some(hit) = s.shape.intersect(&ray, ray.tmax)
                         && accepted(&hit, s.prim, s.flags, accept)
@@ -692,7 +658,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 continue;
             };
             let tmax = F8::from_array(self.bounds);
-            let (origin, dir) = (self.rays.lanes.origin, self.rays.lanes.dir);
+            let (origin, dir) = (self.rays.origin, self.rays.dir);
             let hits = sphere::intersect_lanes(origin, dir, centre, radius, tmax, active);
             active &= !self.answer_hits(&hits, s.prim, s.flags);
         }
@@ -700,9 +666,9 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
 
     #[inline(always)]
     fn single(&mut self, subtree: Subtree, lane: usize) {
-        let (ray, shear) = (self.rays.get(lane), self.shears.lane(lane));
+        let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-        if self.bvh.occludes_in(subtree, ray, shear, accept) {
+        if self.bvh.occludes_in(subtree, &ray, shear, accept) {
             self.answer(lane);
         }
     }

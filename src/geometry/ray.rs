@@ -50,24 +50,14 @@ impl RayLanes {
         }
     }
 
-    /// The rays as an array: [`RayLanes::of_rays`] backwards. Each row of the transpose is
-    /// a ray's seven floats and the next ray's first, stored whole in ray order (the last
-    /// ray's after the bound before it, to end at the array's end), so that a later read
-    /// of a ray's fields finds them in one store.
+    /// Lane `lane`'s ray, read where the lanes lie.
     #[inline(always)]
-    pub(crate) fn to_rays(self) -> [Ray; LANES] {
-        const FLOATS: usize = std::mem::size_of::<Ray>() / 4;
-        let (o, d) = (self.origin, self.dir);
-        let rows = F8::transpose([o.x, o.y, o.z, d.x, d.y, d.z, self.tmax, o.x.shift_down()]);
-        let mut floats = [0.0f32; FLOATS * LANES];
-        for (i, row) in rows.into_iter().enumerate().take(LANES - 1) {
-            row.store(&mut floats, FLOATS * i);
+    pub(crate) fn ray(&self, lane: usize) -> Ray {
+        Ray {
+            origin: self.origin.lane(lane),
+            dir: self.dir.lane(lane),
+            tmax: self.tmax.lane(lane),
         }
-        let last = rows[LANES - 1].shift_up(self.tmax.lane(LANES - 2));
-        last.store(&mut floats, FLOATS * (LANES - 1) - 1);
-        // SAFETY: Ray is repr(C) of seven f32s (checked in `of_rays`), so the 56 floats are
-        // eight rays.
-        unsafe { std::mem::transmute::<[f32; FLOATS * LANES], [Ray; LANES]>(floats) }
     }
 }
 
@@ -155,8 +145,7 @@ mod tests {
     }
 
     /// Lane i of the packet is ray i: origin, direction and bound, bit for bit (NaN,
-    /// infinity and signed zero included; the last ray is read apart from the others), and
-    /// the lanes give back the rays.
+    /// infinity and signed zero included; the last ray is read apart from the others).
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn ray_lanes_are_the_rays() {
@@ -173,20 +162,9 @@ mod tests {
             }
         });
         let lanes = RayLanes::of_rays(&rays);
-        let back = lanes.to_rays();
         let bits = |v: Vec3| v.to_array().map(f32::to_bits);
-        for (i, (ray, lane)) in rays.iter().zip(&back).enumerate() {
-            assert_eq!(
-                bits(lanes.origin.lane(i)),
-                bits(ray.origin),
-                "origin lane {i}"
-            );
-            assert_eq!(bits(lanes.dir.lane(i)), bits(ray.dir), "direction lane {i}");
-            assert_eq!(
-                lanes.tmax.to_array()[i].to_bits(),
-                ray.tmax.to_bits(),
-                "bound lane {i}"
-            );
+        for (i, ray) in rays.iter().enumerate() {
+            let lane = lanes.ray(i);
             assert_eq!(bits(lane.origin), bits(ray.origin), "origin {i}");
             assert_eq!(bits(lane.dir), bits(ray.dir), "direction {i}");
             assert_eq!(lane.tmax.to_bits(), ray.tmax.to_bits(), "bound {i}");

@@ -190,16 +190,6 @@ impl PathLanes {
         }
     }
 
-    /// Lane `lane`'s ray.
-    #[inline(always)]
-    fn ray(&self, lane: usize) -> Ray {
-        Ray {
-            origin: self.origin.lane(lane),
-            dir: self.dir.lane(lane),
-            tmax: self.tmax.lane(lane),
-        }
-    }
-
     /// The lanes' rays.
     #[inline(always)]
     fn rays(&self) -> RayLanes {
@@ -820,7 +810,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 lane_shaded |= 1 << lane;
                 continue;
             }
-            let ray = lanes.ray(lane);
+            let ray = lanes.rays().ray(lane);
             let it = world.interaction(&ray, &hit);
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 self.reached_emitter(&lanes.state(lane), e, slot);
