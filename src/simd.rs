@@ -460,7 +460,6 @@ impl U8 {
         unsafe { M8(_mm256_castsi256_ps(_mm256_cmpeq_epi32(self.0, o.0))) }
     }
 
-    /// The lanes as an array.
     /// Lanes where `self` is above `o`, compared as unsigned integers.
     #[inline(always)]
     pub fn gt(self, o: U8) -> M8 {
@@ -468,6 +467,7 @@ impl U8 {
         !most.eq(o)
     }
 
+    /// The lanes as an array.
     #[inline(always)]
     pub fn to_array(self) -> [u32; 8] {
         // SAFETY: as in `from_array`.
@@ -581,6 +581,7 @@ impl V3 {
     #[inline(always)]
     pub fn from_lanes(v: &[Vec3; 8]) -> V3 {
         // glam's Vec3 is three f32s (repr(C), 12 bytes): the array is x0 y0 z0 x1 … z7.
+        const { assert!(std::mem::size_of::<[Vec3; 8]>() == 96) };
         // Floats `at` to `at + 3` and `at + 12` to `at + 15` of `p` (a function, not a closure,
         // so that it compiles in the caller's AVX2 context).
         #[inline(always)]
@@ -656,6 +657,7 @@ impl V3 {
     /// The lanes as eight vectors: [`V3::from_lanes`]'s shuffles backwards, and six stores.
     #[inline(always)]
     pub fn to_lanes(self) -> [Vec3; 8] {
+        const { assert!(std::mem::size_of::<[Vec3; 8]>() == 96) };
         let (x, y, z) = (self.x.0, self.y.0, self.z.0);
         let mut out = [Vec3::ZERO; 8];
         let p = out.as_mut_ptr().cast::<f32>();
