@@ -111,9 +111,7 @@ const NO_PATH: Path = Path {
 /// ([`PathLanes::state`]). The packet kernel renders the beauty alone, so no lane records
 /// lobe shares (`PathState::lobes` stays zero).
 struct PathLanes {
-    origin: V3,
-    dir: V3,
-    tmax: F8,
+    ray: RayLanes,
     beta: V3,
     prev_p: V3,
     prev_n: V3,
@@ -132,9 +130,11 @@ impl PathLanes {
     #[inline(always)]
     fn new() -> Self {
         let mut lanes = Self {
-            origin: V3::ZERO,
-            dir: V3::ZERO,
-            tmax: F8::ZERO,
+            ray: RayLanes {
+                origin: V3::ZERO,
+                dir: V3::ZERO,
+                tmax: F8::ZERO,
+            },
             beta: V3::ZERO,
             prev_p: V3::ZERO,
             prev_n: V3::ZERO,
@@ -155,9 +155,9 @@ impl PathLanes {
     #[inline(always)]
     fn set(&mut self, lane: usize, path: &Path) {
         let state = &path.state;
-        self.origin.set_lane(lane, path.ray.origin);
-        self.dir.set_lane(lane, path.ray.dir);
-        self.tmax.set_lane(lane, path.ray.tmax);
+        self.ray.origin.set_lane(lane, path.ray.origin);
+        self.ray.dir.set_lane(lane, path.ray.dir);
+        self.ray.tmax.set_lane(lane, path.ray.tmax);
         self.beta.set_lane(lane, state.beta);
         self.prev_p.set_lane(lane, state.prev_p);
         self.prev_n.set_lane(lane, state.prev_n);
@@ -187,16 +187,6 @@ impl PathLanes {
             prev_delta: self.prev_delta & (1 << lane) != 0,
             prev_nee_count: self.prev_nee_count.lane(lane),
             lobes: [Vec3::ZERO; 3],
-        }
-    }
-
-    /// The lanes' rays.
-    #[inline(always)]
-    fn rays(&self) -> RayLanes {
-        RayLanes {
-            origin: self.origin,
-            dir: self.dir,
-            tmax: self.tmax,
         }
     }
 }
@@ -367,15 +357,11 @@ struct Vertices<'b> {
     first: u32,
     /// Shading points, and the origins of the rays that leave them, in lanes.
     p: V3,
-    origin_lanes: V3,
+    origin: V3,
     ng: V3,
     frame: [V3; 3],
     wo: V3,
     bsdf: BsdfLanes<'b>,
-    /// Lane by lane: the ray origins, the points and their shading normals.
-    origin: [Vec3; LANES],
-    points: [Vec3; LANES],
-    normals: [Vec3; LANES],
     /// The lanes' random numbers (`VertexSample`'s), a dimension a vector: see [`Dim`].
     numbers: [F8; Dim::COUNT],
 }
@@ -772,7 +758,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         rays.closest += active.count_ones() as u64;
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
-        let hits = world.intersect_lanes(&lanes.rays(), *active);
+        let hits = world.intersect_lanes(&lanes.ray, *active);
         for lane in Lanes::new(*active) {
             let (sample, depth) = (lanes.sample[lane], lanes.depth.lane(lane));
             let slot = &mut buffers.slots[sample as usize];
@@ -780,7 +766,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             self.count_part_ray(slot, depth, true);
             let Some(hit) = hits[lane] else {
                 if EMITTERS {
-                    emitters_at_infinity(world, lanes.dir.lane(lane), |e| {
+                    emitters_at_infinity(world, lanes.ray.dir.lane(lane), |e| {
                         self.reached_emitter(&lanes.state(lane), e, slot)
                     });
                 }
@@ -810,7 +796,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 lane_shaded |= 1 << lane;
                 continue;
             }
-            let ray = lanes.rays().ray(lane);
+            let ray = lanes.ray.ray(lane);
             let it = world.interaction(&ray, &hit);
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 self.reached_emitter(&lanes.state(lane), e, slot);
@@ -911,21 +897,18 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             }
         }
         // The other lanes' directions as +z (never read, but finite).
-        let dir = V3::select(M8::from_bits(mask), lanes.dir, V3::splat(Vec3::Z));
+        let dir = V3::select(M8::from_bits(mask), lanes.ray.dir, V3::splat(Vec3::Z));
         let points = shading.lanes(mask, dir);
         let origin = offset_ray_origin_lanes(points.p, points.ng);
         let mut v = Vertices {
             mask,
             first,
             p: points.p,
-            origin_lanes: origin,
+            origin,
             ng: points.ng,
             frame: points.frame,
             wo: V3::ZERO,
             bsdf: BsdfLanes::new(bsdfs, mask),
-            origin: origin.to_lanes(),
-            points: points.p.to_lanes(),
-            normals: points.frame[2].to_lanes(),
             numbers,
         };
         v.wo = v.to_local(-dir);
@@ -963,11 +946,11 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let points = self.split_points(lanes, split, SplitKind::Light, j, buffers);
             let own = [Dim::LIGHT_X, Dim::LIGHT_Y, Dim::LIGHT_SELECT];
             let split_lanes = M8::from_bits(split);
-            let mut u = [[0.0f32; LANES]; 3];
+            let mut u = [F8::ZERO; 3];
             for ((u, p), d) in u.iter_mut().zip(points).zip(own) {
-                *u = F8::select(split_lanes, p, v.numbers[d]).to_array();
+                *u = F8::select(split_lanes, p, v.numbers[d]);
             }
-            let (light, p_select, chosen) = self.select_lights(v, round, &u[2]);
+            let (light, p_select, chosen) = self.select_lights(v, round, u[2]);
             // Lanes whose chosen light the lanes sample; the scalar code samples the others.
             let area = match area_lights {
                 Some(table) => chosen & table.lanes_sample(light, self.lane_light_kinds),
@@ -975,17 +958,16 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             };
             let (light_index, p_select_lanes) = (light.to_array(), p_select.to_array());
             for lane in Lanes::new(chosen & !area) {
-                let u_light = Vec2::new(u[0][lane], u[1][lane]);
+                let u_light = Vec2::new(u[0].lane(lane), u[1].lane(lane));
                 let (index, p) = (light_index[lane] as usize, p_select_lanes[lane]);
                 self.scalar_light_sample(v, lane, index, p, u_light, &mut scalar);
             }
             // The lanes' own samples; lanes they leave to the scalar code take its samples.
             let area_samples = match area_lights {
                 Some(table) if area != 0 => {
-                    let u_area = [F8::from_array(u[0]), F8::from_array(u[1])];
-                    let s = table.sample(light, v.p, v.ng, u_area, area);
+                    let s = table.sample(light, v.p, v.ng, [u[0], u[1]], area);
                     for lane in Lanes::new(s.scalar) {
-                        let u_light = Vec2::new(u[0][lane], u[1][lane]);
+                        let u_light = Vec2::new(u[0].lane(lane), u[1].lane(lane));
                         let (index, p) = (light_index[lane] as usize, p_select_lanes[lane]);
                         self.scalar_light_sample(v, lane, index, p, u_light, &mut scalar);
                     }
@@ -1004,7 +986,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 )
             } else {
                 let shadow = RayLanes {
-                    origin: v.origin_lanes,
+                    origin: v.origin,
                     dir: V3::ZERO,
                     tmax: F8::ONE,
                 };
@@ -1015,8 +997,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 wi = V3::select(valid, s.wi, wi);
                 radiance = V3::select(valid, s.radiance, radiance);
                 p_light = F8::select(valid, p_select * s.pdf, p_light);
-                shadow.origin = v.origin_lanes;
-                shadow.dir = V3::select(valid, s.target - v.origin_lanes, shadow.dir);
+                shadow.origin = v.origin;
+                shadow.dir = V3::select(valid, s.target - v.origin, shadow.dir);
                 shadow.tmax = F8::select(valid, F8::ONE, shadow.tmax);
                 scalar.sampled |= s.valid;
             }
@@ -1112,15 +1094,15 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     /// lights are selected by power, else lane by lane), their selection probabilities, and
     /// the lanes that chose one.
     #[inline(always)]
-    fn select_lights(&self, v: &Vertices, round: u32, u_select: &[f32; LANES]) -> (U8, F8, u32) {
+    fn select_lights(&self, v: &Vertices, round: u32, u_select: F8) -> (U8, F8, u32) {
         if let Some(selection) = self.lane_selection {
-            let (light, p) = selection.select(F8::from_array(*u_select));
+            let (light, p) = selection.select(u_select);
             return (light, p, round);
         }
         let (mut light, mut p_select, mut chosen) = ([0u32; LANES], [0.0f32; LANES], 0u32);
         for lane in Lanes::new(round) {
-            let (p, n) = (v.points[lane], v.normals[lane]);
-            if let Some((index, p)) = self.world.lights.select(u_select[lane], p, n) {
+            let (p, n) = (v.p.lane(lane), v.frame[2].lane(lane));
+            if let Some((index, p)) = self.world.lights.select(u_select.lane(lane), p, n) {
                 (light[lane], p_select[lane]) = (index as u32, p);
                 chosen |= 1 << lane;
             }
@@ -1140,13 +1122,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         u_light: Vec2,
         out: &mut ScalarLightSamples,
     ) {
-        let (p, ng) = (v.points[lane], v.ng.lane(lane));
+        let (p, ng) = (v.p.lane(lane), v.ng.lane(lane));
         let Some(ls) = sample_chosen_light(self.world, self.settings, p, ng, index, u_light) else {
             return;
         };
         (out.wi[lane], out.radiance[lane]) = (ls.wi, ls.radiance);
         out.p_light[lane] = p_select * ls.pdf;
-        let origin = v.origin[lane];
+        let origin = v.origin.lane(lane);
         out.shadow[lane] = match ls.target {
             Some(target) => Ray {
                 origin,
@@ -1216,9 +1198,9 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if k == 0 {
                 // The paths go on in their lanes.
                 let m = M8::from_bits(alive);
-                lanes.origin.merge(m, v.origin_lanes);
-                lanes.dir.merge(m, wi);
-                lanes.tmax.merge(m, F8::splat(f32::INFINITY));
+                lanes.ray.origin.merge(m, v.origin);
+                lanes.ray.dir.merge(m, wi);
+                lanes.ray.tmax.merge(m, F8::splat(f32::INFINITY));
                 lanes.beta.merge(m, b);
                 lanes.prev_p.merge(m, v.p);
                 lanes.prev_n.merge(m, v.frame[2]);
@@ -1230,20 +1212,18 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 continue;
             }
             // The first vertex's further BSDF paths wait for lanes.
-            let (b, pdf) = (b.to_lanes(), pdf.to_array());
-            let dir = wi.to_lanes();
             for lane in Lanes::new(alive) {
                 let sample = lanes.sample[lane];
                 buffers.slots[sample as usize].paths += 1;
                 buffers.waiting.push(Path {
-                    ray: Ray::new(v.origin[lane], dir[lane]),
+                    ray: Ray::new(v.origin.lane(lane), wi.lane(lane)),
                     state: PathState {
-                        beta: b[lane],
+                        beta: b.lane(lane),
                         depth: 1,
                         branch: k,
-                        prev_p: v.points[lane],
-                        prev_n: v.normals[lane],
-                        prev_pdf: pdf[lane],
+                        prev_p: v.p.lane(lane),
+                        prev_n: v.frame[2].lane(lane),
+                        prev_pdf: pdf.lane(lane),
                         prev_delta: delta & (1 << lane) != 0,
                         prev_nee_count: counts.nee,
                         lobes: [Vec3::ZERO; 3],
