@@ -207,17 +207,22 @@ impl Camera {
                 Vec3::Z,
             ),
         };
-        let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
         let length = dir_cam.length();
-        let dir = to_world(dir_cam) * length.recip();
+        let dir = self.to_world(dir_cam) * length.recip();
         // Clipping distances are along the viewing axis: as dir_cam.z = 1, a unit of ray
         // distance covers 1 / length of it.
         let (near, far) = (self.clip_near * length, self.clip_far * length);
         Ray {
-            origin: self.origin + to_world(origin_cam) + dir * near,
+            origin: self.origin + self.to_world(origin_cam) + dir * near,
             dir,
             tmax: far - near,
         }
+    }
+
+    /// Camera-space vector `v` in render space (without the camera's position).
+    #[inline]
+    fn to_world(&self, v: Vec3) -> Vec3 {
+        self.right * v.x + self.up * v.y + self.forward * v.z
     }
 
     /// A pinhole perspective camera's primary rays through film positions `(x, y)` in
@@ -253,8 +258,7 @@ impl Camera {
         let dir = world * (one / length);
         let (near, far) = (length * self.clip_near, length * self.clip_far);
         // The scalar code adds the lens offset (zero) in camera space to the origin first.
-        let to_world = |v: Vec3| self.right * v.x + self.up * v.y + self.forward * v.z;
-        let origin = V3::splat(self.origin + to_world(Vec3::ZERO)) + dir * near;
+        let origin = V3::splat(self.origin + self.to_world(Vec3::ZERO)) + dir * near;
         Some((origin, dir, far - near))
     }
 
