@@ -844,7 +844,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         mask: u32,
         buffers: &mut PacketBuffers,
     ) -> Vertices<'b> {
-        // Numbers the scalar code takes (deep vertices, the independent sampler).
+        // Numbers the scalar code takes (the independent sampler).
         let mut scalar_numbers = [[0.0f32; LANES]; Dim::COUNT];
         // Lanes whose numbers are Sobol sets: their inputs, scrambled eight at a time below.
         let (mut sobol, mut index_rev, mut seeds) = (0u32, [0u32; LANES], [[0u32; LANES]; 2]);

@@ -11,7 +11,7 @@ pub enum SamplerKind {
     /// Independent uniform numbers (PCG32 per pixel sample).
     Independent,
     /// Owen-scrambled Sobol (Burley 2020), padded in 4D sets decorrelated by seed, for the
-    /// camera and the first `SOBOL_DEPTH` vertices; independent numbers deeper.
+    /// camera and every vertex.
     Sobol,
 }
 
@@ -75,9 +75,6 @@ pub struct Sampler {
     sample_key: u32,
     rng: Pcg32,
 }
-
-/// Vertices from this depth on take independent numbers even with the Sobol sampler.
-const SOBOL_DEPTH: u32 = 3;
 
 /// Which split samples a [`Sampler::split_point`] is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -159,29 +156,16 @@ impl Sampler {
     /// `branch` (0: the main path).
     #[inline]
     pub fn vertex(&mut self, depth: u32, branch: u32) -> VertexSample {
-        let (a, b) = if self.kind == SamplerKind::Sobol && depth >= SOBOL_DEPTH {
-            // Deep vertices: hashed independent numbers, cheaper than scrambled Sobol sets.
-            let key =
-                mix_u64(((self.sample_key as u64) << 32) ^ ((branch as u64) << 16) ^ depth as u64);
-            let mut rng = Pcg32::new(key, key >> 1);
-            (
-                std::array::from_fn(|_| rng.next_f32()),
-                std::array::from_fn(|_| rng.next_f32()),
-            )
-        } else {
-            let [a, b] = vertex_sets(depth, branch);
-            (self.set(a), self.set(b))
-        };
-        VertexSample::from_sets(a, b)
+        let [a, b] = vertex_sets(depth, branch);
+        VertexSample::from_sets(self.set(a), self.set(b))
     }
 
     /// What the Sobol sets of vertex `depth` of branch `branch` start from: the sample's
     /// bit-reversed index and the two sets' seeds, so that [`sobol_4d_lanes`] computes
-    /// eight lanes' sets at once; `None` where [`Sampler::vertex`] takes other numbers
-    /// (the independent sampler, deep vertices).
+    /// eight lanes' sets at once; `None` for the independent sampler.
     #[inline]
     pub(crate) fn vertex_sobol(&self, depth: u32, branch: u32) -> Option<(u32, [u32; 2])> {
-        (self.kind == SamplerKind::Sobol && depth < SOBOL_DEPTH).then(|| {
+        (self.kind == SamplerKind::Sobol).then(|| {
             let sets = vertex_sets(depth, branch);
             (self.index_rev, sets.map(|set| self.set_seed(set)))
         })
@@ -530,7 +514,14 @@ mod tests {
             }
         }
         let mut s = Sampler::new(SamplerKind::Sobol, 7);
-        for (x, index, depth, branch) in [(3, 0, 0, 0), (4, 9, 1, 0), (5, 70_000, 2, 3)] {
+        let cases = [
+            (3, 0, 0, 0),
+            (4, 9, 1, 0),
+            (5, 70_000, 2, 3),
+            (6, 5, 40, 0),
+            (7, 1, 9, 2),
+        ];
+        for (x, index, depth, branch) in cases {
             s.start(x, 2, index);
             let (rev, seeds) = s.vertex_sobol(depth, branch).expect("a Sobol vertex");
             let [a, b] = seeds.map(|seed| sobol_4d_lanes(U8::splat(rev), U8::splat(seed)));
@@ -539,8 +530,6 @@ mod tests {
             let got = VertexSample::from_sets(lane(&a), lane(&b));
             assert_eq!(format!("{got:?}"), format!("{expected:?}"));
         }
-        s.start(1, 1, 0);
-        assert!(s.vertex_sobol(SOBOL_DEPTH, 0).is_none());
         assert!(
             Sampler::new(SamplerKind::Independent, 7)
                 .vertex_sobol(0, 0)
