@@ -243,6 +243,36 @@ fn render_with(
     })
 }
 
+/// Non-finite contributions are dropped and counted by the packet kernel as by the scalar
+/// one: with every surface of the Cornell box emitting the largest finite radiance, light
+/// samples from a wall towards a nearby part of another overflow to infinity. The two
+/// kernels drop the same number, and their images agree.
+#[test]
+fn packet_kernel_drops_and_counts_the_scalar_kernels_overflows() {
+    if !lucerna::integrator::packet_kernel_available() {
+        eprintln!("no AVX2 and FMA here: the packet kernel is never chosen");
+        return;
+    }
+    let mut scene = cornell();
+    for m in &mut scene.materials {
+        m.emissive = Vec3::splat(f32::MAX);
+    }
+    let run = |mode| render_with(scene.clone(), "spp", mode, 2, |o| o.spp = Some(4));
+    let (packet, packet_stats) = run(PlanMode::Packet);
+    let (scalar, scalar_stats) = run(PlanMode::Scalar);
+    assert!(scalar_stats.discarded > 0, "nothing overflowed");
+    assert_eq!(packet_stats.discarded, scalar_stats.discarded);
+    let (a, b) = (packet.planes(Aov::Beauty), scalar.planes(Aov::Beauty));
+    for c in 0..3 {
+        for (i, (x, y)) in a[c].iter().zip(&b[c]).enumerate() {
+            assert!(
+                x == y || (x - y).abs() <= 1e-6 * y.abs(),
+                "pixel {i} channel {c}: {x} against {y}"
+            );
+        }
+    }
+}
+
 /// The specialised kernels only leave out work whose result is zero or unused, and draw
 /// the same random numbers: from the same seed, every layer is bit-identical to the
 /// general kernel's, which is stronger than "the same within noise".

@@ -123,6 +123,12 @@ struct PathLanes {
     prev_nee_count: U8,
     /// Sample slot of each lane's path.
     sample: [u32; LANES],
+    /// What each lane's path has brought back by light sampling, the rays it traced and
+    /// the non-finite contributions it dropped, since it took its lane: added to its sample
+    /// when it ends ([`PacketTracer::end_path`]) instead of lane by lane at every bounce.
+    value: V3,
+    rays: U8,
+    discarded: U8,
 }
 
 impl PathLanes {
@@ -144,6 +150,9 @@ impl PathLanes {
             branch: [0; LANES],
             prev_nee_count: U8::splat(0),
             sample: [0; LANES],
+            value: V3::ZERO,
+            rays: U8::splat(0),
+            discarded: U8::splat(0),
         };
         for lane in 0..LANES {
             lanes.set(lane, &NO_PATH);
@@ -172,6 +181,9 @@ impl PathLanes {
         self.branch[lane] = state.branch;
         self.prev_nee_count.set_lane(lane, state.prev_nee_count);
         self.sample[lane] = path.sample;
+        self.value.set_lane(lane, Vec3::ZERO);
+        self.rays.set_lane(lane, 0);
+        self.discarded.set_lane(lane, 0);
     }
 
     /// Lane `lane`'s path state, as the scalar code takes it.
@@ -664,11 +676,15 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
     }
 
-    /// One path of sample slot `sample` ended: the sample goes to its pixel once it has no
-    /// path left.
+    /// The path in lane `lane` ended: what it gathered goes to its sample, and the sample
+    /// to its pixel once it has no path left.
     #[inline(always)]
-    fn end_path(&self, sample: u32, buffers: &mut PacketBuffers) {
+    fn end_path(&self, lanes: &PathLanes, lane: usize, buffers: &mut PacketBuffers) {
+        let sample = lanes.sample[lane];
         let slot = &mut buffers.slots[sample as usize];
+        slot.value += lanes.value.lane(lane);
+        slot.rays += u64::from(lanes.rays.lane(lane));
+        slot.discarded += u64::from(lanes.discarded.lane(lane));
         slot.paths -= 1;
         if slot.paths == 0 {
             let pixel = &mut buffers.pixels[slot.pixel];
@@ -756,13 +772,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
         rays.closest += active.count_ones() as u64;
+        lanes.rays = lanes.rays - M8::from_bits(*active).as_u8();
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
         let hits = world.intersect_lanes(&lanes.ray, *active);
         for lane in Lanes::new(*active) {
             let (sample, depth) = (lanes.sample[lane], lanes.depth.lane(lane));
             let slot = &mut buffers.slots[sample as usize];
-            slot.rays += 1;
             self.count_part_ray(slot, depth, true);
             let Some(hit) = hits[lane] else {
                 if EMITTERS {
@@ -771,7 +787,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     });
                 }
                 *active &= !(1 << lane);
-                self.end_path(sample, buffers);
+                self.end_path(lanes, lane, buffers);
                 continue;
             };
             let camera_ray = depth == 0 && lanes.branch[lane] == 0;
@@ -783,7 +799,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 // for both, through an enum of the two, costs 3 % more instructions.)
                 if depth >= max_depth {
                     *active &= !(1 << lane);
-                    self.end_path(sample, buffers);
+                    self.end_path(lanes, lane, buffers);
                     continue;
                 }
                 if camera_ray {
@@ -821,7 +837,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 }
                 _ => {
                     *active &= !(1 << lane);
-                    self.end_path(sample, buffers);
+                    self.end_path(lanes, lane, buffers);
                 }
             }
         }
@@ -920,7 +936,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
     #[inline(always)]
     fn light_samples(
         &self,
-        lanes: &PathLanes,
+        lanes: &mut PathLanes,
         v: &Vertices,
         buffers: &mut PacketBuffers,
         rays: &mut RayCounts,
@@ -1011,10 +1027,12 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let (f, pdf) = unsafe { v.bsdf.eval_pdf(v.wo, wi_local, sampled) };
             let zero = F8::ZERO;
             sampled &= (f.x.ne(zero) | f.y.ne(zero) | f.z.ne(zero)).bits();
-            for lane in Lanes::new(sampled) {
-                let slot = &mut buffers.slots[lanes.sample[lane] as usize];
-                slot.rays += 1;
-                self.count_part_ray(slot, lanes.depth.lane(lane), false);
+            lanes.rays = lanes.rays - M8::from_bits(sampled).as_u8();
+            if self.learning {
+                for lane in Lanes::new(sampled) {
+                    let slot = &mut buffers.slots[lanes.sample[lane] as usize];
+                    self.count_part_ray(slot, lanes.depth.lane(lane), false);
+                }
             }
             let lit = sampled & !world.occluded_lanes(&shadow, sampled);
             rays.shadow += sampled.count_ones() as u64;
@@ -1031,13 +1049,23 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let value = (beta * f) * radiance / own;
             let w = mis_weights(self.settings.mis, Technique::Nee, own, p_bsdf * n_bsdf, lit);
             let value = value * w;
-            for lane in Lanes::new(lit) {
-                let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
-                let slot = &mut buffers.slots[lanes.sample[lane] as usize];
-                // The first vertex's light estimate j, or the BSDF path a deeper vertex is on.
-                let current = if depth == 0 { j } else { branch };
-                self.learn(slot, value.lane(lane), depth + 1, true, current);
-                Self::contribute(slot, value.lane(lane));
+            // Kept where finite, dropped and counted where not (as `contribute` does).
+            let infinity = F8::splat(f32::INFINITY);
+            let finite = value.x.abs().lt(infinity)
+                & value.y.abs().lt(infinity)
+                & value.z.abs().lt(infinity);
+            let lit_lanes = M8::from_bits(lit);
+            lanes.value += V3::select(lit_lanes & finite, value, V3::ZERO);
+            lanes.discarded = lanes.discarded - lit_lanes.and_not(finite).as_u8();
+            if self.learning {
+                for lane in Lanes::new(lit) {
+                    let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
+                    let slot = &mut buffers.slots[lanes.sample[lane] as usize];
+                    // The first vertex's light estimate j, or the BSDF path a deeper vertex
+                    // is on.
+                    let current = if depth == 0 { j } else { branch };
+                    self.learn(slot, value.lane(lane), depth + 1, true, current);
+                }
             }
         }
     }
@@ -1234,7 +1262,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
         for lane in Lanes::new(v.mask & !continued) {
             *active &= !(1 << lane);
-            self.end_path(lanes.sample[lane], buffers);
+            self.end_path(lanes, lane, buffers);
         }
     }
 }
