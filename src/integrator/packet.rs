@@ -54,7 +54,9 @@ use crate::light::lanes::{self as light_lanes, AreaLights, PowerSelection};
 use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf};
-use crate::sampling::sampler::{Sampler, SplitKind, VertexSample, sobol_4d_lanes, sobol_vertex};
+use crate::sampling::sampler::{
+    Sampler, SamplerKind, SplitKind, VertexSample, sobol_4d_lanes, vertex_seeds_lanes,
+};
 use crate::simd::{F8, LANES, M8, U8, V3};
 use crate::world::lanes::{ShadingLanes, TriangleHits};
 use crate::world::{Interaction, World};
@@ -123,6 +125,10 @@ struct PathLanes {
     prev_nee_count: U8,
     /// Sample slot of each lane's path.
     sample: [u32; LANES],
+    /// Each lane's sample's Sobol key ([`Sampler::sobol_key`]): its bit-reversed index and
+    /// its pixel's seed (zero with the independent sampler).
+    sobol_rev: U8,
+    sobol_seed: U8,
     /// What each lane's path has brought back by light sampling, the rays it traced and
     /// the non-finite contributions it dropped, since it took its lane: added to its sample
     /// when it ends ([`PacketTracer::end_path`]) instead of lane by lane at every bounce.
@@ -150,19 +156,21 @@ impl PathLanes {
             branch: [0; LANES],
             prev_nee_count: U8::splat(0),
             sample: [0; LANES],
+            sobol_rev: U8::splat(0),
+            sobol_seed: U8::splat(0),
             value: V3::ZERO,
             rays: U8::splat(0),
             discarded: U8::splat(0),
         };
         for lane in 0..LANES {
-            lanes.set(lane, &NO_PATH);
+            lanes.set(lane, &NO_PATH, (0, 0));
         }
         lanes
     }
 
-    /// Puts `path` in lane `lane`.
+    /// Puts `path`, of a sample with Sobol key `sobol`, in lane `lane`.
     #[inline(always)]
-    fn set(&mut self, lane: usize, path: &Path) {
+    fn set(&mut self, lane: usize, path: &Path, (rev, seed): (u32, u32)) {
         let state = &path.state;
         self.ray.origin.set_lane(lane, path.ray.origin);
         self.ray.dir.set_lane(lane, path.ray.dir);
@@ -181,6 +189,8 @@ impl PathLanes {
         self.branch[lane] = state.branch;
         self.prev_nee_count.set_lane(lane, state.prev_nee_count);
         self.sample[lane] = path.sample;
+        self.sobol_rev.set_lane(lane, rev);
+        self.sobol_seed.set_lane(lane, seed);
         self.value.set_lane(lane, Vec3::ZERO);
         self.rays.set_lane(lane, 0);
         self.discarded.set_lane(lane, 0);
@@ -555,7 +565,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                         }
                     }
                 };
-                lanes.set(lane, &path);
+                let sampler = &buffers.slots[path.sample as usize].sampler;
+                lanes.set(lane, &path, sampler.sobol_key().unwrap_or_default());
                 active |= 1 << lane;
                 free &= free - 1;
             }
@@ -860,58 +871,33 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         mask: u32,
         buffers: &mut PacketBuffers,
     ) -> Vertices<'b> {
-        // Numbers the scalar code takes (the independent sampler).
-        let mut scalar_numbers = [[0.0f32; LANES]; Dim::COUNT];
-        // Lanes whose numbers are Sobol sets: their inputs, scrambled eight at a time below.
-        let (mut sobol, mut index_rev, mut seeds) = (0u32, [0u32; LANES], [[0u32; LANES]; 2]);
-        let mut first = 0u32;
-        for lane in Lanes::new(mask) {
-            let slot = &mut buffers.slots[lanes.sample[lane] as usize];
-            let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
-            first |= u32::from(depth == 0) << lane;
-            if self.learning && depth == 0 {
-                slot.parts.split = true;
-            }
-            let sampler = &mut slot.sampler;
-            match sampler.vertex_sobol(depth, branch) {
-                Some((rev, [a, b])) => {
-                    (index_rev[lane], seeds[0][lane], seeds[1][lane]) = (rev, a, b);
-                    sobol |= 1 << lane;
-                }
-                None => Dim::set(&mut scalar_numbers, lane, &sampler.vertex(depth, branch)),
+        let first = lanes.depth.eq(U8::splat(0)).bits() & mask;
+        if self.learning {
+            for lane in Lanes::new(first) {
+                buffers.slots[lanes.sample[lane] as usize].parts.split = true;
             }
         }
-        let mut numbers = [F8::ZERO; Dim::COUNT];
-        for (n, values) in numbers.iter_mut().zip(scalar_numbers) {
-            *n = F8::from_array(values);
-        }
-        // Below three Sobol lanes, their scalar sets: eight lanes' scrambling costs about as
-        // many instructions as three scalar sets.
-        if sobol.count_ones() < 3 {
-            let mut scalar = [[0.0f32; LANES]; Dim::COUNT];
-            for lane in Lanes::new(sobol) {
-                let lane_seeds = [seeds[0][lane], seeds[1][lane]];
-                Dim::set(
-                    &mut scalar,
-                    lane,
-                    &sobol_vertex(index_rev[lane], lane_seeds),
-                );
-            }
-            let m = M8::from_bits(sobol);
-            for (n, s) in numbers.iter_mut().zip(scalar) {
-                *n = F8::select(m, F8::from_array(s), *n);
-            }
-        } else {
-            let rev = U8::from_array(index_rev);
-            let a = sobol_4d_lanes(rev, U8::from_array(seeds[0]));
-            let b = sobol_4d_lanes(rev, U8::from_array(seeds[1]));
+        // Every lane's numbers (those of lanes outside `mask` are never read).
+        let numbers = if self.settings.sampler == SamplerKind::Sobol {
+            let branch = U8::from_array(lanes.branch);
+            let [a, b] = vertex_seeds_lanes(lanes.sobol_seed, lanes.depth, branch);
+            let a = sobol_4d_lanes(lanes.sobol_rev, a);
+            let b = sobol_4d_lanes(lanes.sobol_rev, b);
             // VertexSample::from_sets: set a's four numbers, then set b's first three.
-            let sets = [a[0], a[1], a[2], a[3], b[0], b[1], b[2]];
-            let m = M8::from_bits(sobol);
-            for (n, s) in numbers.iter_mut().zip(sets) {
-                *n = F8::select(m, s, *n);
+            [a[0], a[1], a[2], a[3], b[0], b[1], b[2]]
+        } else {
+            let mut scalar = [[0.0f32; LANES]; Dim::COUNT];
+            for lane in Lanes::new(mask) {
+                let slot = &mut buffers.slots[lanes.sample[lane] as usize];
+                let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
+                Dim::set(&mut scalar, lane, &slot.sampler.vertex(depth, branch));
             }
-        }
+            let mut numbers = [F8::ZERO; Dim::COUNT];
+            for (n, values) in numbers.iter_mut().zip(scalar) {
+                *n = F8::from_array(values);
+            }
+            numbers
+        };
         // The other lanes' directions as +z (never read, but finite).
         let dir = V3::select(M8::from_bits(mask), lanes.ray.dir, V3::splat(Vec3::Z));
         let points = shading.lanes(mask, dir);

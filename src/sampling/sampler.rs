@@ -160,23 +160,37 @@ impl Sampler {
         VertexSample::from_sets(self.set(a), self.set(b))
     }
 
-    /// What the Sobol sets of vertex `depth` of branch `branch` start from: the sample's
-    /// bit-reversed index and the two sets' seeds, so that [`sobol_4d_lanes`] computes
-    /// eight lanes' sets at once; `None` for the independent sampler.
+    /// What the sample's Sobol sets start from: its bit-reversed index and its pixel's
+    /// seed, so that the packet kernel computes eight paths' vertex sets at once
+    /// ([`vertex_seeds_lanes`], then [`sobol_4d_lanes`]); `None` for the independent
+    /// sampler.
     #[inline]
-    pub(crate) fn vertex_sobol(&self, depth: u32, branch: u32) -> Option<(u32, [u32; 2])> {
-        (self.kind == SamplerKind::Sobol).then(|| {
-            let sets = vertex_sets(depth, branch);
-            (self.index_rev, sets.map(|set| self.set_seed(set)))
-        })
+    pub(crate) fn sobol_key(&self) -> Option<(u32, u32)> {
+        (self.kind == SamplerKind::Sobol).then_some((self.index_rev, self.pixel_seed))
     }
 }
 
-/// The numbers of a Sobol vertex from [`Sampler::vertex_sobol`]'s inputs, one vertex at a
-/// time: [`Sampler::vertex`]'s to the bit.
-#[inline]
-pub(crate) fn sobol_vertex(index_rev: u32, seeds: [u32; 2]) -> VertexSample {
-    VertexSample::from_sets(sobol_4d(index_rev, seeds[0]), sobol_4d(index_rev, seeds[1]))
+/// The seeds of the two Sobol sets of vertex `depth` of branch `branch`, lane by lane, for
+/// samples of pixel seeds `pixel_seed` ([`Sampler::sobol_key`]): `vertex_sets` and
+/// `set_key` in lanes. [`sobol_4d_lanes`] of them and of the samples' indices gives
+/// [`Sampler::vertex`]'s sets to the bit. Only for code compiled with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn vertex_seeds_lanes(
+    pixel_seed: crate::simd::U8,
+    depth: crate::simd::U8,
+    branch: crate::simd::U8,
+) -> [crate::simd::U8; 2] {
+    use crate::simd::U8;
+    let branched =
+        U8::splat(0x4000_0000) ^ lanes::hash_u32(branch).wrapping_mul(U8::splat(0x10000));
+    let base = U8::select(branch.eq(U8::splat(0)), U8::splat(1), branched);
+    let first = base + depth + depth;
+    let second = first + U8::splat(1);
+    [
+        pixel_seed ^ lanes::set_key(first),
+        pixel_seed ^ lanes::set_key(second),
+    ]
 }
 
 impl VertexSample {
@@ -375,7 +389,7 @@ pub(crate) fn sobol_4d_lanes(
     out
 }
 
-/// sobol_burley's hash and Owen scramble, lane by lane.
+/// sobol_burley's hash and Owen scramble, and the sets' keys, lane by lane.
 #[cfg(target_arch = "x86_64")]
 mod lanes {
     use crate::simd::U8;
@@ -383,7 +397,12 @@ mod lanes {
     /// `sobol_burley::parts::hash` in each lane.
     #[inline(always)]
     pub(super) fn hash(n: U8) -> U8 {
-        let n = n ^ U8::splat(0xe6fe_3beb);
+        hash_u32(n ^ U8::splat(0xe6fe_3beb))
+    }
+
+    /// [`super::hash_u32`] in each lane.
+    #[inline(always)]
+    pub(super) fn hash_u32(n: U8) -> U8 {
         let n = n ^ n.shr::<16>();
         let n = n.wrapping_mul(U8::splat(0x7feb_352d));
         let n = n ^ n.shr::<15>();
@@ -399,6 +418,12 @@ mod lanes {
         let n = n.wrapping_mul(scramble.shr::<16>() | U8::splat(1));
         let n = n ^ n.wrapping_mul(U8::splat(0x0552_6c56));
         n ^ n.wrapping_mul(U8::splat(0x53a2_2864))
+    }
+
+    /// [`super::set_key`] in each lane.
+    #[inline(always)]
+    pub(super) fn set_key(set: U8) -> U8 {
+        hash_u32(set.wrapping_mul(U8::splat(0x9e37_79b9)) ^ U8::splat(0x68bc_21eb))
     }
 }
 
@@ -492,7 +517,8 @@ mod tests {
     }
 
     /// Eight lanes' Sobol sets are the scalar sets to the bit, over the index range and
-    /// random seeds, and a vertex's lane inputs give [`Sampler::vertex`]'s numbers.
+    /// random seeds, and eight vertices' sets from their samples' keys are
+    /// [`Sampler::vertex`]'s numbers.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn sobol_lanes_are_the_scalar_sets() {
@@ -513,26 +539,47 @@ mod tests {
                 }
             }
         }
+        // Eight paths' vertices at once: samples of different pixels and indices (one past
+        // a seed's 2^16 points), depths from the first to deep ones, the main path and
+        // split branches.
         let mut s = Sampler::new(SamplerKind::Sobol, 7);
-        let cases = [
-            (3, 0, 0, 0),
-            (4, 9, 1, 0),
-            (5, 70_000, 2, 3),
-            (6, 5, 40, 0),
-            (7, 1, 9, 2),
-        ];
-        for (x, index, depth, branch) in cases {
-            s.start(x, 2, index);
-            let (rev, seeds) = s.vertex_sobol(depth, branch).expect("a Sobol vertex");
-            let [a, b] = seeds.map(|seed| sobol_4d_lanes(U8::splat(rev), U8::splat(seed)));
-            let lane = |set: &[crate::simd::F8; 4]| std::array::from_fn(|d| set[d].to_array()[0]);
-            let expected = s.vertex(depth, branch);
-            let got = VertexSample::from_sets(lane(&a), lane(&b));
-            assert_eq!(format!("{got:?}"), format!("{expected:?}"));
+        for round in 0..64u32 {
+            let (mut rev, mut seed) = ([0; 8], [0; 8]);
+            let (mut depth, mut branch) = ([0; 8], [0; 8]);
+            let mut expected = Vec::new();
+            for l in 0..8 {
+                let index = [0, 9, 70_000, rng.next_u32() % 5000][l % 4];
+                s.start(round + l as u32, 2, index);
+                (rev[l], seed[l]) = s.sobol_key().expect("a Sobol sample");
+                depth[l] = [0, 1, 2, 3, 7, 40, rng.next_u32() % 100, 0][l];
+                branch[l] = if rng.next_u32().is_multiple_of(2) {
+                    0
+                } else {
+                    1 + rng.next_u32() % 4
+                };
+                expected.push(s.vertex(depth[l], branch[l]));
+            }
+            let [seed_a, seed_b] = vertex_seeds_lanes(
+                U8::from_array(seed),
+                U8::from_array(depth),
+                U8::from_array(branch),
+            );
+            let rev = U8::from_array(rev);
+            let (a, b) = (sobol_4d_lanes(rev, seed_a), sobol_4d_lanes(rev, seed_b));
+            for (l, expected) in expected.iter().enumerate() {
+                let a = std::array::from_fn(|d| a[d].to_array()[l]);
+                let b = std::array::from_fn(|d| b[d].to_array()[l]);
+                let got = VertexSample::from_sets(a, b);
+                assert_eq!(
+                    format!("{got:?}"),
+                    format!("{expected:?}"),
+                    "round {round}, lane {l}"
+                );
+            }
         }
         assert!(
             Sampler::new(SamplerKind::Independent, 7)
-                .vertex_sobol(0, 0)
+                .sobol_key()
                 .is_none()
         );
     }
