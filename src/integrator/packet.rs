@@ -55,7 +55,8 @@ use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf};
 use crate::sampling::sampler::{
-    Sampler, SamplerKind, SplitKind, VertexSample, sobol_4d_lanes, vertex_seeds_lanes,
+    Sampler, SamplerKind, SplitKind, VertexSample, first_split_sobol_lanes, sobol_4d_lanes,
+    vertex_seeds_lanes,
 };
 use crate::simd::{F8, LANES, M8, U8, V3};
 use crate::world::lanes::{ShadingLanes, TriangleHits};
@@ -1058,7 +1059,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
 
     /// Point `j` of the first vertex's split samples of `kind` for the lanes of `mask`
     /// (each at its path's first vertex), one vector a dimension: the scalar code's points,
-    /// with eight lanes' Sobol points scrambled at once where three or more lanes take one.
+    /// the Sobol sampler's computed in lanes from each sample's pixel key and point (the
+    /// other lanes' are never read).
     #[inline(always)]
     fn split_points(
         &self,
@@ -1068,40 +1070,40 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         j: u32,
         buffers: &PacketBuffers,
     ) -> [F8; 4] {
-        let mut u = [[0.0f32; LANES]; 4];
         if mask == 0 {
             return [F8::ZERO; 4];
         }
-        let in_lanes = mask.count_ones() >= 3;
-        let (mut sobol, mut rev, mut seed) = (0u32, [0u32; LANES], [0u32; LANES]);
-        for lane in Lanes::new(mask) {
-            let slot = &buffers.slots[lanes.sample[lane] as usize];
-            let point = slot.split_points.point(kind, j);
-            match slot.sampler.first_split_sobol(kind, point) {
-                Some((r, s)) if in_lanes => {
-                    (rev[lane], seed[lane]) = (r, s);
-                    sobol |= 1 << lane;
-                }
-                _ => {
-                    let p = slot.sampler.first_split_point(kind, point);
-                    for (dim, x) in u.iter_mut().zip(p) {
-                        dim[lane] = x;
-                    }
+        if self.settings.sampler == SamplerKind::Independent {
+            let mut u = [[0.0f32; LANES]; 4];
+            for lane in Lanes::new(mask) {
+                let slot = &buffers.slots[lanes.sample[lane] as usize];
+                let point = slot.split_points.point(kind, j);
+                let p = slot.sampler.first_split_point(kind, point);
+                for (dim, x) in u.iter_mut().zip(p) {
+                    dim[lane] = x;
                 }
             }
+            let mut points = [F8::ZERO; 4];
+            for (p, values) in points.iter_mut().zip(u) {
+                *p = F8::from_array(values);
+            }
+            return points;
         }
-        let sets = if sobol != 0 {
-            sobol_4d_lanes(U8::from_array(rev), U8::from_array(seed))
-        } else {
-            [F8::ZERO; 4]
-        };
-        // Into a new array: a select back into `u` would compile to a masked store (see
-        // `F8::merge`).
-        let (m, mut points) = (M8::from_bits(sobol), [F8::ZERO; 4]);
-        for ((p, set), scalar) in points.iter_mut().zip(sets).zip(u) {
-            *p = F8::select(m, set, F8::from_array(scalar));
+        // Each lane's pixel key, stream and point in (low, high) halves, scrambled in lanes.
+        let (mut key, mut stream, mut point) =
+            ([[0u32; LANES]; 2], [0u32; LANES], [[0u32; LANES]; 2]);
+        for lane in Lanes::new(mask) {
+            let slot = &buffers.slots[lanes.sample[lane] as usize];
+            let pixel_key = slot.sampler.split_pixel_key().unwrap_or_default();
+            let (k, p) = slot.split_points.point(kind, j);
+            (key[0][lane], key[1][lane]) = (pixel_key as u32, (pixel_key >> 32) as u32);
+            (point[0][lane], point[1][lane]) = (p as u32, (p >> 32) as u32);
+            stream[lane] = k;
         }
-        points
+        let key = [U8::from_array(key[0]), U8::from_array(key[1])];
+        let point = [U8::from_array(point[0]), U8::from_array(point[1])];
+        let (rev, seed) = first_split_sobol_lanes(kind, key, U8::from_array(stream), point);
+        sobol_4d_lanes(rev, seed)
     }
 
     /// The lights the lanes of `round` choose with numbers `u_select` (in lanes where

@@ -256,19 +256,12 @@ impl Sampler {
         }
     }
 
-    /// What [`Sampler::first_split_point`]'s Sobol point starts from: its bit-reversed
-    /// index and its seed, so that [`sobol_4d_lanes`] computes eight lanes' points at once;
-    /// `None` for the independent sampler.
+    /// The pixel's key, which [`Sampler::first_split_point`]'s Sobol sequences start from,
+    /// so that [`first_split_sobol_lanes`] takes eight lanes' points at once; `None` for
+    /// the independent sampler.
     #[inline]
-    pub(crate) fn first_split_sobol(
-        &self,
-        kind: SplitKind,
-        (stream, point): (u32, u64),
-    ) -> Option<(u32, u32)> {
-        (self.kind == SamplerKind::Sobol).then(|| {
-            let (seed, rev) = sobol_position(self.pixel_key, point);
-            (rev, seed ^ split_key(kind, stream))
-        })
+    pub(crate) fn split_pixel_key(&self) -> Option<u64> {
+        (self.kind == SamplerKind::Sobol).then_some(self.pixel_key)
     }
 
     /// The index of the current sample in its pixel.
@@ -387,6 +380,31 @@ pub(crate) fn sobol_4d_lanes(
             .to_f32_norm();
     }
     out
+}
+
+/// What [`Sampler::first_split_point`]'s Sobol points start from, lane by lane: with each
+/// lane's pixel key ([`Sampler::split_pixel_key`]), stream and point as (low, high) 32-bit
+/// halves, the points' bit-reversed indices and seeds (`sobol_position` and `split_key` in
+/// lanes), of which [`sobol_4d_lanes`] gives the points to the bit. Only for code compiled
+/// with AVX2.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn first_split_sobol_lanes(
+    kind: SplitKind,
+    pixel_key: [crate::simd::U8; 2],
+    stream: crate::simd::U8,
+    point: [crate::simd::U8; 2],
+) -> (crate::simd::U8, crate::simd::U8) {
+    use crate::simd::U8;
+    let [key_low, key_high] = pixel_key;
+    let [point_low, point_high] = point;
+    // (point >> 16) as u32: bits 16-47 of the point.
+    let point_seed = point_high.shl::<16>() | point_low.shr::<16>();
+    let seed = key_low ^ lanes::hash_u32(key_high ^ point_seed);
+    let rev = (point_low & U8::splat(0xffff)).reverse_bits();
+    let split_key =
+        lanes::hash_u32(U8::splat(kind as u32) ^ stream.wrapping_mul(U8::splat(0x2c1b_3c6d)));
+    (rev, seed ^ split_key)
 }
 
 /// sobol_burley's hash and Owen scramble, and the sets' keys, lane by lane.
@@ -580,6 +598,59 @@ mod tests {
         assert!(
             Sampler::new(SamplerKind::Independent, 7)
                 .sobol_key()
+                .is_none()
+        );
+    }
+
+    /// Eight lanes' first-vertex split points are [`Sampler::first_split_point`]'s to the
+    /// bit: both kinds, streams 0 to 3, points within a seed's 2^16, past it and past 2^32.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn split_point_lanes_are_the_scalar_points() {
+        use crate::simd::U8;
+        if !crate::simd::avx2_or_skip() {
+            return;
+        }
+        let mut rng = Pcg32::new(17, 5);
+        let mut s = Sampler::new(SamplerKind::Sobol, 4);
+        for round in 0..64u32 {
+            let kind = [SplitKind::Light, SplitKind::Bsdf][round as usize % 2];
+            let (mut key, mut stream, mut point) = ([[0; 8]; 2], [0; 8], [[0; 8]; 2]);
+            let mut expected = Vec::new();
+            for l in 0..8 {
+                s.start(round, l as u32, 3);
+                let pixel_key = s.split_pixel_key().expect("a Sobol sample");
+                let p = match l % 4 {
+                    0 => u64::from(rng.next_u32() % 0x1_0000),
+                    1 => u64::from(rng.next_u32()),
+                    2 => (1u64 << 32) + u64::from(rng.next_u32()),
+                    _ => (u64::from(rng.next_u32()) << 16) | 0xfffe,
+                };
+                let k = rng.next_u32() % 4;
+                (key[0][l], key[1][l]) = (pixel_key as u32, (pixel_key >> 32) as u32);
+                (point[0][l], point[1][l]) = (p as u32, (p >> 32) as u32);
+                stream[l] = k;
+                expected.push(s.first_split_point(kind, (k, p)));
+            }
+            let (rev, seed) = first_split_sobol_lanes(
+                kind,
+                key.map(U8::from_array),
+                U8::from_array(stream),
+                point.map(U8::from_array),
+            );
+            let got = sobol_4d_lanes(rev, seed);
+            for (l, expected) in expected.iter().enumerate() {
+                let got: [f32; 4] = std::array::from_fn(|d| got[d].to_array()[l]);
+                assert_eq!(
+                    got.map(f32::to_bits),
+                    expected.map(f32::to_bits),
+                    "round {round}, lane {l}"
+                );
+            }
+        }
+        assert!(
+            Sampler::new(SamplerKind::Independent, 4)
+                .split_pixel_key()
                 .is_none()
         );
     }
