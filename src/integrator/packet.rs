@@ -933,9 +933,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         if lights.is_empty() {
             return;
         }
-        let nee_lanes = Lanes::new(v.mask)
-            .filter(|&l| v.bsdf.lane(l).has_non_delta())
-            .fold(0u32, |m, l| m | 1 << l);
+        let nee_lanes = v.bsdf.non_delta(v.mask);
         let counts = self.split.at(0);
         let rounds = v.rounds(nee_lanes, counts.nee);
         let (n_nee, n_bsdf) = (v.counts(counts.nee), v.counts(counts.bsdf));

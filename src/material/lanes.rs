@@ -168,10 +168,19 @@ impl<'a> BsdfLanes<'a> {
         }
     }
 
-    /// Lane `lane`'s scalar BSDF.
+    /// The lanes of `mask` whose BSDF has a lobe that is not a delta
+    /// ([`Bsdf::has_non_delta`]): from the lanes' parameters for Lambert and the uncoated
+    /// glTF BRDF (not a smooth pure metal), lane by lane for the others.
     #[inline(always)]
-    pub fn lane(&self, lane: usize) -> &Bsdf {
-        &self.bsdfs[lane]
+    pub fn non_delta(&self, mask: u32) -> u32 {
+        let rough_or_dielectric = !self.smooth | self.metallic.lt(F8::ONE);
+        let mut non_delta = (self.lambert | (self.pbr & rough_or_dielectric)).bits() & mask;
+        for lane in Lanes::new(mask & self.scalar) {
+            if self.bsdfs[lane].has_non_delta() {
+                non_delta |= 1 << lane;
+            }
+        }
+        non_delta
     }
 
     /// The glTF specular reflectance (dielectric and metal Fresnel mixed by metallic).
@@ -372,7 +381,7 @@ mod tests {
     /// Every lane returns its scalar BSDF's bits: f · cos θi, the density, and the sampled
     /// direction, weight, density and lobe, for Lambert, glTF metals and dielectrics
     /// (rough and mirror-smooth), and the lanes handed to the scalar code (Phong, a coated
-    /// glTF surface).
+    /// glTF surface); and the lanes with a lobe that is not a delta are the scalar ones.
     #[test]
     fn lanes_agree_with_the_scalar_bsdfs() {
         if !crate::simd::avx2_or_skip() {
@@ -395,6 +404,14 @@ mod tests {
             Bsdf::GltfPbr(GltfPbr::new(Vec3::splat(0.7), 1.0, 0.9, 1.5)),
         ];
         let lanes = BsdfLanes::new(&kinds, 0xff);
+        // The smooth pure metal (lane 4) alone has only a delta lobe.
+        assert_eq!(lanes.non_delta(0xff), 0xff & !(1 << 4));
+        for mask in 0..=0xffu32 {
+            let expected = (0..LANES)
+                .filter(|&l| mask & (1 << l) != 0 && kinds[l].has_non_delta())
+                .fold(0, |m, l| m | 1 << l);
+            assert_eq!(lanes.non_delta(mask), expected, "mask {mask:#x}");
+        }
         let mut rng = Pcg32::new(7, 3);
         let mut checked = [0usize; 2];
         for _ in 0..4000 {
