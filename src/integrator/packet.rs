@@ -169,7 +169,8 @@ impl PathLanes {
         lanes
     }
 
-    /// Puts `path`, of a sample with Sobol key `sobol`, in lane `lane`.
+    /// Puts `path` in lane `lane`, with its sample's Sobol key `(rev, seed)`
+    /// ([`Sampler::sobol_key`]).
     #[inline(always)]
     fn set(&mut self, lane: usize, path: &Path, (rev, seed): (u32, u32)) {
         let state = &path.state;
@@ -784,6 +785,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
         rays.closest += active.count_ones() as u64;
+        // A set mask lane is all ones, -1: subtracting it counts one ray.
         lanes.rays = lanes.rays - M8::from_bits(*active).as_u8();
         let mut bsdfs = [NO_BSDF; LANES];
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);

@@ -381,7 +381,7 @@ mod tests {
     /// Every lane returns its scalar BSDF's bits: f · cos θi, the density, and the sampled
     /// direction, weight, density and lobe, for Lambert, glTF metals and dielectrics
     /// (rough and mirror-smooth), and the lanes handed to the scalar code (Phong, a coated
-    /// glTF surface); and the lanes with a lobe that is not a delta are the scalar ones.
+    /// glTF surface); and `non_delta` picks the lanes `Bsdf::has_non_delta` picks.
     #[test]
     fn lanes_agree_with_the_scalar_bsdfs() {
         if !crate::simd::avx2_or_skip() {
