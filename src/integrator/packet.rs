@@ -895,11 +895,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 let (depth, branch) = (lanes.depth.lane(lane), lanes.branch[lane]);
                 Dim::set(&mut scalar, lane, &slot.sampler.vertex(depth, branch));
             }
-            let mut numbers = [F8::ZERO; Dim::COUNT];
-            for (n, values) in numbers.iter_mut().zip(scalar) {
-                *n = F8::from_array(values);
-            }
-            numbers
+            scalar.map(F8::from_array)
         };
         // The other lanes' directions as +z (never read, but finite).
         let dir = V3::select(M8::from_bits(mask), lanes.ray.dir, V3::splat(Vec3::Z));
@@ -1083,11 +1079,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     dim[lane] = x;
                 }
             }
-            let mut points = [F8::ZERO; 4];
-            for (p, values) in points.iter_mut().zip(u) {
-                *p = F8::from_array(values);
-            }
-            return points;
+            return u.map(F8::from_array);
         }
         // Each lane's pixel key, stream and point in (low, high) halves, scrambled in lanes.
         let (mut key, mut stream, mut point) =
