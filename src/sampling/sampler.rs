@@ -366,14 +366,12 @@ pub(crate) fn sobol_4d_lanes(
     use crate::simd::{F8, U8};
     let rev = lanes::owen_scramble(index_rev, lanes::hash(seed ^ U8::splat(0x79c6_8e4a)));
     let bytes = &*SOBOL_BYTES;
-    let (high, low) = (bytes.high.as_flattened(), bytes.low.as_flattened());
-    let high_row = rev.shr::<24>().shl::<2>();
-    let low_row = (rev.shr::<16>() & U8::splat(0xff)).shl::<2>();
+    let high = rev.shr::<24>().gather_rows(&bytes.high);
+    let low = (rev.shr::<16>() & U8::splat(0xff)).gather_rows(&bytes.low);
     let seed_mix = seed.wrapping_mul(U8::splat(0x9c8f_2d3b));
     let mut out = [F8::ZERO; 4];
     for (d, out) in out.iter_mut().enumerate() {
-        let offset = U8::splat(d as u32);
-        let sobol = (high_row + offset).gather(high) ^ (low_row + offset).gather(low);
+        let sobol = high[d] ^ low[d];
         let scramble = seed_mix ^ U8::splat(SCRAMBLE_LANES[d]);
         *out = lanes::owen_scramble(sobol, lanes::hash(scramble))
             .reverse_bits()
