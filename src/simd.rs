@@ -323,6 +323,16 @@ impl F8 {
         }
     }
 
+    /// Row `index[i]` of `table` in each lane, transposed (as [`U8::gather_rows`]).
+    #[inline(always)]
+    pub fn gather_rows(table: &[[f32; 4]], index: U8) -> [F8; 4] {
+        // SAFETY: [f32; 4] and [u32; 4] have the same size and alignment, and every bit
+        // pattern is valid for both.
+        let bits =
+            unsafe { std::slice::from_raw_parts(table.as_ptr().cast::<[u32; 4]>(), table.len()) };
+        index.gather_rows(bits).map(F8::from_bits)
+    }
+
     /// `table[index[i]]` in each lane; an index past the end reads the last entry.
     /// `table` must not be empty.
     #[inline(always)]
@@ -967,6 +977,13 @@ mod tests {
                 let row = |i: u32| 100 * i + d as u32;
                 let expected = [0, 9, 3, 9, 9, 1, 2, 5].map(row);
                 assert_eq!(*lanes, expected, "element {d}");
+            }
+            let float_rows: Vec<[f32; 4]> =
+                rows.iter().map(|r| r.map(|v| v as f32 + 0.5)).collect();
+            let floats = F8::gather_rows(&float_rows, index).map(F8::to_array);
+            for (d, lanes) in floats.iter().enumerate() {
+                let row = |i: u32| (100 * i + d as u32) as f32 + 0.5;
+                assert_eq!(*lanes, [0, 9, 3, 9, 9, 1, 2, 5].map(row), "element {d}");
             }
         });
     }

@@ -1,7 +1,8 @@
 //! Area lights laid out for the packet kernel (`integrator::packet`): each triangle's
 //! vertices, normal, area and emission, and each sphere's centre, radius and emission, in
-//! one record, so that eight lanes' light samples are eight gathers a field instead of
-//! eight trips through [`Light::sample`]; and the alias table of selection by power, so
+//! one record of four 16-byte rows, so that eight lanes' light samples load a row a lane
+//! and transpose (`F8::gather_rows`) instead of taking eight trips through
+//! [`Light::sample`]; and the alias table of selection by power, so
 //! that eight lanes choose their lights at once. A lane's sample is the scalar code's to
 //! the bit: [`AreaLights::sample`] performs `Light::sample`'s and
 //! `integrator::path::sample_chosen_light`'s operations in their order, and
@@ -19,15 +20,16 @@ use crate::simd::{F8, M8, U8, V3};
 use glam::Vec3;
 use std::f32::consts::PI;
 
-/// Floats a record holds. A triangle: vertices 0, 1, 2 (three each), the unit front
-/// normal, the area, the emitted radiance. A sphere: the centre, the radius, the emitted
-/// radiance.
-const RECORD: u32 = 16;
-const NORMAL: u32 = 9;
-const AREA: u32 = 12;
-const CENTRE: u32 = 0;
-const RADIUS: u32 = 3;
-const EMISSION: u32 = 13;
+/// Floats a record holds, in [`ROWS`] rows of four. A triangle: vertices 0, 1, 2 (three
+/// each), the unit front normal, the area, the emitted radiance. A sphere: the centre, the
+/// radius, the emitted radiance.
+const RECORD: usize = 16;
+const ROWS: u32 = RECORD as u32 / 4;
+const NORMAL: usize = 9;
+const AREA: usize = 12;
+const CENTRE: usize = 0;
+const RADIUS: usize = 3;
+const EMISSION: usize = 13;
 
 /// Which lights the lanes sample, as [`AreaLights::lanes_sample`] takes them: triangles of
 /// untextured emission by area, spheres of untextured emission in the cone they subtend.
@@ -39,7 +41,7 @@ const TWO_SIDED: u32 = 2;
 /// The records of a scene's lights, by light index (zero records for the lights the lanes
 /// leave to the scalar code).
 pub struct AreaLights {
-    records: Vec<f32>,
+    records: Vec<[f32; 4]>,
     /// The light's kind ([`TRIANGLES`] or [`SPHERES`], 0 for the scalar code's) and
     /// [`TWO_SIDED`].
     flags: Vec<u32>,
@@ -100,29 +102,29 @@ impl AreaLights {
     /// the emitted radiance of a primitive whose emission is untextured, `None` otherwise.
     pub fn new(set: &LightSet, emission: impl Fn(u32) -> Option<Vec3>) -> Self {
         let lights = &set.lights;
-        let mut records = vec![0.0; lights.len() * RECORD as usize];
+        let mut records = vec![[0.0; 4]; lights.len() * ROWS as usize];
         let mut flags = vec![0; lights.len()];
         for (i, light) in lights.iter().enumerate() {
-            let record = &mut records[i * RECORD as usize..(i + 1) * RECORD as usize];
+            let rows = ROWS as usize;
+            let record = records[i * rows..(i + 1) * rows].as_flattened_mut();
             let (kind, prim, two_sided) = match light {
                 Light::Triangle(t) => {
                     for (v, p) in t.p.iter().enumerate() {
                         record[3 * v..3 * v + 3].copy_from_slice(&p.to_array());
                     }
-                    record[NORMAL as usize..NORMAL as usize + 3].copy_from_slice(&t.n.to_array());
-                    record[AREA as usize] = t.area;
+                    record[NORMAL..NORMAL + 3].copy_from_slice(&t.n.to_array());
+                    record[AREA] = t.area;
                     (TRIANGLES, t.prim, t.two_sided)
                 }
                 Light::Sphere(sp) => {
-                    record[CENTRE as usize..CENTRE as usize + 3]
-                        .copy_from_slice(&sp.centre.to_array());
-                    record[RADIUS as usize] = sp.radius;
+                    record[CENTRE..CENTRE + 3].copy_from_slice(&sp.centre.to_array());
+                    record[RADIUS] = sp.radius;
                     (SPHERES, sp.prim, sp.two_sided)
                 }
                 _ => continue,
             };
             let Some(e) = emission(prim) else { continue };
-            record[EMISSION as usize..EMISSION as usize + 3].copy_from_slice(&e.to_array());
+            record[EMISSION..EMISSION + 3].copy_from_slice(&e.to_array());
             flags[i] = kind | if two_sided { TWO_SIDED } else { 0 };
         }
         let kinds = flags.iter().fold(0, |k, f| k | f) & (TRIANGLES | SPHERES);
@@ -157,8 +159,7 @@ impl AreaLights {
     /// (triangles by area, spheres by cone) and `sample_chosen_light`'s emission and checks.
     #[inline(always)]
     pub fn sample(&self, light: U8, p: V3, ng: V3, u: [F8; 2], mask: u32) -> AreaSamples {
-        let base = light.wrapping_mul(U8::splat(RECORD));
-        let records = &self.records[..];
+        let base = light.wrapping_mul(U8::splat(ROWS));
         let flags = light.gather(&self.flags);
         let two = U8::splat(TWO_SIDED);
         let two_sided = (flags & two).eq(two);
@@ -168,12 +169,15 @@ impl AreaLights {
             0
         };
         let triangles = mask & !spheres;
+        // A sphere's fields are in the first and last rows.
+        let rows = if triangles != 0 { 0b1111 } else { 0b1001 };
+        let record = record_fields(&self.records, base, rows);
         let (mut y, mut n, mut cone_pdf, mut scalar) = (V3::ZERO, V3::ZERO, F8::ZERO, 0);
         if triangles != 0 {
-            (y, n) = triangle_points(records, base, u);
+            (y, n) = triangle_points(&record, u);
         }
         if spheres != 0 {
-            let s = sphere_points(records, base, p, u);
+            let s = sphere_points(&record, p, u);
             let m = M8::from_bits(spheres);
             (y, n) = (V3::select(m, s.y, y), V3::select(m, s.n, n));
             cone_pdf = s.pdf;
@@ -188,12 +192,12 @@ impl AreaLights {
         let facing_away = cos_light.le(zero) & !two_sided;
         let sampled = d2.gt(zero) & !(facing_away | cos_light.eq(zero));
         let target = offset_ray_origin_lanes(y, V3::select(cos_light.gt(zero), n, -n));
-        let mut pdf = d2 / cos_light.abs() / field(records, base, AREA);
+        let mut pdf = d2 / cos_light.abs() / record[AREA];
         if spheres != 0 {
             pdf = F8::select(M8::from_bits(spheres), cone_pdf, pdf);
         }
         // sample_chosen_light: a zero emission or a point behind the shading point is useless.
-        let radiance = vector(records, base, EMISSION);
+        let radiance = vector(&record, EMISSION);
         let black = radiance.x.eq(zero) & radiance.y.eq(zero) & radiance.z.eq(zero);
         let useless: M8 = black | wi.dot(ng).le(zero);
         AreaSamples {
@@ -210,12 +214,8 @@ impl AreaLights {
 /// Points on triangle lights at `u` (`warp::square_to_uniform_triangle`, both branches and
 /// a select) and their normals.
 #[inline(always)]
-fn triangle_points(records: &[f32], base: U8, u: [F8; 2]) -> (V3, V3) {
-    let (p0, p1, p2) = (
-        vector(records, base, 0),
-        vector(records, base, 3),
-        vector(records, base, 6),
-    );
+fn triangle_points(record: &[F8; RECORD], u: [F8; 2]) -> (V3, V3) {
+    let (p0, p1, p2) = (vector(record, 0), vector(record, 3), vector(record, 6));
     let half = F8::splat(2.0);
     let first = u[0].lt(u[1]);
     let (b0_first, b1_second) = (u[0] / half, u[1] / half);
@@ -223,7 +223,7 @@ fn triangle_points(records: &[f32], base: U8, u: [F8; 2]) -> (V3, V3) {
     let b1 = F8::select(first, u[1] - b0_first, b1_second);
     let (bx, by) = (b1, F8::ONE - b0 - b1);
     let y = p0 * (F8::ONE - bx - by) + p1 * bx + p2 * by;
-    (y, vector(records, base, NORMAL))
+    (y, vector(record, NORMAL))
 }
 
 /// Points on sphere lights sampled in their cones from `p`.
@@ -238,8 +238,8 @@ struct SpherePoints {
 
 /// `solid_angle::sphere_cone`, `sample_sphere_cone` and `sphere_cone_pdf` lane by lane.
 #[inline(always)]
-fn sphere_points(records: &[f32], base: U8, p: V3, u: [F8; 2]) -> SpherePoints {
-    let (c, r) = (vector(records, base, CENTRE), field(records, base, RADIUS));
+fn sphere_points(record: &[F8; RECORD], p: V3, u: [F8; 2]) -> SpherePoints {
+    let (c, r) = (vector(record, CENTRE), record[RADIUS]);
     let one = F8::ONE;
     let zero = F8::ZERO;
     // sphere_cone.
@@ -271,21 +271,24 @@ fn sphere_points(records: &[f32], base: U8, p: V3, u: [F8; 2]) -> SpherePoints {
     }
 }
 
-/// Field `f` of the records from `base` in each lane. A function, not a closure: closures
-/// compile outside the packet kernel's AVX2 code, where the intrinsics become calls.
+/// The fields of each lane's record (of rows `base` to `base + ROWS`) in the rows of mask
+/// `rows`, zero in the others. A function, not a closure: closures compile outside the
+/// packet kernel's AVX2 code, where the intrinsics become calls.
 #[inline(always)]
-fn field(records: &[f32], base: U8, f: u32) -> F8 {
-    F8::gather(records, base + U8::splat(f))
+fn record_fields(records: &[[f32; 4]], base: U8, rows: u32) -> [F8; RECORD] {
+    let mut fields = [F8::ZERO; RECORD];
+    for (row, out) in fields.chunks_exact_mut(4).enumerate() {
+        if rows & (1 << row) != 0 {
+            out.copy_from_slice(&F8::gather_rows(records, base + U8::splat(row as u32)));
+        }
+    }
+    fields
 }
 
 /// Fields `f`, `f + 1` and `f + 2` as a vector.
 #[inline(always)]
-fn vector(records: &[f32], base: U8, f: u32) -> V3 {
-    V3::new(
-        field(records, base, f),
-        field(records, base, f + 1),
-        field(records, base, f + 2),
-    )
+fn vector(record: &[F8; RECORD], f: usize) -> V3 {
+    V3::new(record[f], record[f + 1], record[f + 2])
 }
 
 #[cfg(test)]
