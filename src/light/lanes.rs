@@ -24,12 +24,20 @@ use std::f32::consts::PI;
 /// each), the unit front normal, the area, the emitted radiance. A sphere: the centre, the
 /// radius, the emitted radiance.
 const RECORD: usize = 16;
-const ROWS: u32 = RECORD as u32 / 4;
+const ROWS: usize = RECORD / 4;
 const NORMAL: usize = 9;
 const AREA: usize = 12;
 const CENTRE: usize = 0;
 const RADIUS: usize = 3;
 const EMISSION: usize = 13;
+/// The rows (as a mask) that hold a triangle's fields, and a sphere's.
+const TRIANGLE_ROWS: u32 = (1 << ROWS) - 1;
+const SPHERE_ROWS: u32 = row_of(CENTRE) | row_of(RADIUS) | row_of(EMISSION) | row_of(EMISSION + 2);
+
+/// The mask bit of the row that holds field `f`.
+const fn row_of(f: usize) -> u32 {
+    1 << (f / 4)
+}
 
 /// Which lights the lanes sample, as [`AreaLights::lanes_sample`] takes them: triangles of
 /// untextured emission by area, spheres of untextured emission in the cone they subtend.
@@ -102,11 +110,10 @@ impl AreaLights {
     /// the emitted radiance of a primitive whose emission is untextured, `None` otherwise.
     pub fn new(set: &LightSet, emission: impl Fn(u32) -> Option<Vec3>) -> Self {
         let lights = &set.lights;
-        let mut records = vec![[0.0; 4]; lights.len() * ROWS as usize];
+        let mut records = vec![[0.0; 4]; lights.len() * ROWS];
         let mut flags = vec![0; lights.len()];
         for (i, light) in lights.iter().enumerate() {
-            let rows = ROWS as usize;
-            let record = records[i * rows..(i + 1) * rows].as_flattened_mut();
+            let record = records[i * ROWS..(i + 1) * ROWS].as_flattened_mut();
             let (kind, prim, two_sided) = match light {
                 Light::Triangle(t) => {
                     for (v, p) in t.p.iter().enumerate() {
@@ -159,7 +166,7 @@ impl AreaLights {
     /// (triangles by area, spheres by cone) and `sample_chosen_light`'s emission and checks.
     #[inline(always)]
     pub fn sample(&self, light: U8, p: V3, ng: V3, u: [F8; 2], mask: u32) -> AreaSamples {
-        let base = light.wrapping_mul(U8::splat(ROWS));
+        let base = light.wrapping_mul(U8::splat(ROWS as u32));
         let flags = light.gather(&self.flags);
         let two = U8::splat(TWO_SIDED);
         let two_sided = (flags & two).eq(two);
@@ -169,8 +176,11 @@ impl AreaLights {
             0
         };
         let triangles = mask & !spheres;
-        // A sphere's fields are in the first and last rows.
-        let rows = if triangles != 0 { 0b1111 } else { 0b1001 };
+        let rows = if triangles != 0 {
+            TRIANGLE_ROWS
+        } else {
+            SPHERE_ROWS
+        };
         let record = record_fields(&self.records, base, rows);
         let (mut y, mut n, mut cone_pdf, mut scalar) = (V3::ZERO, V3::ZERO, F8::ZERO, 0);
         if triangles != 0 {
