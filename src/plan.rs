@@ -65,7 +65,7 @@ pub struct Lobes {
     pub glossy: bool,
     /// Delta reflection (smooth metals and coats): only BSDF sampling follows it.
     pub specular: bool,
-    /// Transmission (no material model transmits yet: always false).
+    /// Transmission (glass: rough or smooth dielectrics, thin walls).
     pub transmission: bool,
 }
 
@@ -86,14 +86,16 @@ impl Lobes {
             BsdfModel::GltfPbr => {
                 // A roughness texture can lower the roughness to 0 anywhere.
                 let textured = m.metallic_roughness_texture.is_some();
-                let coat = m.clearcoat > 0.0;
+                let coat = m.clearcoat > 0.0 || m.clearcoat_texture.is_some();
+                // A transmission of 1 (untextured) leaves no diffuse base.
+                let all_glass = m.transmission >= 1.0 && m.transmission_texture.is_none();
                 Self {
-                    diffuse: m.metallic < 1.0 || textured,
+                    diffuse: (m.metallic < 1.0 || textured) && !all_glass || m.sheen.is_some(),
                     glossy: rough(m.roughness) || (coat && rough(m.clearcoat_roughness)),
                     specular: !rough(m.roughness)
                         || textured
                         || (coat && !rough(m.clearcoat_roughness)),
-                    transmission: false,
+                    transmission: m.transmits(),
                 }
             }
         }
@@ -239,9 +241,7 @@ impl SceneFeatures {
             lights,
             lobes: in_use().map(Lobes::of).fold(Lobes::default(), Lobes::union),
             textured_materials: count(&|m| {
-                m.base_color_texture.is_some()
-                    || m.metallic_roughness_texture.is_some()
-                    || m.emissive_texture.is_some()
+                m.texture_slots().any(|(name, _)| name != "normal_texture")
             }),
             normal_mapped_materials: count(&|m| m.normal_texture.is_some()),
             alpha_materials: count(&|m| m.alpha_mode != AlphaMode::Opaque),
@@ -271,22 +271,15 @@ pub fn strip_unused_attributes(scene: &mut Scene) -> usize {
         let Some(m) = scene.materials.get(mesh.material as usize) else {
             continue;
         };
-        let slots = [
-            &m.base_color_texture,
-            &m.metallic_roughness_texture,
-            &m.normal_texture,
-            &m.emissive_texture,
-        ];
         for (set, uvs) in mesh.uvs.iter_mut().enumerate() {
-            let read = slots
-                .iter()
-                .flat_map(|s| s.iter())
-                .any(|t| (t.tex_coord as usize).min(1) == set);
+            let read = m
+                .texture_slots()
+                .any(|(_, t)| (t.tex_coord as usize).min(1) == set);
             if !read && uvs.take().is_some() {
                 dropped += 1;
             }
         }
-        if m.normal_texture.is_none() && mesh.tangents.take().is_some() {
+        if !m.needs_tangents() && mesh.tangents.take().is_some() {
             dropped += 1;
         }
     }
@@ -376,6 +369,7 @@ impl RenderPlan {
                 && !first_hit_data
                 && !routing
                 && !roulette_learns
+                && !features.lobes.transmission
                 && crate::integrator::packet_kernel_available(),
         };
         Self {

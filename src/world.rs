@@ -121,6 +121,12 @@ pub struct Surfaces {
     /// Primitive index to the index of the light it is ([`NO_LIGHT`] for none); empty when
     /// nothing emits.
     pub prim_light: Vec<u32>,
+    /// By material, the absorption coefficient inside its volume per render-space unit
+    /// (`None` for no volume, or a clear one).
+    pub absorption: Vec<Option<Vec3>>,
+    /// True if some material can be a filter that shadow rays cross
+    /// ([`Material::can_filter`]).
+    pub filters: bool,
 }
 
 /// Marks a primitive that is not a light in [`Surfaces::prim_light`].
@@ -142,7 +148,29 @@ pub struct Interaction {
     pub material: u32,
     /// True if the ray arrived on the primitive's front (counter-clockwise side, outside).
     pub front: bool,
+    /// The tangent frame of a mesh with tangents (tangent, bitangent with the mesh's
+    /// handedness, interpolated normal), turned with the shading normal to the ray's side:
+    /// the frame of the coat's normal map and of anisotropy.
+    pub tangents: Option<[Vec3; 3]>,
 }
+
+impl Interaction {
+    /// The context its BSDF is built in, with `outside_ior` outside its volume.
+    #[inline]
+    pub fn shading_context(&self, outside_ior: f32) -> material::ShadingContext {
+        material::ShadingContext {
+            front: self.front,
+            outside_ior,
+            tangents: self
+                .tangents
+                .map(|axes| axes.map(|v| self.frame.to_local(v))),
+        }
+    }
+}
+
+/// What a surface hit yields before it is turned to the ray's side: point, front geometric
+/// normal, front shading normal, attributes, material and tangent frame.
+type SurfacePoint = (Vec3, Vec3, Vec3, SurfaceAttributes, u32, Option<[Vec3; 3]>);
 
 /// The scene prepared for rendering.
 pub struct World {
@@ -255,13 +283,16 @@ fn mean_emission(m: &Material, textures: &[Texture]) -> Vec3 {
         })
 }
 
-/// The BVH intersection flags of primitives made of material `m`.
+/// The BVH intersection flags of primitives made of material `m`: back faces are culled
+/// on one-sided materials unless they transmit (a volume's inside and a thin wall's back
+/// must be seen); hits go through the caller's filter where alpha decides them or where
+/// shadow rays may cross the surface ([`Material::can_filter`]).
 fn intersection_flags(m: &Material) -> u8 {
     let mut f = 0;
-    if !m.double_sided {
+    if !m.double_sided && !m.transmits() {
         f |= CULL_BACK;
     }
-    if m.alpha_mode != AlphaMode::Opaque {
+    if m.alpha_mode != AlphaMode::Opaque || m.can_filter() {
         f |= ALPHA_TESTED;
     }
     f
@@ -792,6 +823,16 @@ impl World {
                 placements,
                 spheres,
                 quadrics,
+                absorption: scene
+                    .materials
+                    .iter()
+                    .map(|m| {
+                        m.volume
+                            .map(|v| v.absorption / space.scale as f32)
+                            .filter(|a| *a != Vec3::ZERO)
+                    })
+                    .collect(),
+                filters: scene.materials.iter().any(Material::can_filter),
                 materials: scene.materials,
                 textures: scene.textures,
                 prims: refs,
@@ -839,6 +880,30 @@ impl World {
                     .placed_alpha_passes(placement, prim, hit, object_ray)
             })
             .or(hit)
+    }
+
+    /// What arrives at `ray`'s origin of light leaving its end along it: zero if something
+    /// opaque blocks it, else the product of the straight transmissions of the filters it
+    /// crosses (thin smooth walls; one where there are none). Shadow rays ask this.
+    #[inline]
+    pub fn transmittance(&self, ray: &Ray) -> Vec3 {
+        if !self.surfaces.filters {
+            return if self.occluded(ray) {
+                Vec3::ZERO
+            } else {
+                Vec3::ONE
+            };
+        }
+        let mut through = Vec3::ONE;
+        let surfaces = &self.surfaces;
+        let blocked = self.bvh.occluded(ray, |prim, hit| {
+            surfaces.blocks_shadow(prim, NOT_PLACED, hit, ray, &mut through)
+        }) || self.placed.as_ref().is_some_and(|placed| {
+            placed.occluded(ray, |placement, prim, hit, _| {
+                surfaces.blocks_shadow(prim, placement, hit, ray, &mut through)
+            })
+        });
+        if blocked { Vec3::ZERO } else { through }
     }
 
     /// True if something blocks `ray` before `ray.tmax`.
@@ -1024,6 +1089,8 @@ impl Surfaces {
             textures: Vec::new(),
             prims,
             prim_light: Vec::new(),
+            absorption: Vec::new(),
+            filters: false,
         }
     }
 }
@@ -1128,6 +1195,64 @@ impl Surfaces {
         )
     }
 
+    /// Whether a shadow ray's hit on primitive `prim` (of placement `placement`, or
+    /// [`NOT_PLACED`]) blocks the world-space shadow ray `ray`: not where alpha removes the
+    /// surface; where it is a filter, only once the product `through` of the straight
+    /// transmissions it has crossed (multiplied here) reaches zero. Traversal reports every
+    /// hit once, in any order, and the product does not depend on the order.
+    fn blocks_shadow(
+        &self,
+        prim: u32,
+        placement: u32,
+        hit: &PrimitiveHit,
+        ray: &Ray,
+        through: &mut Vec3,
+    ) -> bool {
+        let counts = if placement == NOT_PLACED {
+            self.alpha_passes(prim, hit, ray)
+        } else {
+            let mesh = &self.shared_meshes[self.placements[placement as usize].mesh as usize];
+            let attrs =
+                self.triangle_attributes(mesh, mesh.triangles[prim as usize], hit.b1, hit.b2);
+            let key = prim ^ hash_u32(placement);
+            self.alpha_decides(
+                &self.materials[mesh.material as usize],
+                &attrs,
+                key,
+                hit,
+                ray,
+            )
+        };
+        if !counts {
+            return false;
+        }
+        let surface = Hit {
+            t: hit.t,
+            prim,
+            b1: hit.b1,
+            b2: hit.b2,
+            front: hit.front,
+            instance: placement,
+        };
+        let it = self.interaction(ray, &surface);
+        let m = &self.materials[it.material as usize];
+        if !m.can_filter() {
+            return true;
+        }
+        let mut storage = material::BsdfStorage::default();
+        let ctx = it.shading_context(1.0);
+        let bsdf = material::bsdf_in(m, &self.textures, &it.attrs, &ctx, &mut storage);
+        *through *= bsdf.straight_transmission(it.frame.to_local(-ray.dir.normalize()));
+        *through == Vec3::ZERO
+    }
+
+    /// The absorption coefficient (per render-space unit) inside the volume of material
+    /// `material`, where it absorbs.
+    #[inline]
+    pub fn absorption(&self, material: u32) -> Option<Vec3> {
+        self.absorption.get(material as usize).copied().flatten()
+    }
+
     /// The alpha decision for a hit with surface attributes `attrs`; `key` identifies the
     /// primitive in the hash of a blended surface.
     fn alpha_decides(
@@ -1138,6 +1263,9 @@ impl Surfaces {
         hit: &PrimitiveHit,
         ray: &Ray,
     ) -> bool {
+        if mat.alpha_mode == AlphaMode::Opaque {
+            return true;
+        }
         let alpha = material::alpha(mat, &self.textures, attrs);
         match mat.alpha_mode {
             AlphaMode::Opaque => true,
@@ -1156,7 +1284,7 @@ impl Surfaces {
     /// The shading point of `hit` along `ray`.
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
         let wo = -ray.dir.normalize();
-        let (p, n_front, ns_front, attrs, material) = if hit.instance != NOT_PLACED {
+        let (p, n_front, ns_front, attrs, material, tangents) = if hit.instance != NOT_PLACED {
             self.placed_surface(hit)
         } else {
             match self.prims[hit.prim as usize] {
@@ -1173,12 +1301,14 @@ impl Surfaces {
                         n,
                         Self::shape_attributes(sphere::uv(n)),
                         s.material,
+                        None,
                     )
                 }
                 PrimRef::Quadric(q) => {
                     let q = &self.quadrics[q as usize];
                     let (p, n) = q.quadric.surface(ray.at(hit.t));
-                    (p, n, n, Self::shape_attributes(q.quadric.uv(p)), q.material)
+                    let attrs = Self::shape_attributes(q.quadric.uv(p));
+                    (p, n, n, attrs, q.material, None)
                 }
             }
         };
@@ -1187,8 +1317,10 @@ impl Surfaces {
         // Onto the side the ray came from; normals that disagree with the winding are
         // taken as flipped.
         let mut ns = if front { ns_front } else { -ns_front };
+        let mut flipped = !front;
         if ns.dot(ng) < 0.0 {
             ns = -ns;
+            flipped = !flipped;
         }
         let ns = facing_shading_normal(ns, ng, wo);
         Interaction {
@@ -1200,33 +1332,39 @@ impl Surfaces {
             instance: hit.instance,
             material,
             front,
+            tangents: tangents.map(|axes| if flipped { axes.map(|v| -v) } else { axes }),
         }
     }
 
     /// [`Surfaces::triangle_surface`] of a placed hit, moved from the shared mesh's object
     /// space into render space.
-    fn placed_surface(&self, hit: &Hit) -> (Vec3, Vec3, Vec3, SurfaceAttributes, u32) {
+    fn placed_surface(&self, hit: &Hit) -> SurfacePoint {
         let placed = &self.placements[hit.instance as usize];
         let mesh = &self.shared_meshes[placed.mesh as usize];
-        let (p, n, ns, attrs, material) = self.triangle_surface(mesh, hit.prim, hit);
+        let (p, n, ns, attrs, material, tangents) = self.triangle_surface(mesh, hit.prim, hit);
         let n = (placed.normal_matrix * n).normalize_or_zero();
+        let tangents = tangents.map(|[t, b, normal]| {
+            let linear = |v: Vec3| placed.to_render.transform_vector3(v).normalize_or_zero();
+            [
+                linear(t),
+                linear(b),
+                (placed.normal_matrix * normal).normalize_or(n),
+            ]
+        });
         (
             placed.to_render.transform_point3(p),
             n,
             (placed.normal_matrix * ns).normalize_or(n),
             attrs,
             material,
+            tangents,
         )
     }
 
     /// Position, front geometric normal, front shading normal (interpolated, then
-    /// normal-mapped), attributes and material of a triangle hit.
-    fn triangle_surface(
-        &self,
-        mesh: &Mesh,
-        tri: u32,
-        hit: &Hit,
-    ) -> (Vec3, Vec3, Vec3, SurfaceAttributes, u32) {
+    /// normal-mapped), attributes, material and tangent frame (where the mesh has tangents)
+    /// of a triangle hit.
+    fn triangle_surface(&self, mesh: &Mesh, tri: u32, hit: &Hit) -> SurfacePoint {
         let tri = mesh.triangles[tri as usize];
         let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
         let (b1, b2) = (hit.b1, hit.b2);
@@ -1242,19 +1380,20 @@ impl Surfaces {
             .map(|n| (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero())
             .filter(|n| *n != Vec3::ZERO)
             .unwrap_or(n_front);
-        if let (Some(tangents), Some(ts_normal)) = (
-            mesh.tangents.as_ref(),
-            material::tangent_space_normal(mat, &self.textures, &attrs),
-        ) {
+        let mut frame = None;
+        if let Some(tangents) = mesh.tangents.as_ref() {
             let t = (tangents[i0] * b0 + tangents[i1] * b1 + tangents[i2] * b2).truncate();
             let tangent_frame = Frame::from_normal_tangent(ns, t);
             let sign = if tangents[i0].w < 0.0 { -1.0 } else { 1.0 };
-            let mapped = tangent_frame.s * ts_normal.x
-                + tangent_frame.t * (sign * ts_normal.y)
-                + tangent_frame.n * ts_normal.z;
-            ns = mapped.normalize_or(n_front);
+            frame = Some([tangent_frame.s, tangent_frame.t * sign, tangent_frame.n]);
+            if let Some(ts_normal) = material::tangent_space_normal(mat, &self.textures, &attrs) {
+                let mapped = tangent_frame.s * ts_normal.x
+                    + tangent_frame.t * (sign * ts_normal.y)
+                    + tangent_frame.n * ts_normal.z;
+                ns = mapped.normalize_or(n_front);
+            }
         }
-        (p, n_front, ns, attrs, mesh.material)
+        (p, n_front, ns, attrs, mesh.material, frame)
     }
 
     /// Radiance emitted from `it` back along the ray that found it (zero for the back of

@@ -295,14 +295,8 @@ fn materials_factors_textures_and_extensions() {
     assert_eq!(m.model, BsdfModel::GltfPbr);
     assert_eq!((m.metallic, m.roughness, m.ior), (0.25, 0.75, 1.33));
     assert_eq!((m.clearcoat, m.clearcoat_roughness), (0.6, 0.2));
-    assert!(
-        scene
-            .warnings
-            .iter()
-            .any(|w| w.contains("KHR_materials_clearcoat textures are not supported")),
-        "{:?}",
-        scene.warnings
-    );
+    assert_eq!(m.clearcoat_texture.map(|t| t.texture), Some(0));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
     assert_eq!(m.emissive, Vec3::new(4.0, 2.0, 1.0));
     assert_eq!(m.alpha_mode, AlphaMode::Mask { cutoff: 0.3 });
     assert!(m.double_sided);
@@ -310,8 +304,10 @@ fn materials_factors_textures_and_extensions() {
     assert_eq!(t.tex_coord, 1, "KHR_texture_transform's texCoord overrides");
     let tr = t.transform.unwrap();
     let (s, c) = 0.3f32.sin_cos();
-    // u axis → (cos r, sin r) · scale.x; origin → offset.
-    assert!((tr.apply(Vec2::X) - (Vec2::new(c, s) * 2.0 + Vec2::new(0.5, 0.0))).length() < 1e-6);
+    // u axis → (cos r, -sin r) · scale.x (the image turns clockwise, as
+    // TextureTransformTest shows); origin → offset.
+    assert!((tr.apply(Vec2::X) - (Vec2::new(c, -s) * 2.0 + Vec2::new(0.5, 0.0))).length() < 1e-6);
+    assert!((tr.apply(Vec2::Y) - (Vec2::new(s, c) + Vec2::new(0.5, 0.0))).length() < 1e-6);
     assert!((tr.apply(Vec2::ZERO) - Vec2::new(0.5, 0.0)).length() < 1e-6);
     // sRGB decode of colour textures, none for data textures.
     let attrs = SurfaceAttributes {
@@ -534,17 +530,17 @@ fn extensions_required_error_used_warning() {
     let prim = b.quad_primitive(None);
     let mesh = b.mesh(json!([prim]));
     b.root(json!({"mesh": mesh}));
-    b.json["extensionsUsed"] = json!(["KHR_materials_sheen"]);
+    b.json["extensionsUsed"] = json!(["KHR_materials_dispersion"]);
     let scene = load(&b.write_embedded(dir.path(), "used"));
     assert!(
         scene
             .warnings
             .iter()
-            .any(|w| w.contains("KHR_materials_sheen")),
+            .any(|w| w.contains("KHR_materials_dispersion")),
         "{:?}",
         scene.warnings
     );
-    b.json["extensionsRequired"] = json!(["KHR_materials_sheen"]);
+    b.json["extensionsRequired"] = json!(["KHR_materials_dispersion"]);
     let err = ingest::load(
         &b.write_embedded(dir.path(), "required"),
         &Default::default(),
@@ -553,7 +549,7 @@ fn extensions_required_error_used_warning() {
     .unwrap();
     assert_eq!(err.exit_code(), 2);
     assert!(
-        err.to_string().contains("KHR_materials_sheen")
+        err.to_string().contains("KHR_materials_dispersion")
             && err.to_string().contains("not supported"),
         "{err}"
     );

@@ -292,6 +292,32 @@ fn malformed_scene_files_are_rejected_with_the_element() {
             Box::new(|m, _| m["materials"][0]["emissive"] = json!([-1.0, 0, 0])),
             "materials[0]",
         ),
+        (
+            "transmission",
+            Box::new(|m, _| m["materials"][0]["transmission"] = json!(1.5)),
+            "materials[0]",
+        ),
+        (
+            "absorption",
+            Box::new(|m, _| m["materials"][0]["volume"] = json!({"absorption": [0.1, -2.0, 0.0]})),
+            "materials[0]",
+        ),
+        (
+            "sheen-roughness",
+            Box::new(|m, _| {
+                m["materials"][0]["sheen"] = json!({"color": [1, 1, 1], "color_texture": null,
+                    "roughness": 2.0, "roughness_texture": null})
+            }),
+            "materials[0]",
+        ),
+        (
+            "transmission-texture",
+            Box::new(|m, _| {
+                m["materials"][0]["transmission_texture"] =
+                    json!({"texture": 7, "tex_coord": 0, "transform": null})
+            }),
+            "materials[0].transmission_texture",
+        ),
     ];
     for (name, corrupt, element) in cases {
         let error = error_after(name, corrupt);

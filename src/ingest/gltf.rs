@@ -27,9 +27,16 @@ use std::sync::Arc;
 /// used one a warning.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_lights_punctual",
+    "KHR_materials_anisotropy",
     "KHR_materials_clearcoat",
     "KHR_materials_emissive_strength",
     "KHR_materials_ior",
+    "KHR_materials_iridescence",
+    "KHR_materials_sheen",
+    "KHR_materials_specular",
+    "KHR_materials_transmission",
+    "KHR_materials_unlit",
+    "KHR_materials_volume",
     "KHR_texture_transform",
 ];
 
@@ -77,6 +84,7 @@ pub fn import_at(
         materials: HashMap::new(),
         meshes: HashMap::new(),
         pose: HashMap::new(),
+        unsupported_material_extensions: Default::default(),
     };
     importer.run(time)?;
     Ok(importer.scene)
@@ -185,6 +193,8 @@ struct Importer<'a> {
     meshes: HashMap<(usize, usize), Option<u32>>,
     /// Animated nodes' translation, rotation and scale at the render's time.
     pose: HashMap<usize, NodePose>,
+    /// Unsupported extensions a material uses → the materials' names (one warning each).
+    unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
 }
 
 /// The animated parts of a node's transform at one time (the rest come from the node).
@@ -226,14 +236,6 @@ impl<'a> Importer<'a> {
     }
 
     fn run(&mut self, time: Option<f64>) -> Result<()> {
-        for ext in self.doc.extensions_used() {
-            if !SUPPORTED_EXTENSIONS.contains(&ext) {
-                self.warn(
-                    "extensionsUsed",
-                    format!("extension {ext} is not supported and is ignored"),
-                );
-            }
-        }
         self.load_buffers()?;
         match time {
             Some(t) => self.pose_at(t)?,
@@ -255,6 +257,7 @@ impl<'a> Importer<'a> {
         for node in gltf_scene.nodes() {
             self.visit(node, DMat4::IDENTITY, &mut path)?;
         }
+        self.warn_unsupported_extensions();
         if self.scene.instanced_triangle_count() == 0 && self.scene.spheres.is_empty() {
             return Err(self.err(
                 format!("scenes[{}]", gltf_scene.index()),
@@ -803,15 +806,16 @@ impl<'a> Importer<'a> {
             triangles,
             material,
         };
-        // Tangents only where a normal map needs them: the file's, else MikkTSpace's.
-        if let Some(normal_map) = self.scene.materials[material as usize].normal_texture {
+        // Tangents only where a normal map or anisotropy needs them: the file's, else
+        // MikkTSpace's.
+        if let Some(uv_set) = self.scene.materials[material as usize].tangent_uv_set() {
             let valid_tangents = tangents.filter(|t| t.iter().all(|t| t.is_finite()));
             if let Some(t) = valid_tangents {
                 out.tangents = Some(t);
-            } else if !tangents::generate(&mut out, normal_map.tex_coord as usize) {
+            } else if !tangents::generate(&mut out, uv_set) {
                 self.warn(
                     element,
-                    "normal map ignored: the mesh has no texture coordinates for it",
+                    "normal map and anisotropy ignored: the mesh has no texture coordinates for their tangents",
                 );
             }
         }
@@ -871,9 +875,9 @@ impl<'a> Importer<'a> {
             },
             gltf::material::AlphaMode::Blend => AlphaMode::Blend,
         };
-        let (clearcoat, clearcoat_roughness) = self.clearcoat(m, element)?;
-        Ok(Material {
-            name: m.name().map_or_else(|| element.to_string(), str::to_string),
+        let name = m.name().map_or_else(|| element.to_string(), str::to_string);
+        let mut material = Material {
+            name: name.clone(),
             model,
             base_color,
             base_color_texture,
@@ -885,49 +889,248 @@ impl<'a> Importer<'a> {
             emissive: emissive.max(Vec3::ZERO),
             emissive_texture,
             ior: m.ior().unwrap_or(1.5),
-            specular_color: None,
-            clearcoat,
-            clearcoat_roughness,
             alpha_mode,
             double_sided: m.double_sided(),
-        })
-    }
-
-    /// Clear coat weight and roughness factors from KHR_materials_clearcoat (0, 0 without
-    /// it). Its textures and normal map are not implemented: a warning says so.
-    fn clearcoat(&mut self, m: &gltf::Material, element: &str) -> Result<(f32, f32)> {
-        let Some(ext) = m.extension_value("KHR_materials_clearcoat") else {
-            return Ok((0.0, 0.0));
+            ..Material::default()
         };
-        let factor = |key: &str| match ext.get(key) {
-            None => Ok(0.0),
-            Some(v) => v
-                .as_f64()
-                .map(|x| x as f32)
-                .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    self.err(
-                        element,
-                        format!("KHR_materials_clearcoat.{key} is not a finite number"),
-                    )
-                }),
-        };
-        let weights = (
-            factor("clearcoatFactor")?.clamp(0.0, 1.0),
-            factor("clearcoatRoughnessFactor")?.clamp(0.0, 1.0),
-        );
-        let textures = [
-            "clearcoatTexture",
-            "clearcoatRoughnessTexture",
-            "clearcoatNormalTexture",
-        ];
-        if textures.iter().any(|t| ext.get(*t).is_some()) {
+        if !(material.ior == 0.0 || material.ior >= 1.0) || !material.ior.is_finite() {
             self.warn(
                 element,
-                "KHR_materials_clearcoat textures are not supported: the factors apply uniformly",
+                format!(
+                    "KHR_materials_ior.ior {} is outside [1, inf) and not 0; 1.5 is used",
+                    material.ior
+                ),
+            );
+            material.ior = 1.5;
+        }
+        let extensions = MaterialExtensions {
+            element,
+            json: m
+                .extensions()
+                .map(|e| e.iter().map(|(k, v)| (k.as_str(), v)).collect())
+                .unwrap_or_default(),
+        };
+        self.material_extensions(&extensions, &mut material)?;
+        for name in extensions.json.keys() {
+            if !SUPPORTED_EXTENSIONS.contains(name) {
+                self.unsupported_material_extensions
+                    .entry(name.to_string())
+                    .or_default()
+                    .push(material.name.clone());
+            }
+        }
+        if material.unlit && material.emissive_texture.is_some() {
+            self.warn(element, "KHR_materials_unlit: the emission is ignored");
+        }
+        Ok(material)
+    }
+
+    /// Reads the material extensions lucerna implements into `material`: clear coat (with
+    /// its textures and normal map), transmission, volume, specular, sheen, iridescence,
+    /// anisotropy, unlit. Factors must be finite numbers (an error names the one that is
+    /// not); values outside the specification's range are clamped into it with a warning.
+    fn material_extensions(
+        &mut self,
+        ext: &MaterialExtensions,
+        material: &mut Material,
+    ) -> Result<()> {
+        if let Some(e) = ext.get("KHR_materials_clearcoat") {
+            let name = "KHR_materials_clearcoat";
+            material.clearcoat = self.unit_factor(ext, name, e, "clearcoatFactor", 0.0)?;
+            material.clearcoat_texture = self.json_texture(ext, e, "clearcoatTexture")?;
+            material.clearcoat_roughness =
+                self.unit_factor(ext, name, e, "clearcoatRoughnessFactor", 0.0)?;
+            material.clearcoat_roughness_texture =
+                self.json_texture(ext, e, "clearcoatRoughnessTexture")?;
+            material.clearcoat_normal_texture =
+                self.json_texture(ext, e, "clearcoatNormalTexture")?;
+            if let Some(n) = e.get("clearcoatNormalTexture") {
+                material.clearcoat_normal_scale = ext.number(self, name, n, "scale", 1.0)?;
+            }
+        }
+        if let Some(e) = ext.get("KHR_materials_transmission") {
+            let name = "KHR_materials_transmission";
+            material.transmission = self.unit_factor(ext, name, e, "transmissionFactor", 0.0)?;
+            material.transmission_texture = self.json_texture(ext, e, "transmissionTexture")?;
+        }
+        if let Some(e) = ext.get("KHR_materials_volume") {
+            let name = "KHR_materials_volume";
+            let thickness = ext.number(self, name, e, "thicknessFactor", 0.0)?;
+            let distance = ext.number(self, name, e, "attenuationDistance", f32::INFINITY)?;
+            let color = ext.color(self, name, e, "attenuationColor", Vec3::ONE)?;
+            if thickness < 0.0 || distance <= 0.0 {
+                self.warn(
+                    ext.element,
+                    format!("{name}: thicknessFactor must be >= 0 and attenuationDistance > 0; the volume is ignored"),
+                );
+            } else if thickness > 0.0 {
+                // σ = -ln(c) / d per world unit (Beer-Lambert), zero where c is 1 or d infinite.
+                let color = color.clamp(Vec3::splat(1e-6), Vec3::ONE);
+                let absorption = if distance.is_finite() {
+                    -Vec3::new(color.x.ln(), color.y.ln(), color.z.ln()) / distance
+                } else {
+                    Vec3::ZERO
+                };
+                material.volume = Some(scene::Volume {
+                    absorption: absorption.max(Vec3::ZERO),
+                });
+            }
+        }
+        if let Some(e) = ext.get("KHR_materials_specular") {
+            let name = "KHR_materials_specular";
+            let weight = ext.number(self, name, e, "specularFactor", 1.0)?;
+            let color = ext.color(self, name, e, "specularColorFactor", Vec3::ONE)?;
+            if weight < 0.0 || color.min_element() < 0.0 {
+                self.warn(
+                    ext.element,
+                    format!("{name}: negative factors are taken as 0"),
+                );
+            }
+            material.specular = scene::Specular {
+                weight: weight.clamp(0.0, 1.0),
+                weight_texture: self.json_texture(ext, e, "specularTexture")?,
+                color: color.max(Vec3::ZERO),
+                color_texture: self.json_texture(ext, e, "specularColorTexture")?,
+            };
+        }
+        if let Some(e) = ext.get("KHR_materials_sheen") {
+            let name = "KHR_materials_sheen";
+            let color = ext.color(self, name, e, "sheenColorFactor", Vec3::ZERO)?;
+            let color_texture = self.json_texture(ext, e, "sheenColorTexture")?;
+            let roughness = self.unit_factor(ext, name, e, "sheenRoughnessFactor", 0.0)?;
+            let roughness_texture = self.json_texture(ext, e, "sheenRoughnessTexture")?;
+            // A black sheen colour disables the layer.
+            if color.max_element() > 0.0 {
+                material.sheen = Some(scene::Sheen {
+                    color: color.clamp(Vec3::ZERO, Vec3::ONE),
+                    color_texture,
+                    roughness,
+                    roughness_texture,
+                });
+            }
+        }
+        if let Some(e) = ext.get("KHR_materials_iridescence") {
+            let name = "KHR_materials_iridescence";
+            let factor = self.unit_factor(ext, name, e, "iridescenceFactor", 0.0)?;
+            let ior = ext.number(self, name, e, "iridescenceIor", 1.3)?;
+            let thickness_min = ext.number(self, name, e, "iridescenceThicknessMinimum", 100.0)?;
+            let thickness_max = ext.number(self, name, e, "iridescenceThicknessMaximum", 400.0)?;
+            if ior < 1.0 || thickness_min < 0.0 || thickness_max < 0.0 {
+                self.warn(
+                    ext.element,
+                    format!("{name}: iridescenceIor must be >= 1 and thicknesses >= 0; clamped"),
+                );
+            }
+            let texture = self.json_texture(ext, e, "iridescenceTexture")?;
+            let thickness_texture = self.json_texture(ext, e, "iridescenceThicknessTexture")?;
+            if factor > 0.0 {
+                material.iridescence = Some(scene::Iridescence {
+                    factor,
+                    texture,
+                    ior: ior.max(1.0),
+                    thickness_min: thickness_min.max(0.0),
+                    thickness_max: thickness_max.max(0.0),
+                    thickness_texture,
+                });
+            }
+        }
+        if let Some(e) = ext.get("KHR_materials_anisotropy") {
+            let name = "KHR_materials_anisotropy";
+            let strength = self.unit_factor(ext, name, e, "anisotropyStrength", 0.0)?;
+            let rotation = ext.number(self, name, e, "anisotropyRotation", 0.0)?;
+            let texture = self.json_texture(ext, e, "anisotropyTexture")?;
+            if strength > 0.0 {
+                material.anisotropy = Some(scene::Anisotropy {
+                    strength,
+                    rotation,
+                    texture,
+                });
+            }
+        }
+        material.unlit = ext.get("KHR_materials_unlit").is_some();
+        Ok(())
+    }
+
+    /// A factor in [0, 1] of extension `name`'s JSON `e` (default `default`); a number
+    /// outside the range is clamped with a warning.
+    fn unit_factor(
+        &mut self,
+        ext: &MaterialExtensions,
+        name: &str,
+        e: &serde_json::Value,
+        key: &str,
+        default: f32,
+    ) -> Result<f32> {
+        let x = ext.number(self, name, e, key, default)?;
+        if !(0.0..=1.0).contains(&x) {
+            self.warn(
+                ext.element,
+                format!("{name}.{key} = {x} is outside [0, 1]; clamped"),
             );
         }
-        Ok(weights)
+        Ok(x.clamp(0.0, 1.0))
+    }
+
+    /// The texture slot of a textureInfo in an extension's JSON (`e[key]`), if present.
+    fn json_texture(
+        &mut self,
+        ext: &MaterialExtensions,
+        e: &serde_json::Value,
+        key: &str,
+    ) -> Result<Option<TextureRef>> {
+        let Some(info) = e.get(key) else {
+            return Ok(None);
+        };
+        let element = format!("{}.{key}", ext.element);
+        let index = info
+            .get("index")
+            .and_then(serde_json::Value::as_u64)
+            .ok_or_else(|| self.err(&element, "textureInfo needs an integer \"index\""))?;
+        let Some(texture) = usize::try_from(index)
+            .ok()
+            .and_then(|i| self.doc.textures().nth(i))
+        else {
+            return Err(self.err(&element, format!("texture {index} does not exist")));
+        };
+        let tex_coord = match info.get("texCoord") {
+            None => 0,
+            Some(v) => v
+                .as_u64()
+                .map(|x| x.min(u32::MAX as u64) as u32)
+                .ok_or_else(|| self.err(&element, "texCoord is not an integer"))?,
+        };
+        let transform = info
+            .get("extensions")
+            .and_then(|x| x.get("KHR_texture_transform"))
+            .map(transform_from_json);
+        self.texture_ref(texture, tex_coord, transform).map(Some)
+    }
+
+    /// One warning for each unsupported extension, naming the materials that use it.
+    fn warn_unsupported_extensions(&mut self) {
+        let by_material = std::mem::take(&mut self.unsupported_material_extensions);
+        for ext in self.doc.extensions_used() {
+            if SUPPORTED_EXTENSIONS.contains(&ext) {
+                continue;
+            }
+            let detail = match ext {
+                "KHR_materials_dispersion" => {
+                    ": refraction uses the material's ior at every wavelength"
+                }
+                "KHR_materials_pbrSpecularGlossiness" => {
+                    ": the metallic-roughness parameters are rendered"
+                }
+                _ => "",
+            };
+            let users = match by_material.get(ext) {
+                Some(names) => format!(" (materials: {})", names.join(", ")),
+                None => String::new(),
+            };
+            self.warn(
+                "extensionsUsed",
+                format!("extension {ext} is not supported and is ignored{detail}{users}"),
+            );
+        }
     }
 
     /// The BSDF model from `extras.lucerna` (default: the glTF BRDF).
@@ -1181,6 +1384,67 @@ where
             }
         })
         .collect()
+}
+
+/// A material's `extensions` object, for reading the extensions that the `gltf` crate does
+/// not type.
+struct MaterialExtensions<'j> {
+    /// The material's element, for messages.
+    element: &'j str,
+    json: std::collections::BTreeMap<&'j str, &'j serde_json::Value>,
+}
+
+impl MaterialExtensions<'_> {
+    fn get(&self, name: &str) -> Option<&serde_json::Value> {
+        self.json.get(name).copied()
+    }
+
+    /// `e[key]` of extension `name` as a finite number (`default` when absent).
+    fn number(
+        &self,
+        importer: &Importer,
+        name: &str,
+        e: &serde_json::Value,
+        key: &str,
+        default: f32,
+    ) -> Result<f32> {
+        match e.get(key) {
+            None => Ok(default),
+            Some(v) => v
+                .as_f64()
+                .map(|x| x as f32)
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    importer.err(self.element, format!("{name}.{key} is not a finite number"))
+                }),
+        }
+    }
+
+    /// `e[key]` of extension `name` as an RGB triple of finite numbers.
+    fn color(
+        &self,
+        importer: &Importer,
+        name: &str,
+        e: &serde_json::Value,
+        key: &str,
+        default: Vec3,
+    ) -> Result<Vec3> {
+        let Some(v) = e.get(key) else {
+            return Ok(default);
+        };
+        let values: Option<Vec<f32>> = v.as_array().and_then(|a| {
+            (a.len() == 3)
+                .then(|| a.iter().map(|x| x.as_f64().map(|x| x as f32)).collect())
+                .flatten()
+        });
+        match values {
+            Some(c) if c.iter().all(|x| x.is_finite()) => Ok(Vec3::new(c[0], c[1], c[2])),
+            _ => Err(importer.err(
+                self.element,
+                format!("{name}.{key} is not three finite numbers"),
+            )),
+        }
+    }
 }
 
 /// A KHR_texture_transform's values.

@@ -161,8 +161,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
 fn add_tangents(scene: &mut Scene) {
     for mesh in &mut scene.meshes {
         let material = &scene.materials[mesh.material as usize];
-        if let (Some(normal_map), None) = (material.normal_texture, &mesh.tangents)
-            && !tangents::generate(mesh, normal_map.tex_coord as usize)
+        if let (Some(uv_set), None) = (material.tangent_uv_set(), &mesh.tangents)
+            && !tangents::generate(mesh, uv_set)
         {
             scene.warnings.push(format!(
                 "{}: normal map ignored: the mesh has no texture coordinates for it",

@@ -2,6 +2,7 @@
 //! "Render settings"), and the records it produces.
 
 pub mod ears;
+pub(crate) mod media;
 pub mod mis;
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod packet;

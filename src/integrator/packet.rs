@@ -40,6 +40,7 @@
 //! instructions, the MIS plates 2 %). A camera sample's value is complete when its last
 //! path ends; it then goes to its pixel's accumulator as the scalar kernel's samples do.
 
+use super::media::Media;
 use super::mis::{Mis, Technique};
 use super::path::{
     Emitter, PathState, RayCounts, emitters_at_infinity, sample_chosen_light, surface_emitter,
@@ -53,7 +54,7 @@ use crate::geometry::triangle::Lanes;
 use crate::light::lanes::{self as light_lanes, AreaLights, PowerSelection};
 use crate::material::lambert::Lambert;
 use crate::material::lanes::BsdfLanes;
-use crate::material::{self, Bsdf};
+use crate::material::{self, Bsdf, BsdfStorage};
 use crate::sampling::sampler::{
     Sampler, SamplerKind, SplitKind, VertexSample, first_split_sobol_lanes, sobol_4d_lanes,
     vertex_seeds_lanes,
@@ -77,13 +78,45 @@ pub struct PixelWork {
 }
 
 /// A path waiting for a lane (a camera sample's, or a branch of a split first vertex): the
-/// ray it follows, its state as the scalar kernel keeps it, and the camera sample it
-/// belongs to.
+/// ray it follows, its state, and the camera sample it belongs to.
 #[derive(Clone, Copy, Debug)]
 struct Path {
     ray: Ray,
-    state: PathState,
+    state: LaneState,
     sample: u32,
+}
+
+/// The part of the scalar kernel's `PathState` that a path in a lane has: paths in lanes
+/// record no lobe shares (the packet kernel renders the beauty alone) and meet no
+/// transmissive surface, so they are in no volume and cross no filter.
+#[derive(Clone, Copy, Debug)]
+struct LaneState {
+    beta: Vec3,
+    depth: u32,
+    branch: u32,
+    prev_p: Vec3,
+    prev_n: Vec3,
+    prev_pdf: f32,
+    prev_delta: bool,
+    prev_nee_count: u32,
+}
+
+impl LaneState {
+    /// The state of a camera path whose ray starts at `origin` (`PathState::camera`'s).
+    #[inline(always)]
+    fn camera(origin: Vec3) -> Self {
+        let s = PathState::camera(origin);
+        Self {
+            beta: s.beta,
+            depth: s.depth,
+            branch: s.branch,
+            prev_p: s.prev_p,
+            prev_n: s.prev_n,
+            prev_pdf: s.prev_pdf,
+            prev_delta: s.prev_delta,
+            prev_nee_count: s.prev_nee_count,
+        }
+    }
 }
 
 /// What idle lanes hold (never read).
@@ -93,7 +126,7 @@ const NO_PATH: Path = Path {
         dir: Vec3::Z,
         tmax: 0.0,
     },
-    state: PathState {
+    state: LaneState {
         beta: Vec3::ZERO,
         depth: 0,
         branch: 0,
@@ -102,7 +135,6 @@ const NO_PATH: Path = Path {
         prev_pdf: 0.0,
         prev_delta: true,
         prev_nee_count: 1,
-        lobes: [Vec3::ZERO; 3],
     },
     sample: 0,
 };
@@ -211,6 +243,11 @@ impl PathLanes {
             prev_delta: self.prev_delta & (1 << lane) != 0,
             prev_nee_count: self.prev_nee_count.lane(lane),
             lobes: [Vec3::ZERO; 3],
+            // Paths in lanes meet no transmissive surface: their vertices are scattering
+            // events in air.
+            vertex: self.depth.lane(lane),
+            media: Media::EMPTY,
+            crossed: 0.0,
         }
     }
 }
@@ -267,7 +304,7 @@ impl PacketBuffers {
 }
 
 /// The BSDF of lanes that do not scatter (never read).
-const NO_BSDF: Bsdf = Bsdf::Lambert(Lambert { albedo: Vec3::ZERO });
+const NO_BSDF: Bsdf<'static> = Bsdf::Lambert(Lambert { albedo: Vec3::ZERO });
 
 /// The packet kernel over a world with given settings; `EMITTERS` as in
 /// [`super::path::PathTracer`].
@@ -293,7 +330,7 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
     learning: bool,
     /// By mesh, the BSDF of a mesh whose shading points the lanes compute
     /// (`Surfaces::uniform_bsdf`); the others go through `World::interaction` lane by lane.
-    mesh_bsdfs: Vec<Option<Bsdf>>,
+    mesh_bsdfs: Vec<Option<Bsdf<'static>>>,
 }
 
 /// Shading points that the scalar code computed, lane by lane.
@@ -529,6 +566,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let mut lanes = PathLanes::new();
         let mut cameras = CameraPaths::new();
         let mut shading = Shading::new();
+        // Where lanes the scalar code shades build a layered BSDF, reused bounce to bounce.
+        let mut layered: [BsdfStorage; LANES] = Default::default();
         let mut active = 0u32;
         let (mut item, mut next) = (0usize, 0u32);
         // Checked at every pixel's start, as the scalar loop does.
@@ -575,7 +614,14 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if active == 0 {
                 return taken;
             }
-            self.bounce(&mut lanes, &mut active, &mut shading, buffers, rays);
+            self.bounce(
+                &mut lanes,
+                &mut active,
+                &mut shading,
+                &mut layered,
+                buffers,
+                rays,
+            );
         }
     }
 
@@ -651,7 +697,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
         out.fill(starts.len(), |lane| Path {
             ray: rays[lane],
-            state: PathState::camera(rays[lane].origin),
+            state: LaneState::camera(rays[lane].origin),
             sample: sample[lane],
         });
     }
@@ -779,6 +825,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         lanes: &mut PathLanes,
         active: &mut u32,
         shading: &mut Shading,
+        layered: &mut [BsdfStorage; LANES],
         buffers: &mut PacketBuffers,
         rays: &mut RayCounts,
     ) {
@@ -788,6 +835,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         // A set mask lane is all ones, -1: subtracting it counts one ray.
         lanes.rays = lanes.rays - M8::from_bits(*active).as_u8();
         let mut bsdfs = [NO_BSDF; LANES];
+        let mut storage = layered.each_mut().map(Some);
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
         let hits = world.intersect_lanes(&lanes.ray, *active);
         for lane in Lanes::new(*active) {
@@ -831,14 +879,15 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 self.reached_emitter(&lanes.state(lane), e, slot);
             }
-            let bsdf = (depth < max_depth).then(|| {
-                let surfaces = &world.surfaces;
-                material::bsdf(
-                    &surfaces.materials[it.material as usize],
-                    &surfaces.textures,
-                    &it.attrs,
-                )
-            });
+            let lane_storage = storage[lane].take();
+            let bsdf = (depth < max_depth)
+                .then_some(lane_storage)
+                .flatten()
+                .map(|storage| {
+                    let surfaces = &world.surfaces;
+                    let m = &surfaces.materials[it.material as usize];
+                    material::bsdf(m, &surfaces.textures, &it.attrs, storage)
+                });
             // Coverage, as the scalar kernel's first hit records it.
             if camera_ray && bsdf.is_some() {
                 slot.covered = true;
@@ -870,7 +919,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         &self,
         lanes: &PathLanes,
         shading: &Shading,
-        bsdfs: &'b [Bsdf; LANES],
+        bsdfs: &'b [Bsdf<'b>; LANES],
         mask: u32,
         buffers: &mut PacketBuffers,
     ) -> Vertices<'b> {
@@ -1131,7 +1180,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         out: &mut ScalarLightSamples,
     ) {
         let (p, ng) = (v.p.lane(lane), v.ng.lane(lane));
-        let Some(ls) = sample_chosen_light(self.world, self.settings, p, ng, index, u_light) else {
+        let Some(ls) = sample_chosen_light(self.world, self.settings, p, Some(ng), index, u_light)
+        else {
             return;
         };
         (out.wi[lane], out.radiance[lane]) = (ls.wi, ls.radiance);
@@ -1225,7 +1275,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 buffers.slots[sample as usize].paths += 1;
                 buffers.waiting.push(Path {
                     ray: Ray::new(v.origin.lane(lane), wi.lane(lane)),
-                    state: PathState {
+                    state: LaneState {
                         beta: b.lane(lane),
                         depth: 1,
                         branch: k,
@@ -1234,7 +1284,6 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                         prev_pdf: pdf.lane(lane),
                         prev_delta: delta & (1 << lane) != 0,
                         prev_nee_count: counts.nee,
-                        lobes: [Vec3::ZERO; 3],
                     },
                     sample,
                 });

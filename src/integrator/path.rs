@@ -11,16 +11,31 @@
 //! Past each vertex's light sample, the continuation is decided once: the first vertex's
 //! split, efficiency-aware roulette and splitting (`ears`) where its statistics know the
 //! place, or the configured Russian roulette.
+//!
+//! Transmission: light samples at a surface that transmits are taken on both sides of it
+//! (each from the side its shadow ray leaves, and only where the geometric and shading
+//! normals agree on the side, so that no light leaks through a surface); a path that
+//! refracts enters or leaves a volume (`media`), whose absorption weighs every segment it
+//! travels inside. Shadow rays stop at glass, except at filters: a smooth thin wall's
+//! straight-through transmission (a window pane) does not bend light, so a shadow ray can
+//! cross it exactly, carrying its transmittance (`World::transmittance`). For the two
+//! estimators of light through a filter to agree, a path that crosses a filter by its
+//! straight lobe does not scatter there: its depth, lobe shares and MIS state (the previous
+//! vertex, its densities) carry on, and the light it then finds is weighed by MIS against
+//! the previous vertex's light samples, which crossed the same filter. It still takes new
+//! random numbers (`PathState::vertex`).
 
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
+use super::media::Media;
 use super::mis::{Mis, Technique};
 use super::settings::{RussianRoulette, Settings};
 use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::light::LightSample;
-use crate::material::{self, Bsdf, PerLobe};
+use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
+use crate::scene::Material;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 
@@ -106,6 +121,10 @@ pub(crate) struct PathState {
     pub(crate) beta: Vec3,
     /// Scattering events so far.
     pub(crate) depth: u32,
+    /// Surfaces the path has met so far (scattering events and filter crossings): the
+    /// vertex whose random numbers the next surface takes. Equal to `depth` until a
+    /// filter is crossed.
+    pub(crate) vertex: u32,
     /// Sample-dimension namespace of this path (0: the main path; branches get their own).
     pub(crate) branch: u32,
     /// The vertex the current ray left: where light selection and light densities are
@@ -120,6 +139,11 @@ pub(crate) struct PathState {
     pub(crate) prev_nee_count: u32,
     /// Lobe shares of the first scattering event (once there was one, and if wanted).
     pub(crate) lobes: PerLobe,
+    /// The volumes the path is inside.
+    pub(crate) media: Media,
+    /// Distance travelled through filters since the previous vertex (render space): the
+    /// part of the way from `prev_p` to the next surface that light densities must add.
+    pub(crate) crossed: f32,
 }
 
 /// An emitter a path ran into: radiance towards the path, light index, and where.
@@ -188,7 +212,7 @@ pub(crate) fn surface_emitter(
 /// A light sample for shading point `it`: a light chosen with `u_select` (its index and
 /// selection probability) and a point on it from `u_light`, its radiance including the
 /// emitter's surface emission; `None` where it cannot contribute (no light, zero radiance,
-/// or below the surface).
+/// or below a surface that does not transmit, `both_sides` false).
 #[inline]
 pub(crate) fn sample_light(
     world: &World,
@@ -196,20 +220,22 @@ pub(crate) fn sample_light(
     it: &Interaction,
     u_select: f32,
     u_light: Vec2,
+    both_sides: bool,
 ) -> Option<(usize, f32, LightSample)> {
     let (index, p_select) = world.lights.select(u_select, it.p, it.frame.n)?;
-    let ls = sample_chosen_light(world, settings, it.p, it.ng, index, u_light)?;
+    let ng = if both_sides { None } else { Some(it.ng) };
+    let ls = sample_chosen_light(world, settings, it.p, ng, index, u_light)?;
     Some((index, p_select, ls))
 }
 
-/// [`sample_light`]'s sample of light `index`, once chosen, from point `p` of geometric
-/// normal `ng`.
+/// [`sample_light`]'s sample of light `index`, once chosen, from point `p`; with a
+/// geometric normal `ng`, only above the surface.
 #[inline(always)]
 pub(crate) fn sample_chosen_light(
     world: &World,
     settings: &Settings,
     p: Vec3,
-    ng: Vec3,
+    ng: Option<Vec3>,
     index: usize,
     u_light: Vec2,
 ) -> Option<LightSample> {
@@ -223,7 +249,7 @@ pub(crate) fn sample_chosen_light(
     if let Some((prim, b)) = ls.area_point {
         ls.radiance *= world.surfaces.emission_at(prim, b);
     }
-    let useless = ls.radiance == Vec3::ZERO || ls.wi.dot(ng) <= 0.0;
+    let useless = ls.radiance == Vec3::ZERO || ng.is_some_and(|ng| ls.wi.dot(ng) <= 0.0);
     (!useless).then_some(ls)
 }
 
@@ -253,14 +279,29 @@ impl Walk<'_> {
     }
 }
 
-/// A scattering vertex: the shading point, its BSDF, the direction back along the ray that
-/// found it (local frame), and the origin every ray leaving it starts from (computed once:
-/// its shadow rays and its continuation share it).
+/// A scattering vertex: the shading point, its material and BSDF, the direction back along
+/// the ray that found it (local frame), the origin every ray leaving it above the surface
+/// starts from (computed once: its shadow rays and its continuation share it), and the
+/// length of the ray that found it.
 struct Vertex<'v> {
     it: &'v Interaction,
-    bsdf: &'v Bsdf,
+    material: &'v Material,
+    bsdf: &'v Bsdf<'v>,
     wo: Vec3,
     origin: Vec3,
+    arrived: f32,
+}
+
+impl Vertex<'_> {
+    /// Where a ray leaving the vertex starts: off the surface on the side it leaves to.
+    #[inline]
+    fn origin(&self, below: bool) -> Vec3 {
+        if below {
+            offset_ray_origin(self.it.p, -self.it.ng)
+        } else {
+            self.origin
+        }
+    }
 }
 
 /// How a path continues past a vertex.
@@ -294,6 +335,7 @@ impl PathState {
         Self {
             beta: Vec3::ONE,
             depth: 0,
+            vertex: 0,
             branch: 0,
             prev_p: origin,
             prev_n: Vec3::ZERO,
@@ -301,6 +343,8 @@ impl PathState {
             prev_delta: true,
             prev_nee_count: 1,
             lobes: [Vec3::ZERO; 3],
+            media: Media::default(),
+            crossed: 0.0,
         }
     }
 
@@ -320,7 +364,12 @@ impl PathState {
                 .environment
                 .as_ref()
                 .map_or(0.0, |env| env.pdf(e.dir)),
-            l => l.pdf(self.prev_p, e.dir, e.dist, settings.light_sampling),
+            l => l.pdf(
+                self.prev_p,
+                e.dir,
+                e.dist + self.crossed,
+                settings.light_sampling,
+            ),
         };
         select * density * self.prev_nee_count as f32
     }
@@ -450,6 +499,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 }
                 return;
             };
+            let arrived = hit.t * ray.dir.length();
+            if !path.media.is_empty() {
+                path.beta *= path.media.transmittance(&world.surfaces, arrived);
+            }
             let it = world.interaction(&ray, &hit);
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 path.reached_emitter(self, walk, rec, e);
@@ -458,13 +511,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 return;
             }
             let surfaces = &world.surfaces;
-            let bsdf = material::bsdf(
-                &surfaces.materials[it.material as usize],
-                &surfaces.textures,
-                &it.attrs,
-            );
+            let m = &surfaces.materials[it.material as usize];
+            let ctx = it.shading_context(path.media.outside_ior(surfaces, &it));
+            let mut storage = BsdfStorage::default();
+            let bsdf = material::bsdf_in(m, &surfaces.textures, &it.attrs, &ctx, &mut storage);
             let wo = it.frame.to_local(-ray.dir);
-            if path.depth == 0 && path.branch == 0 {
+            if path.vertex == 0 && path.branch == 0 {
                 rec.first_hit(DATA.then(|| {
                     let lobe_albedo = bsdf.albedo_lobes(wo);
                     FirstHit {
@@ -494,13 +546,15 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             }
             let vertex = Vertex {
                 it: &it,
+                material: m,
                 bsdf: &bsdf,
                 wo,
                 origin: offset_ray_origin(it.p, it.ng),
+                arrived,
             };
-            let vs = sampler.vertex(path.depth, path.branch);
-            let first = path.depth == 0;
-            let n_nee = self.split.at(path.depth).nee;
+            let vs = sampler.vertex(path.vertex, path.branch);
+            let first = path.vertex == 0;
+            let n_nee = self.split.at(path.vertex).nee;
             let continuation = self.continuation(&path, walk, cell, vs.rr);
             if let Some(parts) = walk.first_vertex_parts(first) {
                 parts.split = true;
@@ -597,7 +651,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         cell: Option<u32>,
         u: f32,
     ) -> Continuation {
-        let split = self.split.at(path.depth).bsdf;
+        let split = self.split.at(path.vertex).bsdf;
         if split > 1 {
             return Continuation {
                 count: split,
@@ -653,11 +707,28 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         let Vertex { it, bsdf, wo, .. } = *v;
         let bs = bsdf.sample(wo, vs.lobe, vs.bsdf)?;
         let wi = it.frame.to_world(bs.wi);
-        // Reflection must leave on the side of the surface the path arrived from.
-        if wi.dot(it.ng) <= 0.0 {
+        // Reflection must leave on the side of the surface the path arrived from, and
+        // transmission cross it, by the geometric normal too.
+        let crossing = bs.is_transmission();
+        if (wi.dot(it.ng) > 0.0) == crossing {
             return None;
         }
         let mut beta = path.beta * bs.weight * c.weight;
+        let origin = v.origin(crossing);
+        if bs.lobe == Lobe::StraightTransmission {
+            // A filter crossed: no scattering event (see the module notes).
+            if !(beta.max_element() > 0.0) {
+                return None;
+            }
+            let next = PathState {
+                beta,
+                vertex: path.vertex + 1,
+                branch,
+                crossed: path.crossed + v.arrived,
+                ..*path
+            };
+            return Some((Ray::new(origin, wi), next));
+        }
         let depth = path.depth + 1;
         if c.roulette {
             let rr = match self.settings.rr {
@@ -678,13 +749,14 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         }
         // The first scattering event decides the lobe shares of all the path brings back.
         let lobes = if walk.lobes && path.depth == 0 {
-            bsdf.lobe_shares(wo, (!bs.is_delta()).then_some(bs.wi))
+            bsdf.lobe_shares(wo, &bs)
         } else {
             path.lobes
         };
         let next = PathState {
             beta,
             depth,
+            vertex: path.vertex + 1,
             branch,
             prev_p: it.p,
             prev_n: it.frame.n,
@@ -692,8 +764,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             prev_delta: bs.is_delta(),
             prev_nee_count: n_nee,
             lobes,
+            media: path.media.beyond(it, v.material, crossing),
+            crossed: 0.0,
         };
-        Some((Ray::new(v.origin, wi), next))
+        Some((Ray::new(origin, wi), next))
     }
 
     /// One light sample at vertex `v`: a light chosen by the selection strategy, a point on
@@ -711,23 +785,30 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
     ) -> u64 {
         let Vertex { it, bsdf, wo, .. } = *v;
         let world = self.world;
-        let Some((index, p_select, ls)) = sample_light(world, self.settings, it, u_select, u_light)
+        let transmits = bsdf.transmits();
+        let Some((index, p_select, ls)) =
+            sample_light(world, self.settings, it, u_select, u_light, transmits)
         else {
             return 0;
         };
-        let radiance = ls.radiance;
+        let mut radiance = ls.radiance;
         let wi = it.frame.to_local(ls.wi);
+        let below = transmits && ls.wi.dot(it.ng) < 0.0;
+        // Light through the surface only where the shading frame agrees it crosses.
+        if below != (wi.z < 0.0) && transmits {
+            return 0;
+        }
         // At the first vertex the lobe layers need f split by lobe: evaluated once, split.
         let (f, lobes) = if walk.lobes && path.depth == 0 {
             let parts = bsdf.eval_lobes(wo, wi);
-            (parts[0] + parts[1], material::shares(parts))
+            (parts[0] + parts[1] + parts[2], material::shares(parts))
         } else {
             (bsdf.eval(wo, wi), path.lobes)
         };
         if f == Vec3::ZERO {
             return 0;
         }
-        let origin = v.origin;
+        let origin = v.origin(below);
         let shadow = match ls.target {
             Some(target) => Ray {
                 origin,
@@ -736,8 +817,15 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             },
             None => Ray::new(origin, ls.wi),
         };
-        if world.occluded(&shadow) {
+        let through = world.transmittance(&shadow);
+        if through == Vec3::ZERO {
             return 1;
+        }
+        radiance *= through;
+        let media = path.media.beyond(it, v.material, below);
+        if !media.is_empty() {
+            let length = ls.target.map_or(f32::INFINITY, |t| (t - origin).length());
+            radiance *= media.transmittance(&world.surfaces, length);
         }
         let p_light = p_select * ls.pdf;
         // BSDF sampling cannot reach a delta light (nor any light, in a kernel without

@@ -27,7 +27,7 @@ pub struct BsdfLanes<'a> {
     alpha: F8,
     f0: V3,
     /// Each lane's scalar BSDF (borrowed: eight of them are too large to copy a bounce).
-    bsdfs: &'a [Bsdf; LANES],
+    bsdfs: &'a [Bsdf<'a>; LANES],
 }
 
 /// Directions sampled in eight lanes.
@@ -129,7 +129,7 @@ impl GgxLanes {
 impl<'a> BsdfLanes<'a> {
     /// The lanes of `bsdfs`; only lanes set in `used` are ever read.
     #[inline(always)]
-    pub fn new(bsdfs: &'a [Bsdf; LANES], used: u32) -> Self {
+    pub fn new(bsdfs: &'a [Bsdf<'a>; LANES], used: u32) -> Self {
         let mut base = [Vec3::ZERO; LANES];
         let mut f0 = [Vec3::ZERO; LANES];
         let (mut metallic, mut alpha) = ([0.0; LANES], [1.0; LANES]);
@@ -151,7 +151,10 @@ impl<'a> BsdfLanes<'a> {
                     }
                     None => scalar |= 1 << lane,
                 },
-                Bsdf::Phong(_) => scalar |= 1 << lane,
+                Bsdf::Phong(_)
+                | Bsdf::Dielectric(_)
+                | Bsdf::ThinDielectric(_)
+                | Bsdf::Layered(_) => scalar |= 1 << lane,
             }
         }
         let alpha = F8::from_array(alpha);

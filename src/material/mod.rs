@@ -2,21 +2,31 @@
 //!
 //! Every BSDF works in the local shading frame (+z = shading normal) and offers the same
 //! three operations, which the chi-square tests check against each other:
-//! `eval` (f · cos θi), `pdf` (solid-angle density of `sample`) and `sample`
-//! (direction, weight f · cos θi / pdf). Delta lobes never appear in `eval` or `pdf`; a
-//! sampled delta lobe reports [`Lobe::Specular`] and its discrete probability as `pdf`.
+//! `eval` (f · |cos θi|), `pdf` (solid-angle density of `sample`) and `sample`
+//! (direction, weight f · |cos θi| / pdf). Directions below the surface (wi.z < 0) are
+//! transmission, which only the dielectrics produce. Delta lobes never appear in `eval` or
+//! `pdf`; a sampled delta lobe reports [`Lobe::Specular`] (a mirror) or
+//! [`Lobe::SpecularTransmission`] and its discrete probability as `pdf`.
 
+pub mod dielectric;
+pub mod fresnel;
 pub mod gltf_pbr;
 pub mod lambert;
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod lanes;
+pub mod layered;
 pub mod microfacet;
 pub mod phong;
+pub mod sheen;
+mod sheen_albedo;
+pub mod thin_film;
 
 use crate::scene::{BsdfModel, Material, Texture, TextureRef};
+use dielectric::{Dielectric, ThinDielectric};
 use glam::{Vec2, Vec3, Vec4};
 use gltf_pbr::GltfPbr;
 use lambert::Lambert;
+use layered::{Film, Layered, LayeredParams};
 use phong::Phong;
 
 /// A colour per lobe kind: diffuse, glossy, transmission. As lobe shares, the parts of a
@@ -24,12 +34,13 @@ use phong::Phong;
 /// to one where the path carries light); as albedos, each lobe's reflectance.
 pub type PerLobe = [Vec3; 3];
 
-/// The lobe shares of f · cos θi split as `[diffuse, glossy]` (see [`Bsdf::eval_lobes`]).
+/// The lobe shares of f · cos θi split as `[diffuse, glossy, transmission]` (see
+/// [`Bsdf::eval_lobes`]).
 #[inline]
-pub fn shares([diffuse, glossy]: [Vec3; 2]) -> PerLobe {
-    let total = diffuse + glossy;
+pub fn shares(lobes: PerLobe) -> PerLobe {
+    let total = lobes[0] + lobes[1] + lobes[2];
     let share = |part: Vec3| Vec3::select(total.cmpgt(Vec3::ZERO), part / total, Vec3::ZERO);
-    [share(diffuse), share(glossy), Vec3::ZERO]
+    lobes.map(share)
 }
 
 /// The kind of lobe a sample came from (the lobe splits of the AOVs follow it).
@@ -37,8 +48,28 @@ pub fn shares([diffuse, glossy]: [Vec3; 2]) -> PerLobe {
 pub enum Lobe {
     Diffuse,
     Glossy,
-    /// A delta lobe (perfect mirror): only BSDF sampling can find it.
+    /// A delta reflection lobe (perfect mirror): only BSDF sampling can find it.
     Specular,
+    /// Rough transmission (refraction through a rough interface, or a rough thin slab).
+    GlossyTransmission,
+    /// Delta transmission bent by refraction (a smooth volume boundary).
+    SpecularTransmission,
+    /// Delta transmission straight through (a smooth thin wall): the surface is a filter
+    /// that paths cross without a scattering event (see `integrator::path`).
+    StraightTransmission,
+}
+
+impl Lobe {
+    /// Index of the lobe kind in a [`PerLobe`]: diffuse, glossy (mirrors too),
+    /// transmission.
+    #[inline]
+    pub fn kind(self) -> usize {
+        match self {
+            Self::Diffuse => 0,
+            Self::Glossy | Self::Specular => 1,
+            Self::GlossyTransmission | Self::SpecularTransmission | Self::StraightTransmission => 2,
+        }
+    }
 }
 
 /// A sampled direction.
@@ -66,48 +97,85 @@ impl BsdfSample {
     }
 
     /// True if the sample came from a delta lobe.
+    #[inline]
     pub fn is_delta(&self) -> bool {
-        self.lobe == Lobe::Specular
+        matches!(
+            self.lobe,
+            Lobe::Specular | Lobe::SpecularTransmission | Lobe::StraightTransmission
+        )
+    }
+
+    /// True if the sampled direction crosses the surface.
+    #[inline]
+    pub fn is_transmission(&self) -> bool {
+        matches!(
+            self.lobe,
+            Lobe::GlossyTransmission | Lobe::SpecularTransmission | Lobe::StraightTransmission
+        )
     }
 }
 
-/// A BSDF at one surface point.
+/// A BSDF at one surface point. The layered glTF model lives in a [`BsdfStorage`] that the
+/// BSDF borrows: it is several times the size of the others, and a BSDF is copied (the
+/// packet kernel keeps eight per bounce), so it is kept out of line, but not on the heap.
 #[derive(Clone, Copy, Debug)]
-pub enum Bsdf {
+pub enum Bsdf<'s> {
     Lambert(Lambert),
     GltfPbr(GltfPbr),
     Phong(Phong),
+    Dielectric(Dielectric),
+    ThinDielectric(ThinDielectric),
+    Layered(&'s Layered),
 }
 
-impl Bsdf {
-    /// f(wo, wi) · cos θi over the non-delta lobes.
+/// Where a BSDF too large to keep in a [`Bsdf`] (the layered glTF model) is built; the BSDF
+/// borrows it.
+#[derive(Debug, Default)]
+pub struct BsdfStorage(Option<Layered>);
+
+impl Bsdf<'_> {
+    /// f(wo, wi) · |cos θi| over the non-delta lobes.
     #[inline]
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match self {
             Self::Lambert(b) => b.eval(wo, wi),
             Self::GltfPbr(b) => b.eval(wo, wi),
             Self::Phong(b) => b.eval(wo, wi),
+            Self::Dielectric(b) => b.eval(wo, wi),
+            Self::ThinDielectric(b) => b.eval(wo, wi),
+            Self::Layered(b) => b.eval(wo, wi),
         }
     }
 
-    /// [`Bsdf::eval`] split by lobe: diffuse, glossy (lucerna's BSDFs transmit nothing).
+    /// [`Bsdf::eval`] split by lobe kind: diffuse, glossy, transmission.
     #[inline]
-    pub fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> [Vec3; 2] {
+    pub fn eval_lobes(&self, wo: Vec3, wi: Vec3) -> PerLobe {
         match self {
-            Self::Lambert(b) => [b.eval(wo, wi), Vec3::ZERO],
-            Self::GltfPbr(b) => b.eval_lobes(wo, wi),
-            Self::Phong(b) => b.eval_lobes(wo, wi),
+            Self::Lambert(b) => [b.eval(wo, wi), Vec3::ZERO, Vec3::ZERO],
+            Self::GltfPbr(b) => {
+                let [diffuse, glossy] = b.eval_lobes(wo, wi);
+                [diffuse, glossy, Vec3::ZERO]
+            }
+            Self::Phong(b) => {
+                let [diffuse, glossy] = b.eval_lobes(wo, wi);
+                [diffuse, glossy, Vec3::ZERO]
+            }
+            Self::Dielectric(b) => b.eval_lobes(wo, wi),
+            Self::ThinDielectric(b) => b.eval_lobes(wo, wi),
+            Self::Layered(b) => b.eval_lobes(wo, wi),
         }
     }
 
-    /// The lobe shares of light arriving along `wi` and leaving along `wo`; for a sample of
-    /// a delta lobe (a perfect mirror: glossy), pass `wi` = `None`.
+    /// The lobe shares of the light a sample `s` of this BSDF at `wo` brings: split by
+    /// lobe where it is not a delta, all of its own kind where it is.
     #[inline]
-    pub fn lobe_shares(&self, wo: Vec3, wi: Option<Vec3>) -> PerLobe {
-        match wi {
-            Some(wi) => shares(self.eval_lobes(wo, wi)),
-            None => [Vec3::ZERO, Vec3::ONE, Vec3::ZERO],
+    pub fn lobe_shares(&self, wo: Vec3, s: &BsdfSample) -> PerLobe {
+        if s.is_delta() {
+            let mut shares = [Vec3::ZERO; 3];
+            shares[s.lobe.kind()] = Vec3::ONE;
+            return shares;
         }
+        shares(self.eval_lobes(wo, s.wi))
     }
 
     /// Solid-angle density with which [`Bsdf::sample`] produces `wi` (non-delta lobes).
@@ -117,6 +185,9 @@ impl Bsdf {
             Self::Lambert(b) => b.pdf(wo, wi),
             Self::GltfPbr(b) => b.pdf(wo, wi),
             Self::Phong(b) => b.pdf(wo, wi),
+            Self::Dielectric(b) => b.pdf(wo, wi),
+            Self::ThinDielectric(b) => b.pdf(wo, wi),
+            Self::Layered(b) => b.pdf(wo, wi),
         }
     }
 
@@ -127,6 +198,33 @@ impl Bsdf {
             Self::Lambert(b) => b.sample(wo, u),
             Self::GltfPbr(b) => b.sample(wo, u_lobe, u),
             Self::Phong(b) => b.sample(wo, u_lobe, u),
+            Self::Dielectric(b) => b.sample(wo, u_lobe, u),
+            Self::ThinDielectric(b) => b.sample(wo, u_lobe, u),
+            Self::Layered(b) => b.sample(wo, u_lobe, u),
+        }
+    }
+
+    /// True if light can cross the surface (some lobe transmits): light samples are then
+    /// taken on both sides of it.
+    #[inline]
+    pub fn transmits(&self) -> bool {
+        match self {
+            Self::Dielectric(_) | Self::ThinDielectric(_) => true,
+            Self::Layered(b) => b.transmits(),
+            _ => false,
+        }
+    }
+
+    /// The weight of a delta lobe that continues straight through the surface, for light
+    /// crossing it along `-wo` (zero for none): such a surface is a filter that shadow
+    /// rays pass, and that paths cross without a scattering event (see
+    /// `integrator::path`).
+    #[inline]
+    pub fn straight_transmission(&self, wo: Vec3) -> Vec3 {
+        match self {
+            Self::ThinDielectric(b) => b.straight_transmission(wo),
+            Self::Layered(b) => b.straight_transmission(wo),
+            _ => Vec3::ZERO,
         }
     }
 
@@ -139,7 +237,9 @@ impl Bsdf {
         match self {
             Self::Lambert(b) => b.albedo == Vec3::ZERO,
             Self::Phong(b) => b.kd == Vec3::ZERO && b.ks == Vec3::ZERO,
-            Self::GltfPbr(_) => false,
+            Self::GltfPbr(_) | Self::Dielectric(_) | Self::ThinDielectric(_) | Self::Layered(_) => {
+                false
+            }
         }
     }
 
@@ -148,6 +248,9 @@ impl Bsdf {
     pub fn has_non_delta(&self) -> bool {
         match self {
             Self::GltfPbr(b) => b.has_non_delta(),
+            Self::Dielectric(b) => b.has_non_delta(),
+            Self::ThinDielectric(b) => b.has_non_delta(),
+            Self::Layered(b) => b.has_non_delta(),
             Self::Lambert(_) | Self::Phong(_) => true,
         }
     }
@@ -162,6 +265,9 @@ impl Bsdf {
                 [diffuse, glossy, Vec3::ZERO]
             }
             Self::Phong(b) => [b.kd, b.ks, Vec3::ZERO],
+            Self::Dielectric(b) => b.albedo_lobes(wo),
+            Self::ThinDielectric(b) => b.albedo_lobes(wo),
+            Self::Layered(b) => b.albedo_lobes(wo),
         }
     }
 }
@@ -222,26 +328,117 @@ pub fn tangent_space_normal(
     textures: &[Texture],
     attrs: &SurfaceAttributes,
 ) -> Option<Vec3> {
-    let t = m.normal_texture.as_ref()?;
-    let c = texture_lookup(textures, t, attrs, false).truncate() * 2.0 - Vec3::ONE;
-    let n = Vec3::new(c.x * m.normal_scale, c.y * m.normal_scale, c.z);
+    decode_normal(textures, m.normal_texture.as_ref()?, m.normal_scale, attrs)
+}
+
+/// The tangent-space normal a normal map `slot` holds at a point, x and y scaled by `scale`.
+#[inline]
+fn decode_normal(
+    textures: &[Texture],
+    slot: &TextureRef,
+    scale: f32,
+    attrs: &SurfaceAttributes,
+) -> Option<Vec3> {
+    let c = texture_lookup(textures, slot, attrs, false).truncate() * 2.0 - Vec3::ONE;
+    let n = Vec3::new(c.x * scale, c.y * scale, c.z);
     let n = n.normalize_or_zero();
     (n.z > 0.0).then_some(n)
 }
 
-/// The BSDF of material `m` at a surface point.
-pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bsdf {
+/// What a BSDF depends on beyond its material and the point's attributes: which side of
+/// the surface the light leaves towards the path, and what lies outside.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingContext {
+    /// The path arrived on the surface's front (the outside of a volume).
+    pub front: bool,
+    /// Index of refraction of the medium on the surface's outside (1 for air; the
+    /// enclosing volume's for nested dielectrics).
+    pub outside_ior: f32,
+    /// The surface's tangent frame (tangent, bitangent with the mesh's handedness,
+    /// interpolated normal) in the local shading frame, where the mesh has tangents: the
+    /// frame that the coat's normal map and the anisotropy direction are given in.
+    pub tangents: Option<[Vec3; 3]>,
+}
+
+impl Default for ShadingContext {
+    fn default() -> Self {
+        Self {
+            front: true,
+            outside_ior: 1.0,
+            tangents: None,
+        }
+    }
+}
+
+/// A texture slot's value at a surface point (white without the texture), linear.
+#[inline]
+fn slot(textures: &[Texture], slot: Option<&TextureRef>, attrs: &SurfaceAttributes) -> Vec4 {
+    slot.map_or(Vec4::ONE, |t| texture_lookup(textures, t, attrs, false))
+}
+
+/// The BSDF of material `m` at a surface point seen from the front, in air (a layered one
+/// built in `storage`).
+pub fn bsdf<'s>(
+    m: &Material,
+    textures: &[Texture],
+    attrs: &SurfaceAttributes,
+    storage: &'s mut BsdfStorage,
+) -> Bsdf<'s> {
+    bsdf_in(m, textures, attrs, &ShadingContext::default(), storage)
+}
+
+/// The BSDF of material `m` at a surface point in context `ctx` (a layered one built in
+/// `storage`).
+pub fn bsdf_in<'s>(
+    m: &Material,
+    textures: &[Texture],
+    attrs: &SurfaceAttributes,
+    ctx: &ShadingContext,
+    storage: &'s mut BsdfStorage,
+) -> Bsdf<'s> {
+    match build(m, textures, attrs, ctx) {
+        Built::Compact(b) => b,
+        Built::Layered(params) => Bsdf::Layered(storage.0.insert(Layered::new(params))),
+    }
+}
+
+/// The BSDF of material `m` at a surface point in context `ctx` where it is not the
+/// layered model (which needs a [`BsdfStorage`]).
+pub fn compact_bsdf(
+    m: &Material,
+    textures: &[Texture],
+    attrs: &SurfaceAttributes,
+    ctx: &ShadingContext,
+) -> Option<Bsdf<'static>> {
+    match build(m, textures, attrs, ctx) {
+        Built::Compact(b) => Some(b),
+        Built::Layered(_) => None,
+    }
+}
+
+/// A BSDF as built: one that fits in [`Bsdf`], or the layered model's parameters.
+enum Built {
+    Compact(Bsdf<'static>),
+    Layered(LayeredParams),
+}
+
+fn build(
+    m: &Material,
+    textures: &[Texture],
+    attrs: &SurfaceAttributes,
+    ctx: &ShadingContext,
+) -> Built {
     let base = base_color(m, textures, attrs).truncate();
     match m.model {
-        BsdfModel::Lambert => Bsdf::Lambert(Lambert {
+        BsdfModel::Lambert => Built::Compact(Bsdf::Lambert(Lambert {
             albedo: base.clamp(Vec3::ZERO, Vec3::ONE),
-        }),
-        BsdfModel::Phong { exponent, specular } => Bsdf::Phong(Phong {
+        })),
+        BsdfModel::Phong { exponent, specular } => Built::Compact(Bsdf::Phong(Phong {
             // kd + ks <= 1 keeps the lobe pair energy-conserving.
             kd: base.min(Vec3::ONE - specular).max(Vec3::ZERO),
             ks: specular,
             exponent,
-        }),
+        })),
         BsdfModel::GltfPbr => {
             let (mut metallic, mut roughness) = (m.metallic, m.roughness);
             if let Some(t) = &m.metallic_roughness_texture {
@@ -249,14 +446,203 @@ pub fn bsdf(m: &Material, textures: &[Texture], attrs: &SurfaceAttributes) -> Bs
                 roughness *= mr.y;
                 metallic *= mr.z;
             }
-            let mut pbr = GltfPbr::new(base, metallic, roughness, m.ior)
-                .with_clearcoat(m.clearcoat, m.clearcoat_roughness);
+            let transmission = if m.transmits() {
+                m.transmission * slot(textures, m.transmission_texture.as_ref(), attrs).x
+            } else {
+                0.0
+            };
+            if m.transmits()
+                && let Some(b) = dielectric_bsdf(m, base, metallic, roughness, transmission, ctx)
+            {
+                return Built::Compact(b);
+            }
+            if m.transmits() || needs_layers(m) {
+                let point = Point {
+                    textures,
+                    attrs,
+                    ctx,
+                };
+                let params = layered_params(m, &point, base, metallic, roughness, transmission);
+                return Built::Layered(params);
+            }
+            let coat = slot(textures, m.clearcoat_texture.as_ref(), attrs).x * m.clearcoat;
+            let coat_roughness = slot(textures, m.clearcoat_roughness_texture.as_ref(), attrs).y
+                * m.clearcoat_roughness;
+            let mut pbr =
+                GltfPbr::new(base, metallic, roughness, m.ior).with_clearcoat(coat, coat_roughness);
             if let Some(color) = m.specular_color {
                 pbr = pbr.with_specular_color(color);
             }
-            Bsdf::GltfPbr(pbr)
+            Built::Compact(Bsdf::GltfPbr(pbr))
         }
     }
+}
+
+/// True if material `m` needs the layered model (beyond `gltf_pbr`'s base and coat) even
+/// where it does not transmit.
+fn needs_layers(m: &Material) -> bool {
+    m.sheen.is_some()
+        || m.iridescence.is_some()
+        || m.anisotropy.is_some()
+        || !m.specular.is_default()
+        || m.clearcoat_normal_texture.is_some()
+}
+
+/// Where a BSDF is built: the textures, the point's attributes and its context.
+struct Point<'p> {
+    textures: &'p [Texture],
+    attrs: &'p SurfaceAttributes,
+    ctx: &'p ShadingContext,
+}
+
+impl Point<'_> {
+    /// A texture slot's value (white without one), linear or sRGB-decoded.
+    fn read(&self, slot: Option<&TextureRef>, srgb: bool) -> Vec4 {
+        slot.map_or(Vec4::ONE, |t| {
+            texture_lookup(self.textures, t, self.attrs, srgb)
+        })
+    }
+
+    /// A vector of the tangent frame (tangent-space coordinates) in the local shading frame.
+    fn tangent_to_local(&self, v: Vec3) -> Option<Vec3> {
+        let [t, b, n] = self.ctx.tangents?;
+        Some(t * v.x + b * v.y + n * v.z)
+    }
+}
+
+/// The layered model's parameters of material `m` at a point, given its base colour,
+/// metallic, roughness and transmission there.
+fn layered_params(
+    m: &Material,
+    at: &Point,
+    base: Vec3,
+    metallic: f32,
+    roughness: f32,
+    transmission: f32,
+) -> LayeredParams {
+    let ctx = at.ctx;
+    let r = roughness.clamp(0.0, 1.0);
+    let alpha = r * r;
+    // Anisotropy: alpha along the direction rises towards 1 with the strength squared.
+    let (alpha, anisotropy_direction) = match &m.anisotropy {
+        Some(a) => {
+            let texel = a.texture.map_or(Vec4::new(1.0, 0.5, 1.0, 1.0), |t| {
+                texture_lookup(at.textures, &t, at.attrs, false)
+            });
+            let strength = (a.strength * texel.z).clamp(0.0, 1.0);
+            let d = Vec2::new(texel.x * 2.0 - 1.0, texel.y * 2.0 - 1.0).normalize_or(Vec2::X);
+            let (s, c) = a.rotation.sin_cos();
+            let d = Vec2::new(c * d.x - s * d.y, s * d.x + c * d.y);
+            let direction = at
+                .tangent_to_local(d.extend(0.0))
+                .map(|v| Vec2::new(v.x, v.y).normalize_or(Vec2::X))
+                .unwrap_or(Vec2::X);
+            let along = alpha + (1.0 - alpha) * strength * strength;
+            (Vec2::new(along, alpha), direction)
+        }
+        None => (Vec2::splat(alpha), Vec2::X),
+    };
+    let ior = if m.ior > 0.0 { m.ior } else { f32::INFINITY };
+    let relative = ior / ctx.outside_ior;
+    let eta = match (m.volume, ctx.front) {
+        (Some(_), false) => 1.0 / relative,
+        _ => relative,
+    };
+    let f0 = match m.specular_color {
+        Some(color) => color,
+        None => {
+            let f0_ior = if relative.is_finite() {
+                fresnel::normal_reflectance(relative)
+            } else {
+                1.0
+            };
+            let color =
+                m.specular.color * at.read(m.specular.color_texture.as_ref(), true).truncate();
+            (color * f0_ior).min(Vec3::ONE)
+        }
+    };
+    let specular_weight = m.specular.weight * at.read(m.specular.weight_texture.as_ref(), false).w;
+    let sheen = m.sheen.map(|s| {
+        sheen::Sheen::new(
+            s.color * at.read(s.color_texture.as_ref(), true).truncate(),
+            s.roughness * at.read(s.roughness_texture.as_ref(), false).w,
+        )
+    });
+    let coat = m.clearcoat * at.read(m.clearcoat_texture.as_ref(), false).x;
+    let coat_roughness =
+        m.clearcoat_roughness * at.read(m.clearcoat_roughness_texture.as_ref(), false).y;
+    let coat_normal = m
+        .clearcoat_normal_texture
+        .as_ref()
+        .and_then(|t| decode_normal(at.textures, t, m.clearcoat_normal_scale, at.attrs))
+        .and_then(|n| at.tangent_to_local(n))
+        .unwrap_or(Vec3::Z);
+    let film = m.iridescence.map(|i| {
+        let thickness_texel = i
+            .thickness_texture
+            .map_or(1.0, |t| texture_lookup(at.textures, &t, at.attrs, false).y);
+        Film {
+            factor: (i.factor * at.read(i.texture.as_ref(), false).x).clamp(0.0, 1.0),
+            thickness: i.thickness_min + (i.thickness_max - i.thickness_min) * thickness_texel,
+            ior: i.ior,
+        }
+    });
+    LayeredParams {
+        base,
+        metallic,
+        alpha,
+        anisotropy_direction,
+        transmission,
+        thin: m.volume.is_none(),
+        eta,
+        exact: m.transmits(),
+        f0,
+        specular_weight,
+        sheen,
+        coat,
+        coat_alpha: coat_roughness * coat_roughness,
+        coat_normal,
+        film: film.filter(|f| f.factor > 0.0),
+    }
+}
+
+/// The glass of a glTF material that is all transmission at a point (transmission 1,
+/// metallic 0, no other layer): a [`Dielectric`] bounding its volume, or a
+/// [`ThinDielectric`] wall, tinted by the base colour; `None` where the material mixes
+/// other lobes in.
+fn dielectric_bsdf(
+    m: &Material,
+    base: Vec3,
+    metallic: f32,
+    roughness: f32,
+    transmission: f32,
+    ctx: &ShadingContext,
+) -> Option<Bsdf<'static>> {
+    let pure = transmission >= 1.0
+        && metallic <= 0.0
+        && m.clearcoat == 0.0
+        && m.sheen.is_none()
+        && m.iridescence.is_none()
+        && m.anisotropy.is_none()
+        && m.specular.is_default()
+        && m.specular_color.is_none();
+    if !pure {
+        return None;
+    }
+    let r = roughness.clamp(0.0, 1.0);
+    let alpha = r * r;
+    let ior = if m.ior > 0.0 { m.ior } else { f32::INFINITY };
+    Some(match m.volume {
+        Some(_) => {
+            let eta = if ctx.front {
+                ior / ctx.outside_ior
+            } else {
+                ctx.outside_ior / ior
+            };
+            Bsdf::Dielectric(Dielectric::new(eta, alpha, base))
+        }
+        None => Bsdf::ThinDielectric(ThinDielectric::new(ior / ctx.outside_ior, alpha, base)),
+    })
 }
 
 #[cfg(test)]

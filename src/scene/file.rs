@@ -14,7 +14,7 @@
 //! before anything uses the scene.
 
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
-use super::{Cylinder, Disk, Instance, LightGroup, Sphere, Texels, Texture, TextureRef, Wrap};
+use super::{Cylinder, Disk, Instance, LightGroup, Sphere, Texels, Texture, Wrap};
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
@@ -545,14 +545,7 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
         }
     }
     for (i, m) in scene.materials.iter().enumerate() {
-        let texture_refs: [(&str, Option<TextureRef>); 4] = [
-            ("base_color_texture", m.base_color_texture),
-            ("metallic_roughness_texture", m.metallic_roughness_texture),
-            ("normal_texture", m.normal_texture),
-            ("emissive_texture", m.emissive_texture),
-        ];
-        for (field, r) in texture_refs {
-            let Some(r) = r else { continue };
+        for (field, r) in m.texture_slots() {
             if r.texture as usize >= textures || r.tex_coord > 1 {
                 return fail(
                     format!("materials[{i}].{field}"),
@@ -577,6 +570,24 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             super::AlphaMode::Mask { cutoff } => cutoff.is_finite(),
             _ => true,
         };
+        let unit = |x: f32| (0.0..=1.0).contains(&x);
+        let colour = |c: Vec3| c.is_finite() && c.min_element() >= 0.0;
+        let extensions_ok = unit(m.transmission)
+            && m.clearcoat_normal_scale.is_finite()
+            && m.volume.is_none_or(|v| colour(v.absorption))
+            && unit(m.specular.weight)
+            && colour(m.specular.color)
+            && m.sheen.is_none_or(|s| colour(s.color) && unit(s.roughness))
+            && m.iridescence.is_none_or(|i| {
+                unit(i.factor)
+                    && i.ior.is_finite()
+                    && i.ior >= 1.0
+                    && finite(&[i.thickness_min, i.thickness_max])
+                    && i.thickness_min >= 0.0
+                    && i.thickness_max >= 0.0
+            })
+            && m.anisotropy
+                .is_none_or(|a| unit(a.strength) && a.rotation.is_finite());
         if !(finite(&m.base_color.to_array())
             && m.emissive.is_finite()
             && m.emissive.min_element() >= 0.0
@@ -587,7 +598,8 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 .is_none_or(|c| c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0)
             && (0.0..=1.0).contains(&m.clearcoat_roughness)
             && phong_ok
-            && alpha_ok)
+            && alpha_ok
+            && extensions_ok)
         {
             return fail(
                 format!("materials[{i}]"),

@@ -33,9 +33,128 @@ pub struct Material {
     /// Perceptual roughness of the clear coat.
     #[serde(default)]
     pub clearcoat_roughness: f32,
+    /// Clear coat weight (R) and roughness (G) textures, multiplying the factors, and the
+    /// coat's own tangent-space normal map with its scale (KHR_materials_clearcoat).
+    #[serde(default)]
+    pub clearcoat_texture: Option<TextureRef>,
+    #[serde(default)]
+    pub clearcoat_roughness_texture: Option<TextureRef>,
+    #[serde(default)]
+    pub clearcoat_normal_texture: Option<TextureRef>,
+    #[serde(default = "one")]
+    pub clearcoat_normal_scale: f32,
+    /// Share of the dielectric base that is specular transmission instead of diffuse
+    /// reflection, in [0, 1] (KHR_materials_transmission; UsdPreviewSurface opacity with an
+    /// ior), times `transmission_texture`'s R.
+    #[serde(default)]
+    pub transmission: f32,
+    #[serde(default)]
+    pub transmission_texture: Option<TextureRef>,
+    /// The material bounds a volume (KHR_materials_volume with a thickness): light refracts
+    /// into it and is absorbed inside. `None`: a thin wall, which transmits without bending.
+    #[serde(default)]
+    pub volume: Option<Volume>,
+    /// KHR_materials_specular: the strength and F0 colour of the dielectric's reflection.
+    #[serde(default)]
+    pub specular: Specular,
+    /// KHR_materials_sheen.
+    #[serde(default)]
+    pub sheen: Option<Sheen>,
+    /// KHR_materials_iridescence.
+    #[serde(default)]
+    pub iridescence: Option<Iridescence>,
+    /// KHR_materials_anisotropy.
+    #[serde(default)]
+    pub anisotropy: Option<Anisotropy>,
+    /// KHR_materials_unlit: the base colour is seen by the camera as is, and every other
+    /// ray passes through (Blender's and three.js's reading of the extension).
+    #[serde(default)]
+    pub unlit: bool,
     pub alpha_mode: AlphaMode,
     /// Both sides are visible and shaded; otherwise back faces are invisible to every ray.
+    /// Transmissive materials are seen from both sides whatever it says (a volume's inside
+    /// must be, and light crossing a thin wall reaches its back).
     pub double_sided: bool,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// The inside of a dielectric volume: Beer-Lambert absorption.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Volume {
+    /// Absorption coefficient per world unit, per channel (-ln(attenuationColor) /
+    /// attenuationDistance); zero for a clear volume.
+    pub absorption: Vec3,
+}
+
+/// KHR_materials_specular: `weight` scales the dielectric's reflection (F0 and F90), `color`
+/// tints its F0.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Specular {
+    /// specularFactor, times `weight_texture`'s A.
+    pub weight: f32,
+    pub weight_texture: Option<TextureRef>,
+    /// specularColorFactor (may exceed 1; F0 is clamped), times `color_texture`'s RGB (sRGB).
+    pub color: Vec3,
+    pub color_texture: Option<TextureRef>,
+}
+
+impl Default for Specular {
+    fn default() -> Self {
+        Self {
+            weight: 1.0,
+            weight_texture: None,
+            color: Vec3::ONE,
+            color_texture: None,
+        }
+    }
+}
+
+impl Specular {
+    /// True where the extension changes nothing.
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// KHR_materials_sheen: a retro-reflective layer of fibres over the base.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Sheen {
+    /// sheenColorFactor, times `color_texture`'s RGB (sRGB).
+    pub color: Vec3,
+    pub color_texture: Option<TextureRef>,
+    /// sheenRoughnessFactor, times `roughness_texture`'s A.
+    pub roughness: f32,
+    pub roughness_texture: Option<TextureRef>,
+}
+
+/// KHR_materials_iridescence: a thin film over the base whose interference colours the
+/// specular reflection.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Iridescence {
+    /// iridescenceFactor, times `texture`'s R.
+    pub factor: f32,
+    pub texture: Option<TextureRef>,
+    /// Index of refraction of the film.
+    pub ior: f32,
+    /// Film thickness in nanometres: `thickness_min` at `thickness_texture`'s G = 0,
+    /// `thickness_max` at 1 (and without the texture).
+    pub thickness_min: f32,
+    pub thickness_max: f32,
+    pub thickness_texture: Option<TextureRef>,
+}
+
+/// KHR_materials_anisotropy: the specular lobes stretch along a direction of the tangent
+/// plane.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Anisotropy {
+    /// anisotropyStrength in [0, 1], times `texture`'s B.
+    pub strength: f32,
+    /// Radians counter-clockwise from the tangent, added to `texture`'s RG direction.
+    pub rotation: f32,
+    pub texture: Option<TextureRef>,
 }
 
 impl Default for Material {
@@ -57,6 +176,18 @@ impl Default for Material {
             specular_color: None,
             clearcoat: 0.0,
             clearcoat_roughness: 0.0,
+            clearcoat_texture: None,
+            clearcoat_roughness_texture: None,
+            clearcoat_normal_texture: None,
+            clearcoat_normal_scale: 1.0,
+            transmission: 0.0,
+            transmission_texture: None,
+            volume: None,
+            specular: Specular::default(),
+            sheen: None,
+            iridescence: None,
+            anisotropy: None,
+            unlit: false,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
         }
@@ -64,9 +195,101 @@ impl Default for Material {
 }
 
 impl Material {
-    /// True if the material can emit light.
+    /// True if the material can emit light (an unlit material shows its colour to the
+    /// camera but lights nothing).
     pub fn is_emissive(&self) -> bool {
-        self.emissive.max_element() > 0.0
+        self.emissive.max_element() > 0.0 && !self.unlit
+    }
+
+    /// True if some point of the material can transmit light (its glTF BSDF has a
+    /// transmission lobe): such surfaces are seen from both sides.
+    pub fn transmits(&self) -> bool {
+        self.model == BsdfModel::GltfPbr
+            && (self.transmission > 0.0 || self.transmission_texture.is_some())
+            && (self.metallic < 1.0 || self.metallic_roughness_texture.is_some())
+    }
+
+    /// True if some point of the material can be a filter that light crosses in a straight
+    /// line without scattering (a smooth thin wall, an unlit surface): shadow rays pass
+    /// such surfaces, attenuated (see `integrator::path`).
+    pub fn can_filter(&self) -> bool {
+        self.unlit
+            || (self.transmits()
+                && self.volume.is_none()
+                && (self.roughness * self.roughness < crate::material::microfacet::SMOOTH_ALPHA
+                    || self.metallic_roughness_texture.is_some()
+                    || self.anisotropy.is_some()))
+    }
+
+    /// Every texture slot the material uses, with its field name.
+    pub fn texture_slots(&self) -> impl Iterator<Item = (&'static str, &TextureRef)> {
+        let specular = &self.specular;
+        let sheen = self.sheen.as_ref();
+        let iridescence = self.iridescence.as_ref();
+        [
+            ("base_color_texture", self.base_color_texture.as_ref()),
+            (
+                "metallic_roughness_texture",
+                self.metallic_roughness_texture.as_ref(),
+            ),
+            ("normal_texture", self.normal_texture.as_ref()),
+            ("emissive_texture", self.emissive_texture.as_ref()),
+            ("clearcoat_texture", self.clearcoat_texture.as_ref()),
+            (
+                "clearcoat_roughness_texture",
+                self.clearcoat_roughness_texture.as_ref(),
+            ),
+            (
+                "clearcoat_normal_texture",
+                self.clearcoat_normal_texture.as_ref(),
+            ),
+            ("transmission_texture", self.transmission_texture.as_ref()),
+            ("specular.weight_texture", specular.weight_texture.as_ref()),
+            ("specular.color_texture", specular.color_texture.as_ref()),
+            (
+                "sheen.color_texture",
+                sheen.and_then(|s| s.color_texture.as_ref()),
+            ),
+            (
+                "sheen.roughness_texture",
+                sheen.and_then(|s| s.roughness_texture.as_ref()),
+            ),
+            (
+                "iridescence.texture",
+                iridescence.and_then(|i| i.texture.as_ref()),
+            ),
+            (
+                "iridescence.thickness_texture",
+                iridescence.and_then(|i| i.thickness_texture.as_ref()),
+            ),
+            (
+                "anisotropy.texture",
+                self.anisotropy.as_ref().and_then(|a| a.texture.as_ref()),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, slot)| slot.map(|s| (name, s)))
+    }
+
+    /// True if the material needs a tangent frame at its surface points: a normal map (of
+    /// the base or the coat) or anisotropy.
+    pub fn needs_tangents(&self) -> bool {
+        self.tangent_uv_set().is_some()
+    }
+
+    /// The texture coordinate set whose tangent frame the material's normal maps and
+    /// anisotropy use (the base normal map's, else the coat's, else the anisotropy
+    /// texture's, else set 0), or `None` if it needs none.
+    pub fn tangent_uv_set(&self) -> Option<usize> {
+        let anisotropy = self
+            .anisotropy
+            .as_ref()
+            .map(|a| a.texture.map_or(0, |t| t.tex_coord));
+        self.normal_texture
+            .or(self.clearcoat_normal_texture)
+            .map(|t| t.tex_coord)
+            .or(anisotropy)
+            .map(|set| (set as usize).min(1))
     }
 }
 
@@ -108,7 +331,7 @@ pub enum AlphaMode {
 }
 
 /// A texture used by a material slot.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TextureRef {
     pub texture: u32,
     /// Which texture coordinate set (0 or 1).
@@ -126,13 +349,18 @@ pub struct UvTransform {
 }
 
 impl UvTransform {
-    /// The KHR_texture_transform matrix, translation * rotation * scale, as the ratified
-    /// specification's (column-major) GLSL defines it: the u axis maps to (cos r, sin r).
+    /// The KHR_texture_transform matrix, translation * rotation * scale, with the rotation
+    /// turning the UVs (v pointing down the image) by `rotation` radians counter-clockwise
+    /// as the image shows them: the u axis maps to (cos r, -sin r). This is the matrix of
+    /// the specification's GLSL read row by row, what its reference implementations (the
+    /// Khronos sample viewer, three.js, Blender's importer) compute and what
+    /// TextureTransformTest checks; read as GLSL's column-major constructor it would turn
+    /// the other way.
     pub fn new(offset: Vec2, rotation: f32, scale: Vec2) -> Self {
         let (s, c) = rotation.sin_cos();
         Self {
-            x: Vec2::new(c, s) * scale.x,
-            y: Vec2::new(-s, c) * scale.y,
+            x: Vec2::new(c, -s) * scale.x,
+            y: Vec2::new(s, c) * scale.y,
             offset,
         }
     }

@@ -7,7 +7,10 @@ pub mod material;
 pub mod texture;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
-pub use material::{AlphaMode, BsdfModel, Material, TextureRef, UvTransform};
+pub use material::{
+    AlphaMode, Anisotropy, BsdfModel, Iridescence, Material, Sheen, Specular, TextureRef,
+    UvTransform, Volume,
+};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 pub use texture::{Texels, Texture, Wrap};
@@ -82,10 +85,7 @@ impl Mesh {
     /// such a mesh's shading points in lanes (`world::lanes`).
     pub fn uniform_material<'m>(&self, materials: &'m [Material]) -> Option<&'m Material> {
         let m = materials.get(self.material as usize)?;
-        let textured = m.base_color_texture.is_some()
-            || m.metallic_roughness_texture.is_some()
-            || m.normal_texture.is_some()
-            || m.emissive_texture.is_some();
+        let textured = m.texture_slots().next().is_some();
         (!textured && self.colors.is_none() && !m.is_emissive()).then_some(m)
     }
 

@@ -102,16 +102,17 @@ impl TriangleHits {
 
 impl Surfaces {
     /// The BSDF of every point of `mesh` where its shading points can be taken in lanes
-    /// ([`TriangleHits`]): its material is uniform (`Mesh::uniform_material`) and reflects
-    /// something. `None` otherwise: such a mesh's points go through
-    /// [`Surfaces::interaction`].
-    pub(crate) fn uniform_bsdf(&self, mesh: &Mesh) -> Option<Bsdf> {
+    /// ([`TriangleHits`]): its material is uniform (`Mesh::uniform_material`), reflects
+    /// something and is not the layered glTF model. `None` otherwise: such a mesh's points
+    /// go through [`Surfaces::interaction`].
+    pub(crate) fn uniform_bsdf(&self, mesh: &Mesh) -> Option<Bsdf<'static>> {
         let m = mesh.uniform_material(&self.materials)?;
         let attrs = SurfaceAttributes {
             uv: [glam::Vec2::ZERO; 2],
             color: Vec4::ONE,
         };
-        Some(material::bsdf(m, &self.textures, &attrs)).filter(|b| !b.is_black())
+        material::compact_bsdf(m, &self.textures, &attrs, &Default::default())
+            .filter(|b| !b.is_black())
     }
 
     /// The mesh and triangle of `hit` where it lies on a mesh placed once (not through a
