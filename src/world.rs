@@ -22,6 +22,7 @@ use crate::geometry::{
     ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, quadric, sphere,
 };
 use crate::integrator::LightSelect;
+use crate::light::emission_texture::EmissionPyramid;
 use crate::light::environment::{Environment, EnvironmentMap};
 use crate::light::{Light, LightSet, QuadricLight, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
@@ -275,12 +276,44 @@ fn build_environment(scene: &Scene) -> Option<Environment> {
     }
 }
 
-/// Mean emitted radiance of material `m` (the emissive texture's mean, if any).
-fn mean_emission(m: &Material, textures: &[Texture]) -> Vec3 {
-    m.emissive
-        * m.emissive_texture.map_or(Vec3::ONE, |t| {
-            textures[t.texture as usize].mean(true).truncate()
-        })
+/// The mean emission of emitters with emissive textures, for their selection by power:
+/// one pyramid per texture and factor (see `light::emission_texture`).
+struct TexturedEmission<'t> {
+    textures: &'t [Texture],
+    pyramids: std::collections::HashMap<(u32, [u32; 3]), EmissionPyramid>,
+}
+
+impl<'t> TexturedEmission<'t> {
+    fn new(textures: &'t [Texture]) -> Self {
+        Self {
+            textures,
+            pyramids: Default::default(),
+        }
+    }
+
+    /// Mean emitted radiance of material `m` over the texture coordinates of `uvs` (their
+    /// bounding box; the whole texture for `None`), as a grey of the right luminance.
+    fn mean(&mut self, m: &Material, uvs: Option<[Vec2; 3]>) -> Vec3 {
+        let Some(slot) = m.emissive_texture else {
+            return m.emissive;
+        };
+        let textures = self.textures;
+        let pyramid = self
+            .pyramids
+            .entry((slot.texture, m.emissive.to_array().map(f32::to_bits)))
+            .or_insert_with(|| EmissionPyramid::new(&textures[slot.texture as usize], m.emissive));
+        let (lo, hi) = match uvs {
+            Some(uvs) => {
+                let uvs = uvs.map(|uv| slot.transform.map_or(uv, |t| t.apply(uv)));
+                (
+                    uvs[0].min(uvs[1]).min(uvs[2]),
+                    uvs[0].max(uvs[1]).max(uvs[2]),
+                )
+            }
+            None => (Vec2::ZERO, Vec2::ONE),
+        };
+        Vec3::splat(pyramid.mean_over(lo, hi))
+    }
 }
 
 /// The BVH intersection flags of primitives made of material `m`: back faces are culled
@@ -555,13 +588,26 @@ fn area_lights(
     }
     let mut lights = Vec::new();
     let mut prim_light = vec![NO_LIGHT; prims.len()];
+    let mut textured = TexturedEmission::new(textures);
     for (i, (prim, r)) in prims.iter().zip(refs).enumerate() {
         let m = &surfaces_materials[material_of(r) as usize];
         if !m.is_emissive() {
             continue;
         }
         prim_light[i] = lights.len() as u32;
-        let mean_radiance = mean_emission(m, textures);
+        let uvs = match (*r, m.emissive_texture) {
+            (PrimRef::Triangle { mesh, tri }, Some(slot)) => {
+                let mesh = &meshes[mesh as usize];
+                let set = (slot.tex_coord as usize).min(1);
+                Some(mesh.triangles[tri as usize].map(|v| {
+                    mesh.uvs[set]
+                        .as_ref()
+                        .map_or(Vec2::ZERO, |uv| uv[v as usize])
+                }))
+            }
+            _ => None,
+        };
+        let mean_radiance = textured.mean(m, uvs);
         lights.push(match *prim {
             Primitive::Triangle(p) => {
                 let n = geometric_normal(p[0], p[1], p[2]);

@@ -3,6 +3,7 @@
 //! and directional lights, distant lights with an angular size, and the environment. Which
 //! light to sample is `selection`'s job.
 
+pub mod emission_texture;
 pub mod environment;
 pub mod groups;
 #[cfg(target_arch = "x86_64")]
