@@ -2,7 +2,8 @@
 //!
 //! Each setting (each MIS heuristic, each Russian roulette mode, splitting fixed and learned, each
 //! light selection and light sampling strategy, each sampler) renders the Cornell box, the
-//! MIS plates (also under a sun with an angular size) and the indirect room at a small resolution; every 4×4-pixel block's mean
+//! MIS plates (also under a sun with an angular size), the indirect room and the glass box
+//! (smooth and rough glass, a thin pane) at a small resolution; every 4×4-pixel block's mean
 //! (per colour channel) is compared with the same block of a reference rendered with the
 //! default settings and another seed. Each render's `variance` layer (the variance of each
 //! pixel mean) gives the block mean's variance, so under "both estimators have the same
@@ -163,6 +164,11 @@ fn every_configuration_converges_to_the_same_image() {
                 &Default::default(),
             )
             .unwrap(),
+            256,
+        ),
+        (
+            "glass-box",
+            ingest::load(&root.join("glass-box/glass-box.gltf"), &Default::default()).unwrap(),
             256,
         ),
     ];

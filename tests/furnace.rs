@@ -170,3 +170,106 @@ fn sun_irradiance_does_not_depend_on_its_angle() {
         );
     }
 }
+
+/// A glTF glass material: transmission 1, smooth, ior 1.5 (or `ior`), bounding a volume
+/// of absorption `absorption` per world unit, or a thin wall.
+fn glass(volume: Option<Vec3>, ior: f32) -> lucerna::scene::Material {
+    lucerna::scene::Material {
+        transmission: 1.0,
+        metallic: 0.0,
+        roughness: 0.0,
+        ior,
+        volume: volume.map(|absorption| lucerna::scene::Volume { absorption }),
+        ..material(BsdfModel::GltfPbr, Vec3::ONE, 0.0, 0.0)
+    }
+}
+
+/// Smooth glass loses nothing: a glass ball and a thin glass shell in a uniform
+/// environment disappear (every path leaves with weight 1: reflections keep it, and the
+/// 1/η² a refraction in carries is undone by the η² of the refraction out). Without
+/// roulette (and with a depth bound no path reaches), so that every sample is exactly 1:
+/// total internal reflection traps light in a faceted dense ball for hundreds of bounces,
+/// and roulette's weights on those paths are a heavy tail that a few samples cannot
+/// average, though the estimate stays unbiased (`tests/convergence.rs` checks roulette on
+/// glass).
+#[test]
+fn smooth_glass_disappears() {
+    for (name, m) in [
+        ("glass ball", glass(Some(Vec3::ZERO), 1.5)),
+        ("thin glass shell", glass(None, 1.5)),
+        ("dense glass ball", glass(Some(Vec3::ZERO), 3.0)),
+    ] {
+        let s = scene(
+            vec![(icosphere(3), DMat4::IDENTITY)],
+            m,
+            Vec3::ONE,
+            ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
+        );
+        let mut exact = settings();
+        exact.set("rr", "off").unwrap();
+        exact.set("max-depth", "100000").unwrap();
+        let (film, stats) = render(s, (32, 32), 16, exact, 2);
+        assert_eq!(stats.discarded, 0, "{name}");
+        assert_invisible(name, &film);
+    }
+}
+
+/// Beer-Lambert: a slab of index-matched glass (nothing reflects or bends) whose
+/// absorption halves the light over its thickness shows the environment at half, through
+/// a volume entered and left once, whatever the scene's scale in render space.
+#[test]
+fn absorbing_slab_transmits_beer_lambert() {
+    for (thickness, scale) in [(0.5f64, 1.0f64), (0.5, 1000.0)] {
+        let sigma = (2.0f32).ln() / (thickness * scale) as f32;
+        let slab = DMat4::from_scale(DVec3::new(2.0 * scale, 2.0 * scale, thickness * scale));
+        let s = scene(
+            vec![(lucerna_test_cube(), slab)],
+            glass(Some(Vec3::new(sigma, 2.0 * sigma, 0.0)), 1.0),
+            Vec3::ONE,
+            ortho_camera(DVec3::new(0.0, 0.0, 5.0 * scale), (0.5 * scale) as f32),
+        );
+        let (film, _) = render(s, (8, 8), 4, settings(), 2);
+        let beauty = film.planes(Aov::Beauty);
+        for i in 0..beauty[0].len() {
+            let rgb = [0, 1, 2].map(|c| beauty[c][i]);
+            let expected = [0.5, 0.25, 1.0];
+            for c in 0..3 {
+                assert!(
+                    (rgb[c] - expected[c]).abs() < 1e-4,
+                    "scale {scale}: pixel {i} = {rgb:?}, expected {expected:?}"
+                );
+            }
+        }
+    }
+}
+
+/// A closed unit cube centred on the origin (12 outward-facing triangles).
+fn lucerna_test_cube() -> lucerna::scene::Mesh {
+    let v: Vec<Vec3> = (0..8)
+        .map(|i| {
+            Vec3::new(
+                if i & 1 == 0 { -0.5 } else { 0.5 },
+                if i & 2 == 0 { -0.5 } else { 0.5 },
+                if i & 4 == 0 { -0.5 } else { 0.5 },
+            )
+        })
+        .collect();
+    let quads = [
+        [0, 2, 3, 1],
+        [4, 5, 7, 6],
+        [0, 1, 5, 4],
+        [2, 6, 7, 3],
+        [0, 4, 6, 2],
+        [1, 3, 7, 5],
+    ];
+    let triangles = quads
+        .iter()
+        .flat_map(|[a, b, c, d]| [[*a, *b, *c], [*a, *c, *d]])
+        .collect();
+    lucerna::scene::Mesh {
+        name: "cube".into(),
+        positions: v,
+        triangles,
+        ..Default::default()
+    }
+}

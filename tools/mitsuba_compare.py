@@ -13,6 +13,12 @@ dominated by noise when the renderers agree; a bias in lucerna adds to the first
 check passes when the first is within 2x the second.
 
     .venv/bin/python tools/mitsuba_compare.py [--scene S] [--spp 1024] [--resolution 256x256] [--json out.json]
+    .venv/bin/python tools/mitsuba_compare.py --seeds 16 [--scene S] [--spp 1024] [--resolution 32x32]
+
+With `--seeds N` it measures whether the image means agree instead: N renders of each with
+independent seeds, the mean of the pixels that do not see a light directly (where the
+light's pixels, identical in both, would dilute a difference), and the difference of the
+two renderers' means with its standard error from the spread between seeds.
 
 Needs numpy, mitsuba and OpenImageIO (tests/requirements.txt) and a release build of lucerna
 ($LUCERNA_BIN, default target/release/lucerna).
@@ -70,14 +76,52 @@ def compare(spp, width, height, scene=CORNELL):
     return result
 
 
+def mean_agreement(spp, width, height, seeds, scene=CORNELL):
+    """Per renderer: the mean over `seeds` renders of the off-light pixel mean, its standard
+    error, and the relative difference (lucerna / Mitsuba - 1) with its standard error."""
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    means = {"lucerna": [], "mitsuba": []}
+    with tempfile.TemporaryDirectory() as workdir:
+        scene_file = Path(workdir) / "scene.lucerna"
+        lt.convert(scene, scene_file)
+        exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
+        for s in range(seeds):
+            mitsuba, _ = render_mitsuba(exported, spp, 1000 + s)
+            lucerna, _ = render_lucerna(scene, spp, 1000 + s, width, height, workdir)
+            off_light = mitsuba.max(axis=2) < 1.0
+            means["mitsuba"].append(mitsuba[off_light].mean(axis=0))
+            means["lucerna"].append(lucerna[off_light].mean(axis=0))
+    l, m = np.array(means["lucerna"]), np.array(means["mitsuba"])
+    se = lambda x: x.std(axis=0, ddof=1) / np.sqrt(len(x))  # noqa: E731
+    return {
+        "spp": spp, "resolution": [width, height], "seeds": seeds,
+        "mean_lucerna": l.mean(axis=0).tolist(), "se_lucerna": se(l).tolist(),
+        "mean_mitsuba": m.mean(axis=0).tolist(), "se_mitsuba": se(m).tolist(),
+        "difference": (l.mean(axis=0) / m.mean(axis=0) - 1).tolist(),
+        "difference_se": (np.sqrt(se(l) ** 2 + se(m) ** 2) / m.mean(axis=0)).tolist(),
+    }
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--spp", type=int, default=1024)
     parser.add_argument("--scene", default=str(CORNELL))
     parser.add_argument("--resolution", default="256x256", help="WxH")
     parser.add_argument("--json", help="also write the figures to this file")
+    parser.add_argument("--seeds", type=int, help="compare the image means over this many seeds")
     args = parser.parse_args()
     width, height = map(int, args.resolution.split("x"))
+    if args.seeds:
+        r = mean_agreement(args.spp, width, height, args.seeds, args.scene)
+        print(f"{args.scene} {width}x{height}, {args.spp} spp, {args.seeds} seeds: mean of the off-light pixels")
+        print(f"  lucerna {np.round(r['mean_lucerna'], 5)} ± {np.round(r['se_lucerna'], 5)}")
+        print(f"  Mitsuba {np.round(r['mean_mitsuba'], 5)} ± {np.round(r['se_mitsuba'], 5)}")
+        print(f"  lucerna / Mitsuba - 1 = {np.round(100 * np.array(r['difference']), 2)} % "
+              f"± {np.round(100 * np.array(r['difference_se']), 2)} %")
+        if args.json:
+            Path(args.json).write_text(json.dumps(r, indent=1) + "\n")
+        return
     r = compare(args.spp, width, height, args.scene)
     print(f"{args.scene} {width}x{height}, {args.spp} spp, box filter")
     print(f"  mean radiance   lucerna {np.round(r['mean_lucerna'], 5)}   Mitsuba {np.round(r['mean_mitsuba'], 5)}")

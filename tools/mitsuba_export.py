@@ -7,6 +7,10 @@ names the element (never a silent approximation):
 - `lambert` materials -> `diffuse`; glTF PBR with metallic 1, base colour 1, no textures ->
   `roughconductor` (GGX, alpha = roughness^2, Fresnel 1: `material = "none"`, visible-normal
   sampling); `double_sided` -> `twosided`.
+- glass (glTF transmission 1, metallic 0, no other layer, no texture): with a clear volume
+  -> `dielectric` (smooth) or `roughdielectric` (GGX, alpha = roughness^2, visible-normal
+  sampling), a thin wall -> `thindielectric` (smooth only); int_ior = ior, ext_ior = 1, the
+  base colour as `specular_transmittance` (both tint each crossing).
 - emission -> an `area` emitter (one-sided, on the front face, like lucerna);
 - meshes (with their shading normals if any) per instance, analytic spheres;
 - point and directional lights, a constant environment;
@@ -61,13 +65,44 @@ def matrix(values):
     return np.array(values, dtype=np.float64).reshape(4, 4).T
 
 
+SMOOTH_ALPHA = 1e-3  # as src/material/microfacet.rs: below it, a delta lobe
+
+
+def glass(material, element):
+    """Mitsuba's dielectric of a lucerna glass material."""
+    layered = [k for k in ("sheen", "iridescence", "anisotropy") if material.get(k)]
+    specular = material.get("specular") or {}
+    if (material["transmission"] != 1.0 or material["metallic"] != 0.0 or material.get("clearcoat", 0.0) > 0
+            or layered or material.get("specular_color") or specular.get("weight", 1.0) != 1.0
+            or specular.get("color", [1, 1, 1]) != [1, 1, 1] or material.get("transmission_texture")):
+        raise Unsupported(f"{element}: only pure glass (transmission 1, metallic 0, no other layer) is exported")
+    volume = material.get("volume")
+    if volume and any(volume["absorption"]):
+        raise Unsupported(f"{element}: absorbing volumes are not exported")
+    alpha = material["roughness"] ** 2
+    common = {"int_ior": material["ior"], "ext_ior": 1.0,
+              "specular_transmittance": {"type": "rgb", "value": material["base_color"][:3]}}
+    if volume is None:
+        if alpha >= SMOOTH_ALPHA:
+            raise Unsupported(f"{element}: Mitsuba's thindielectric is smooth only")
+        return {"type": "thindielectric", **common}
+    if alpha < SMOOTH_ALPHA:
+        return {"type": "dielectric", **common}
+    return {"type": "roughdielectric", "distribution": "ggx", "alpha": alpha, "sample_visible": True, **common}
+
+
 def bsdf(material, element):
-    if material["base_color_texture"] or material["metallic_roughness_texture"] or material["normal_texture"]:
+    if any(material.get(k) for k in ("base_color_texture", "metallic_roughness_texture", "normal_texture",
+                                     "emissive_texture", "transmission_texture", "clearcoat_texture")):
         raise Unsupported(f"{element}: textures are not exported")
     if material["alpha_mode"] != "opaque":
         raise Unsupported(f"{element}: alpha modes other than opaque are not exported")
+    if material.get("transmission", 0.0) > 0.0 and material["model"] == "gltf_pbr":
+        return glass(material, element)
     if material.get("clearcoat", 0.0) > 0.0:
         raise Unsupported(f"{element}: clear coats are not exported")
+    if material.get("unlit") or material.get("sheen") or material.get("iridescence") or material.get("anisotropy"):
+        raise Unsupported(f"{element}: unlit, sheen, iridescence and anisotropy are not exported")
     base = material["base_color"][:3]
     if material["model"] == "lambert":
         b = {"type": "diffuse", "reflectance": {"type": "rgb", "value": base}}

@@ -103,6 +103,18 @@ impl Media {
             .map_or(1.0, |m| m.ior)
     }
 
+    /// The square of the innermost volume's index of refraction (1 outside every volume):
+    /// the factor by which refraction into it scaled a path's throughput down (radiance
+    /// grows by η² in a denser medium), which Russian roulette undoes so that it does not
+    /// end paths for being in glass (pbrt-v4's `etaScale`).
+    #[inline]
+    pub(crate) fn radiance_scale(&self, surfaces: &Surfaces) -> f32 {
+        self.innermost()
+            .map(|m| &surfaces.materials[m as usize])
+            .filter(|m| m.volume.is_some() && m.ior > 0.0)
+            .map_or(1.0, |m| m.ior * m.ior)
+    }
+
     /// The fraction of light that crosses `length` render-space units of the innermost
     /// volume (one outside every volume and in clear ones).
     #[inline]

@@ -730,13 +730,18 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             return Some((Ray::new(origin, wi), next));
         }
         let depth = path.depth + 1;
+        let media = path.media.beyond(it, v.material, crossing);
         if c.roulette {
             let rr = match self.settings.rr {
                 // Efficiency mode where its statistics are missing: throughput roulette.
                 RussianRoulette::Efficiency(_) => RussianRoulette::Throughput(0.01),
                 rr => rr,
             };
-            let survival = rr.survival(luminance(beta), depth);
+            let mut throughput = luminance(beta);
+            if !media.is_empty() {
+                throughput *= media.radiance_scale(&self.world.surfaces);
+            }
+            let survival = rr.survival(throughput, depth);
             if survival < 1.0 {
                 if !(vs.rr < survival) {
                     return None;
@@ -764,7 +769,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             prev_delta: bs.is_delta(),
             prev_nee_count: n_nee,
             lobes,
-            media: path.media.beyond(it, v.material, crossing),
+            media,
             crossed: 0.0,
         };
         Some((Ray::new(origin, wi), next))
