@@ -369,7 +369,6 @@ impl RenderPlan {
                 && !first_hit_data
                 && !routing
                 && !roulette_learns
-                && !features.lobes.transmission
                 && crate::integrator::packet_kernel_available(),
         };
         Self {

@@ -128,6 +128,9 @@ pub struct Surfaces {
     /// True if some material can be a filter that shadow rays cross
     /// ([`Material::can_filter`]).
     pub filters: bool,
+    /// By material: whether it transmits or can be a filter, so that the packet kernel hands
+    /// paths reaching it to the scalar code.
+    pub scalar_only: Vec<bool>,
 }
 
 /// Marks a primitive that is not a light in [`Surfaces::prim_light`].
@@ -879,6 +882,11 @@ impl World {
                     })
                     .collect(),
                 filters: scene.materials.iter().any(Material::can_filter),
+                scalar_only: scene
+                    .materials
+                    .iter()
+                    .map(|m| m.transmits() || m.can_filter())
+                    .collect(),
                 materials: scene.materials,
                 textures: scene.textures,
                 prims: refs,
@@ -1016,6 +1024,37 @@ impl World {
         occluded
     }
 
+    /// [`World::transmittance`] of the `mask` lanes of `rays`: the lanes something opaque
+    /// blocks, and where the scene has filters, what each lane's filters let through
+    /// (`None` without filters: [`World::occluded_lanes`]).
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) fn transmittance_lanes(
+        &self,
+        rays: &RayLanes,
+        mask: u32,
+    ) -> (u32, Option<[Vec3; crate::simd::LANES]>) {
+        if !self.surfaces.filters {
+            return (self.occluded_lanes(rays, mask), None);
+        }
+        let surfaces = &self.surfaces;
+        let mut through = [Vec3::ONE; crate::simd::LANES];
+        let mut blocked = self.bvh.occluded_lanes(rays, mask, |lane, prim, hit| {
+            surfaces.blocks_shadow(prim, NOT_PLACED, hit, &rays.ray(lane), &mut through[lane])
+        });
+        if let Some(placed) = &self.placed {
+            for lane in crate::geometry::triangle::Lanes::new(mask & !blocked) {
+                let ray = rays.ray(lane);
+                let lane_through = &mut through[lane];
+                let hit = placed.occluded(&ray, |placement, prim, hit, _| {
+                    surfaces.blocks_shadow(prim, placement, hit, &ray, lane_through)
+                });
+                blocked |= u32::from(hit) << lane;
+            }
+        }
+        (blocked, Some(through))
+    }
+
     /// How many of `rays` hit something (`occlusion`: are blocked), queried eight at a time
     /// as the packet kernel queries them ([`World::intersect_lanes`],
     /// [`World::occluded_lanes`]); `None` where the CPU lacks AVX2 and FMA. For the
@@ -1137,6 +1176,7 @@ impl Surfaces {
             prim_light: Vec::new(),
             absorption: Vec::new(),
             filters: false,
+            scalar_only: Vec::new(),
         }
     }
 }

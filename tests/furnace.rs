@@ -230,8 +230,9 @@ fn absorbing_slab_transmits_beer_lambert() {
         );
         let (film, _) = render(s, (8, 8), 4, settings(), 2);
         let beauty = film.planes(Aov::Beauty);
-        for i in 0..beauty[0].len() {
-            let rgb = [0, 1, 2].map(|c| beauty[c][i]);
+        let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
+        for (i, ((&r, &g), &b)) in pixels.enumerate() {
+            let rgb = [r, g, b];
             let expected = [0.5, 0.25, 1.0];
             for c in 0..3 {
                 assert!(

@@ -86,6 +86,7 @@ fn scenes() -> Vec<(&'static str, Scene)> {
         ("cornell-environment", cornell_environment()),
         ("mis-plates", shipped("scenes/mis-plates/mis-plates.glb")),
         ("usd-twin", shipped("scenes/usd-twin/usd-twin.gltf")),
+        ("glass-box", shipped("scenes/glass-box/glass-box.gltf")),
     ]
 }
 

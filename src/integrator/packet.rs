@@ -43,12 +43,14 @@
 use super::media::Media;
 use super::mis::{Mis, Technique};
 use super::path::{
-    Emitter, PathState, RayCounts, emitters_at_infinity, sample_chosen_light, surface_emitter,
+    Emitter, PathState, PathTracer, RayCounts, emitters_at_infinity, sample_chosen_light,
+    surface_emitter,
 };
 use super::settings::{ROULETTE_CAP, ROULETTE_CAP_DEPTH, RussianRoulette, Settings};
 use super::split::{FirstSplit, PixelParts, SampleParts, SamplePoints, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
+use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, RayLanes, offset_ray_origin_lanes};
 use crate::geometry::triangle::Lanes;
 use crate::light::lanes::{self as light_lanes, AreaLights, PowerSelection};
@@ -312,6 +314,8 @@ pub struct PacketTracer<'a, const EMITTERS: bool> {
     world: &'a World,
     settings: &'a Settings,
     split: FirstSplit,
+    /// The scalar kernel, which takes over the paths that reach glass or a filter.
+    scalar: PathTracer<'a, EMITTERS, false>,
     filter: &'a PixelFilter,
     /// A sampler of the render's kind and seed, which camera samples start from.
     sampler: Sampler,
@@ -532,6 +536,55 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 .iter()
                 .map(|m| world.surfaces.uniform_bsdf(m))
                 .collect(),
+            scalar: PathTracer::new(world, settings, None, split),
+        }
+    }
+
+    /// Lane `lane`'s path, whose ray `ray` found `hit` on glass or a filter, followed to its
+    /// end by the scalar kernel (the same random numbers, so the same estimate): what it
+    /// brings back, its rays and (in a pass that learns the split) its parts go to its
+    /// sample's slot.
+    #[inline(never)]
+    fn hand_off(
+        &self,
+        lanes: &PathLanes,
+        lane: usize,
+        (ray, hit): (Ray, Hit),
+        slot: &mut SampleSlot,
+        rays: &mut RayCounts,
+    ) {
+        let state = lanes.state(lane);
+        let mut rec = SlotRecorder::default();
+        let mut walked = RayCounts::default();
+        if self.learning && state.depth > 0 {
+            slot.parts.current = state.branch as usize;
+        }
+        let parts = self.learning.then_some(&mut slot.parts);
+        self.scalar.continue_from(
+            ray,
+            hit,
+            state,
+            (slot.pixel, slot.split_points),
+            &mut slot.sampler,
+            &mut rec,
+            &mut walked,
+            parts,
+        );
+        slot.value += rec.value;
+        slot.discarded += rec.discarded;
+        slot.covered |= rec.covered;
+        let traced = walked.closest + walked.shadow;
+        slot.rays += traced;
+        rays.add(&walked);
+        if self.learning {
+            // The scalar walk marks its first vertex's light samples in the parts' rays.
+            if state.depth == 0 {
+                let [_, at_vertex, after_light, _] = slot.parts.rays;
+                slot.part_rays[1] += after_light - at_vertex;
+                slot.part_rays[2] += traced - (after_light - at_vertex);
+            } else {
+                slot.part_rays[2] += traced;
+            }
         }
     }
 
@@ -876,6 +929,13 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             }
             let ray = lanes.ray.ray(lane);
             let it = world.interaction(&ray, &hit);
+            if world.surfaces.scalar_only[it.material as usize] {
+                // Glass (volumes, refraction) and filters: the scalar code, lane by lane.
+                self.hand_off(lanes, lane, (ray, hit), slot, rays);
+                *active &= !(1 << lane);
+                self.end_path(lanes, lane, buffers);
+                continue;
+            }
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 self.reached_emitter(&lanes.state(lane), e, slot);
             }
@@ -1066,10 +1126,15 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     self.count_part_ray(slot, lanes.depth.lane(lane), false);
                 }
             }
-            let lit = sampled & !world.occluded_lanes(&shadow, sampled);
+            let (blocked, through) = world.transmittance_lanes(&shadow, sampled);
+            let lit = sampled & !blocked;
             rays.shadow += sampled.count_ones() as u64;
             if lit == 0 {
                 continue;
+            }
+            // What the filters the shadow rays crossed let through (thin glass).
+            if let Some(through) = through {
+                radiance = radiance * V3::from_lanes(&through);
             }
             let no_bsdf = if EMITTERS {
                 M8::from_bits(scalar.delta)
@@ -1293,6 +1358,36 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             *active &= !(1 << lane);
             self.end_path(lanes, lane, buffers);
         }
+    }
+}
+
+/// Receives what a path handed to the scalar kernel brings back for its sample.
+#[derive(Default)]
+struct SlotRecorder {
+    value: Vec3,
+    discarded: u64,
+    covered: bool,
+}
+
+impl super::path::Recorder for SlotRecorder {
+    fn wants_single_technique(&self) -> bool {
+        false
+    }
+
+    fn wants_lobes(&self) -> bool {
+        false
+    }
+
+    fn contribution(&mut self, c: super::path::Contribution) {
+        if c.value.is_finite() {
+            self.value += c.value;
+        } else {
+            self.discarded += 1;
+        }
+    }
+
+    fn first_hit(&mut self, _: Option<super::path::FirstHit>) {
+        self.covered = true;
     }
 }
 

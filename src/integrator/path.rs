@@ -31,6 +31,7 @@ use super::mis::{Mis, Technique};
 use super::settings::{RussianRoulette, Settings};
 use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
+use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::light::LightSample;
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
@@ -457,31 +458,66 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 .sample_points(sampler.pixel(), sampler.sample_index()),
         };
         let camera = PathState::camera(ray.origin);
-        self.trace_from(ray, camera, &mut walk, sampler, rec, rays);
+        self.trace_from(ray, camera, None, &mut walk, sampler, rec, rays);
     }
 
-    /// Follows a path from `ray` until it ends; paths split off from it are traced by
-    /// recursion. The vertices it opens for learning are closed when it ends.
+    /// Follows the path of state `path` whose ray `ray` found `hit` (already traced and
+    /// counted) to its end: the packet kernel hands the paths that reach a surface it does
+    /// not shade in lanes (glass, filters) to this. `parts`, the pixel `pixel` and the
+    /// sample's first-vertex split points `split_points` are as for [`PathTracer::trace`];
+    /// no roulette learns.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn continue_from<R: Recorder>(
+        &self,
+        ray: Ray,
+        hit: Hit,
+        path: PathState,
+        (pixel, split_points): (usize, SamplePoints),
+        sampler: &mut Sampler,
+        rec: &mut R,
+        rays: &mut RayCounts,
+        parts: Option<&mut SampleParts>,
+    ) {
+        let mut walk = Walk {
+            mis: self.settings.mis,
+            single: rec.wants_single_technique(),
+            lobes: rec.wants_lobes(),
+            pixel,
+            paths: 1,
+            learning: None,
+            parts,
+            split_points,
+        };
+        self.trace_from(ray, path, Some(hit), &mut walk, sampler, rec, rays);
+    }
+
+    /// Follows a path from `ray` (whose hit may be known already) until it ends; paths
+    /// split off from it are traced by recursion. The vertices it opens for learning are
+    /// closed when it ends.
+    #[allow(clippy::too_many_arguments)]
     fn trace_from<R: Recorder>(
         &self,
         ray: Ray,
         path: PathState,
+        hit: Option<Hit>,
         walk: &mut Walk,
         sampler: &mut Sampler,
         rec: &mut R,
         rays: &mut RayCounts,
     ) {
         let mark = walk.learning.as_ref().map(|l| l.mark());
-        self.walk_path(ray, path, walk, sampler, rec, rays);
+        self.walk_path(ray, path, hit, walk, sampler, rec, rays);
         if let (Some(learning), Some(mark)) = (walk.learning.as_deref_mut(), mark) {
             learning.close(mark, rays.closest + rays.shadow);
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn walk_path<R: Recorder>(
         &self,
         mut ray: Ray,
         mut path: PathState,
+        mut known_hit: Option<Hit>,
         walk: &mut Walk,
         sampler: &mut Sampler,
         rec: &mut R,
@@ -490,8 +526,11 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         let world = self.world;
         let max_depth = self.settings.max_depth.unwrap_or(u32::MAX);
         loop {
-            rays.closest += 1;
-            let Some(hit) = world.intersect(&ray) else {
+            let hit = known_hit.take().or_else(|| {
+                rays.closest += 1;
+                world.intersect(&ray)
+            });
+            let Some(hit) = hit else {
                 if EMITTERS {
                     emitters_at_infinity(world, ray.dir, |e| {
                         path.reached_emitter(self, walk, rec, e)
@@ -632,7 +671,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 if k + 1 == continuation.count {
                     next = Some(child);
                 } else {
-                    self.trace_from(child.0, child.1, walk, sampler, rec, rays);
+                    self.trace_from(child.0, child.1, None, walk, sampler, rec, rays);
                 }
             }
             let Some((next_ray, next_path)) = next else {

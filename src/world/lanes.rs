@@ -103,10 +103,13 @@ impl TriangleHits {
 impl Surfaces {
     /// The BSDF of every point of `mesh` where its shading points can be taken in lanes
     /// ([`TriangleHits`]): its material is uniform (`Mesh::uniform_material`), reflects
-    /// something and is not the layered glTF model. `None` otherwise: such a mesh's points
-    /// go through [`Surfaces::interaction`].
+    /// something, transmits nothing and is not the layered glTF model. `None` otherwise:
+    /// such a mesh's points go through [`Surfaces::interaction`] (and paths reaching glass
+    /// to the scalar code).
     pub(crate) fn uniform_bsdf(&self, mesh: &Mesh) -> Option<Bsdf<'static>> {
-        let m = mesh.uniform_material(&self.materials)?;
+        let m = mesh
+            .uniform_material(&self.materials)
+            .filter(|m| !m.transmits() && !m.can_filter())?;
         let attrs = SurfaceAttributes {
             uv: [glam::Vec2::ZERO; 2],
             color: Vec4::ONE,
