@@ -1409,6 +1409,12 @@ impl Surfaces {
             flipped = !flipped;
         }
         let ns = facing_shading_normal(ns, ng, wo);
+        // A normal that is the geometric one never needs the reflection's correction.
+        let ns = if ns == ng {
+            ns
+        } else {
+            valid_reflection_normal(ns, ng, wo)
+        };
         Interaction {
             p,
             ng,
@@ -1537,9 +1543,92 @@ fn facing_shading_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
     (ns * (1.0 - t) + ng * t).normalize_or(ng)
 }
 
+/// The steepest a mirror reflection of `wo` about a shading normal may leave the geometric
+/// surface: the threshold of [`valid_reflection_normal`] for a viewer at cos `iz` to it.
+#[inline]
+pub(crate) fn reflection_threshold(iz: f32) -> f32 {
+    (0.9 * iz).min(0.01)
+}
+
+/// Tilts shading normal `ns` towards the geometric normal `ng` (in the plane of the two)
+/// just enough that the mirror reflection of the viewer `wo` about it leaves the surface
+/// at least at the threshold [`reflection_threshold`] (as steeply as the viewer arrives,
+/// up to cos 0.01). Strongly tilted normal maps and coarse interpolated normals otherwise
+/// reflect glossy and mirror lobes into the surface, where the path ends: black rims.
+/// This is the correction of Keller et al., "The Iray Light Transport Simulation and
+/// Rendering System" (2017), which Cycles applies to its BSDFs' normals too.
+#[inline]
+pub(crate) fn valid_reflection_normal(ns: Vec3, ng: Vec3, wo: Vec3) -> Vec3 {
+    let iz = wo.dot(ng);
+    let threshold = reflection_threshold(iz);
+    let z0 = ns.dot(ng);
+    if iz <= 0.0 || 2.0 * ns.dot(wo) * z0 - iz >= threshold {
+        return ns;
+    }
+    // The tilt n = z ng + x X (X: the direction of ns's tangential part) whose reflection of
+    // wo leaves at exactly the threshold solves 2 z (x ix + z iz) - iz = threshold; squared,
+    // a quadratic in z².
+    let Some(axis) = (ns - ng * z0).try_normalize() else {
+        return ng;
+    };
+    let ix = wo.dot(axis);
+    let a = ix * ix + iz * iz;
+    let b = 2.0 * (a + iz * threshold);
+    let c = (threshold + iz) * (threshold + iz);
+    let root = (b * b - 4.0 * a * c).max(0.0).sqrt();
+    // Of the roots that solve the unsquared equation, the least tilt away from ns; the
+    // geometric normal (always valid) when rounding leaves none.
+    let mut best = (f32::INFINITY, ng);
+    for z2 in [0.25 * (b - root) / a, 0.25 * (b + root) / a] {
+        let z = z2.clamp(0.0, 1.0).sqrt();
+        let x = (1.0 - z * z).max(0.0).sqrt();
+        let n = ng * z + axis * x;
+        let leaves = 2.0 * n.dot(wo) * z - iz;
+        if (leaves - threshold).abs() <= 1e-3 && z >= z0 && z < best.0 {
+            best = (z, n);
+        }
+    }
+    best.1.normalize_or(ng)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Mirror reflections about the corrected normal leave the surface at least at the
+    /// threshold, exactly at it where a correction was needed, and normals that need none
+    /// are left alone.
+    #[test]
+    fn reflections_about_corrected_normals_leave_the_surface() {
+        let ng = Vec3::Z;
+        let mut rng = crate::sampling::pcg::Pcg32::new(5, 0);
+        let mut corrected = 0;
+        for _ in 0..20_000 {
+            let d = |rng: &mut crate::sampling::pcg::Pcg32| {
+                crate::sampling::warp::square_to_uniform_hemisphere(glam::Vec2::new(
+                    rng.next_f32(),
+                    rng.next_f32(),
+                ))
+            };
+            let (ns, wo) = (d(&mut rng), d(&mut rng));
+            let ns = facing_shading_normal(ns, ng, wo);
+            let fixed = valid_reflection_normal(ns, ng, wo);
+            let threshold = reflection_threshold(wo.z);
+            let r = fixed * (2.0 * fixed.dot(wo)) - wo;
+            assert!((fixed.length() - 1.0).abs() < 1e-4);
+            assert!(r.z >= threshold - 2e-3, "ns {ns} wo {wo}: reflection {r}");
+            let before = ns * (2.0 * ns.dot(wo)) - wo;
+            if before.z >= threshold {
+                assert_eq!(fixed, ns);
+            } else {
+                corrected += 1;
+                assert!((r.z - threshold).abs() < 2e-3 || fixed == ng, "{r}");
+                // The tilt only moves towards the geometric normal.
+                assert!(fixed.z >= ns.z - 1e-5);
+            }
+        }
+        assert!(corrected > 1000, "{corrected}");
+    }
 
     #[test]
     fn render_space_is_centred_and_scaled_by_a_power_of_two() {

@@ -592,3 +592,86 @@ fn sphere_meshes_in_extras_become_analytic_spheres() {
     );
     assert_eq!(film.planes(Aov::Emission)[0][32 * 64 + 32], 1.0);
 }
+
+/// KHR_materials_unlit as Blender reads it: the camera sees the base colour whatever the
+/// light, and every other ray passes through the surface (a required extension lucerna
+/// implements loads, though the gltf crate has no feature for it).
+#[test]
+fn unlit_surfaces_show_their_colour_to_the_camera_and_let_other_rays_pass() {
+    let dir = temp();
+    let material = json!({"pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.4, 0.2, 1.0]},
+        "doubleSided": true, "extensions": {"KHR_materials_unlit": {}}});
+    let mut b = Builder::new();
+    b.json["extensionsUsed"] = json!(["KHR_materials_unlit"]);
+    b.json["extensionsRequired"] = json!(["KHR_materials_unlit"]);
+    let m = b.add("materials", material);
+    let prim = b.quad_primitive(Some(m));
+    let mesh = b.mesh(json!([prim]));
+    b.root(json!({"mesh": mesh}));
+    b.add("cameras", json!({"type": "orthographic", "orthographic": {"xmag": 1.0, "ymag": 1.0, "znear": 0.01, "zfar": 100}}));
+    b.root(json!({"camera": 0, "translation": [0, 0, 3]}));
+    let mut scene = load(&b.write_embedded(dir.path(), "unlit"));
+    assert!(scene.materials[0].unlit && !scene.materials[0].is_emissive());
+    // Under any environment the camera sees the colour exactly.
+    for env in [0.0f32, 3.0] {
+        ingest::set_constant_environment(&mut scene, Vec3::splat(env));
+        let (film, _) = render(scene.clone(), (8, 8), 4, Settings::default(), 2);
+        let beauty = film.planes(Aov::Beauty);
+        for c in 0..3 {
+            let expected = [0.8, 0.4, 0.2][c];
+            assert!(
+                beauty[c].iter().all(|&v| (v - expected).abs() < 1e-5),
+                "env {env}: channel {c}: {:?}",
+                &beauty[c][..4]
+            );
+        }
+    }
+    // It neither lights nor shadows: a Lambert floor under an oblique sun, the unlit quad
+    // above it, shows the sun's full irradiance everywhere the camera sees it, where the
+    // quad's shadow would fall too.
+    let mut lit = scene.clone();
+    lit.materials.push(lucerna::scene::Material {
+        model: BsdfModel::Lambert,
+        base_color: Vec4::new(0.5, 0.5, 0.5, 1.0),
+        double_sided: true,
+        ..Default::default()
+    });
+    let floor = lit.meshes[0].clone();
+    lit.meshes.push(lucerna::scene::Mesh {
+        material: 1,
+        ..floor
+    });
+    lit.instances.push(lucerna::scene::Instance {
+        name: "floor".into(),
+        mesh: 1,
+        transform: DMat4::from_translation(DVec3::new(0.0, 0.0, -1.0))
+            * DMat4::from_scale(DVec3::splat(8.0)),
+    });
+    lit.instances[0].transform = DMat4::from_scale(DVec3::splat(0.25));
+    let direction = DVec3::new(-1.0, 0.0, -1.0).normalize();
+    lit.lights.push(lucerna::scene::Light {
+        name: "sun".into(),
+        kind: LightKind::Directional {
+            direction,
+            irradiance: Vec3::ONE,
+            angle: 0.0,
+        },
+    });
+    ingest::set_constant_environment(&mut lit, Vec3::ZERO);
+    let (film, _) = render(lit, (32, 32), 2, Settings::default(), 2);
+    let (r, g) = (&film.planes(Aov::Beauty)[0], &film.planes(Aov::Beauty)[1]);
+    let expected = 0.5 * (-direction.z) as f32 / std::f32::consts::PI;
+    let mut floor = 0;
+    for (&r, &g) in r.iter().zip(g) {
+        // The quad's own pixels are its colour (R 0.8, G 0.4); the rest is floor.
+        if (r - 0.8).abs() < 1e-4 && (g - 0.4).abs() < 1e-4 {
+            continue;
+        }
+        floor += 1;
+        assert!(
+            (r - expected).abs() < 1e-4,
+            "floor {r}, expected {expected}"
+        );
+    }
+    assert!(floor > 900, "{floor} floor pixels");
+}

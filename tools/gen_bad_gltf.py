@@ -115,8 +115,8 @@ def cases():
            variant(lambda d: d["buffers"][0].update(uri="http://example.com/scene.bin")),
            "buffers[0].uri", "scheme \"http\" is not allowed")
     yield ("unsupported-required-extension.gltf",
-           variant(lambda d: d.update(extensionsUsed=["KHR_materials_clearcoat"],
-                                      extensionsRequired=["KHR_materials_clearcoat"])),
+           variant(lambda d: d.update(extensionsUsed=["ADOBE_materials_thin_transparency"],
+                                      extensionsRequired=["ADOBE_materials_thin_transparency"])),
            "extensionsRequired[0]", "required extension is not supported")
     yield ("wrong-accessor-type.gltf",
            variant(lambda d: d["accessors"][0].update(type="VEC2", count=3, min=[0, 0], max=[1, 1])),

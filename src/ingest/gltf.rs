@@ -143,12 +143,25 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
         let path = path();
         let bounds =
             path.0.ends_with("[\"POSITION\"].min") || path.0.ends_with("[\"POSITION\"].max");
-        if !bounds {
+        // The crate refuses required extensions it has no feature for; lucerna decides
+        // that from the extensions it implements (below).
+        let required = path.0.starts_with("extensionsRequired")
+            && matches!(error, gltf::json::validation::Error::Unsupported);
+        if !bounds && !required {
             errors.push((path, error));
         }
     });
     if !errors.is_empty() {
         return Err(parse_error(source, gltf::Error::Validation(errors)));
+    }
+    for (i, ext) in root.extensions_required.iter().enumerate() {
+        if !SUPPORTED_EXTENSIONS.contains(&ext.as_str()) {
+            return Err(Error::bad_input(
+                source,
+                format!("extensionsRequired[{i}] = {ext:?}"),
+                "required extension is not supported by lucerna",
+            ));
+        }
     }
     Ok(gltf)
 }

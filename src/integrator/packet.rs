@@ -397,7 +397,7 @@ impl Shading {
         if lane_shaded == 0 {
             return self.scalar.lanes();
         }
-        let computed = self.triangles.shading(dir);
+        let computed = self.triangles.shading(dir, lane_shaded);
         if lane_shaded == mask {
             return computed;
         }

@@ -375,6 +375,23 @@ impl PathState {
         select * density * self.prev_nee_count as f32
     }
 
+    /// A camera path (through filters at most) reached an unlit surface of colour
+    /// `colour`: it is seen as emission (of no light: no light group takes it).
+    fn reached_unlit<R: Recorder>(&self, walk: &mut Walk, rec: &mut R, colour: Vec3) {
+        let value = self.beta * colour;
+        if let Some(parts) = walk.parts.as_deref_mut() {
+            parts.add(value, 0, false);
+        }
+        rec.contribution(Contribution {
+            value,
+            depth: 0,
+            source: Source::Emission,
+            single_technique: None,
+            lobes: None,
+            light: None,
+        });
+    }
+
     /// The path reached emitter `e`: seen directly by the camera, or found by BSDF
     /// sampling and weighted against light sampling's density there (unless a delta lobe
     /// led here, which light sampling cannot follow).
@@ -568,6 +585,13 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                         material: it.material,
                     }
                 }));
+            }
+            // An unlit surface shows its colour to the camera and ends the path there; every
+            // other ray crosses it (its BSDF is a clear filter).
+            if m.unlit && path.depth == 0 {
+                let colour = material::base_color(m, &surfaces.textures, &it.attrs).truncate();
+                path.reached_unlit(walk, rec, colour);
+                return;
             }
             // Light samples and continuations from a black surface would add nothing.
             if bsdf.is_black() {

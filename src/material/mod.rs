@@ -429,6 +429,14 @@ fn build(
     ctx: &ShadingContext,
 ) -> Built {
     let base = base_color(m, textures, attrs).truncate();
+    if m.unlit {
+        // A clear filter: every ray but the camera's passes (see `integrator::path`).
+        return Built::Compact(Bsdf::ThinDielectric(ThinDielectric::new(
+            1.0,
+            0.0,
+            Vec3::ONE,
+        )));
+    }
     match m.model {
         BsdfModel::Lambert => Built::Compact(Bsdf::Lambert(Lambert {
             albedo: base.clamp(Vec3::ZERO, Vec3::ONE),

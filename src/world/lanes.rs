@@ -63,10 +63,10 @@ impl TriangleHits {
     }
 
     /// The shading points of the hits, for rays of directions `dir` (only the lanes given
-    /// to [`TriangleHits::set`] are meaningful): `Surfaces::triangle_surface` and
+    /// to [`TriangleHits::set`], `mask`, are meaningful): `Surfaces::triangle_surface` and
     /// `Surfaces::interaction` without a normal map.
     #[inline(always)]
-    pub fn shading(&self, dir: V3) -> ShadingLanes {
+    pub fn shading(&self, dir: V3, mask: u32) -> ShadingLanes {
         let (b1, b2) = (F8::from_array(self.b[0]), F8::from_array(self.b[1]));
         let b0 = F8::ONE - b1 - b2;
         let [p0, p1, p2] = &self.p;
@@ -91,7 +91,21 @@ impl TriangleHits {
         let keep = target.le(a) | b.le(zero);
         let t = (target - a) / (b - a);
         let (bent, _) = (ns * (F8::ONE - t) + ng * t).normalize_or(ng);
-        let ns = V3::select(keep, ns, bent);
+        let mut ns = V3::select(keep, ns, bent);
+        // valid_reflection_normal, lane by lane where the reflection may leave too low (the
+        // lanes' test is a margin looser, and the scalar code decides exactly); a normal
+        // that is the geometric one never needs it.
+        let interpolated = interpolated_used.bits() & mask;
+        if interpolated != 0 {
+            let iz = wo.dot(ng);
+            let threshold = (iz * 0.9).min(F8::splat(0.01));
+            let leaves = ns.dot(wo) * 2.0 * ns.dot(ng) - iz;
+            let low = (leaves.lt(threshold + F8::splat(1e-4)) & iz.gt(zero)).bits() & interpolated;
+            for lane in crate::geometry::triangle::Lanes::new(low) {
+                let (n, g, w) = (ns.lane(lane), ng.lane(lane), wo.lane(lane));
+                ns.set_lane(lane, crate::world::valid_reflection_normal(n, g, w));
+            }
+        }
         ShadingLanes {
             p,
             ng,
@@ -210,7 +224,7 @@ mod tests {
                 hits.set(lane, &surfaces.meshes[mesh], 0, &hit);
                 scalar.push(surfaces.interaction(&ray, &hit));
             }
-            let lanes = hits.shading(V3::from_lanes(&dirs));
+            let lanes = hits.shading(V3::from_lanes(&dirs), 0xff);
             let bits = |v: Vec3| v.to_array().map(f32::to_bits);
             for (lane, it) in scalar.iter().enumerate() {
                 assert_eq!(bits(lanes.p.lane(lane)), bits(it.p), "p, round {round}");
@@ -220,10 +234,15 @@ mod tests {
                 assert_eq!(bits(t.lane(lane)), bits(it.frame.t), "t, round {round}");
                 assert_eq!(bits(n.lane(lane)), bits(it.frame.n), "n, round {round}");
                 checked += 1;
-                // Bent towards the viewer: the shading normal ends at the target angle.
-                let wo = -dirs[lane].normalize();
+                // Bent towards the viewer (the shading normal ends at the target angle) or
+                // until its mirror reflection leaves the surface (at the threshold).
+                let (n, wo) = (it.frame.n, -dirs[lane].normalize());
                 let target = (0.5 * it.ng.dot(wo)).min(0.01);
-                bent += usize::from((it.frame.n.dot(wo) - target).abs() < 1e-4);
+                let reflected = (n * (2.0 * n.dot(wo)) - wo).dot(it.ng);
+                let threshold = crate::world::reflection_threshold(it.ng.dot(wo));
+                bent += usize::from(
+                    (n.dot(wo) - target).abs() < 1e-4 || (reflected - threshold).abs() < 2e-3,
+                );
             }
         }
         assert_eq!(checked, 400 * LANES);
