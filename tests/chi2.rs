@@ -583,6 +583,7 @@ fn layered_cases() -> Vec<Case> {
         alpha: Vec2::splat(0.2),
         anisotropy_direction: Vec2::X,
         transmission: 0.0,
+        transmission_tint: Vec3::new(0.9, 0.8, 0.95),
         thin: true,
         eta: 1.5,
         exact: false,

@@ -80,8 +80,9 @@ def glass(material, element):
     if volume and any(volume["absorption"]):
         raise Unsupported(f"{element}: absorbing volumes are not exported")
     alpha = material["roughness"] ** 2
+    tint = material.get("transmission_color") or material["base_color"][:3]
     common = {"int_ior": material["ior"], "ext_ior": 1.0,
-              "specular_transmittance": {"type": "rgb", "value": material["base_color"][:3]}}
+              "specular_transmittance": {"type": "rgb", "value": tint}}
     if volume is None:
         if alpha >= SMOOTH_ALPHA:
             raise Unsupported(f"{element}: Mitsuba's thindielectric is smooth only")

@@ -66,6 +66,8 @@ pub struct LayeredParams {
     pub anisotropy_direction: Vec2,
     /// Share of the dielectric base that transmits.
     pub transmission: f32,
+    /// What transmitted light is tinted by at each crossing.
+    pub transmission_tint: Vec3,
     /// Transmission through a thin wall (no bending) rather than a volume's boundary.
     pub thin: bool,
     /// Relative index of refraction across the interface (below the surface over `wo`'s
@@ -111,6 +113,7 @@ impl Layered {
         p.base = p.base.clamp(Vec3::ZERO, Vec3::ONE);
         p.metallic = p.metallic.clamp(0.0, 1.0);
         p.transmission = p.transmission.clamp(0.0, 1.0);
+        p.transmission_tint = p.transmission_tint.clamp(Vec3::ZERO, Vec3::ONE);
         p.coat = p.coat.clamp(0.0, 1.0);
         p.specular_weight = p.specular_weight.clamp(0.0, 1.0);
         p.f0 = p.f0.clamp(Vec3::ZERO, Vec3::ONE);
@@ -265,13 +268,13 @@ impl Layered {
         let fd = self.dielectric_fresnel(cos);
         let fm = self.metal_fresnel(cos);
         let specular = below * (luminance(fd) * (1.0 - p.metallic) + luminance(fm) * p.metallic);
-        let rest = below * (1.0 - p.metallic) * (1.0 - fd.max_element()) * luminance(p.base);
+        let rest = below * (1.0 - p.metallic) * (1.0 - fd.max_element());
         let mut w = [
             c,
             under * sheen,
             specular,
-            rest * p.transmission,
-            rest * (1.0 - p.transmission),
+            rest * p.transmission * luminance(p.transmission_tint),
+            rest * (1.0 - p.transmission) * luminance(p.base),
         ];
         let total: f32 = w.iter().sum();
         if !(total > 0.0) {
@@ -329,11 +332,11 @@ impl Layered {
             if p.thin {
                 if let Some((h_a, value)) = rough_reflection(&self.ggx, wo_a, flip(wi_a)) {
                     let fd = self.dielectric_fresnel(wo_a.dot(h_a));
-                    lobes[2] = p.base * ((1.0 - fd.max_element()) * value * weight);
+                    lobes[2] = p.transmission_tint * ((1.0 - fd.max_element()) * value * weight);
                 }
             } else if let Some(r) = rough_refraction(&self.ggx, wo_a, wi_a, p.eta) {
                 let fd = self.dielectric_fresnel(wo_a.dot(r.wm));
-                lobes[2] = p.base * ((1.0 - fd.max_element()) * r.value * weight);
+                lobes[2] = p.transmission_tint * ((1.0 - fd.max_element()) * r.value * weight);
             }
         }
         lobes
@@ -430,8 +433,8 @@ impl Layered {
             }
             TRANSMISSION if self.specular_smooth() => {
                 let fd = self.dielectric_fresnel(wo.z);
-                let weight =
-                    p.base * ((1.0 - p.metallic) * p.transmission * (1.0 - fd.max_element()));
+                let weight = p.transmission_tint
+                    * ((1.0 - p.metallic) * p.transmission * (1.0 - fd.max_element()));
                 let (wi, scale, kind) = if p.thin {
                     (-wo, 1.0, Lobe::StraightTransmission)
                 } else {
@@ -492,7 +495,7 @@ impl Layered {
         }
         let wo = if wo.z < 0.0 { -wo } else { wo };
         let fd = self.dielectric_fresnel(wo.z);
-        p.base
+        p.transmission_tint
             * ((1.0 - p.metallic)
                 * p.transmission
                 * (1.0 - fd.max_element())
@@ -513,11 +516,11 @@ impl Layered {
         let below = under * scaling;
         let fd = self.dielectric_fresnel(cos);
         let specular = (fd * (1.0 - p.metallic) + self.metal_fresnel(cos) * p.metallic) * below;
-        let rest = p.base * ((1.0 - p.metallic) * (1.0 - fd.max_element()) * below);
+        let rest = (1.0 - p.metallic) * (1.0 - fd.max_element()) * below;
         [
-            rest * (1.0 - p.transmission) + sheen * under,
+            p.base * (rest * (1.0 - p.transmission)) + sheen * under,
             specular + Vec3::splat(c),
-            rest * p.transmission,
+            p.transmission_tint * (rest * p.transmission),
         ]
     }
 }

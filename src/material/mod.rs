@@ -601,6 +601,7 @@ fn layered_params(
         alpha,
         anisotropy_direction,
         transmission,
+        transmission_tint: m.transmission_color.unwrap_or(base),
         thin: m.volume.is_none(),
         eta,
         exact: m.transmits(),
@@ -640,6 +641,7 @@ fn dielectric_bsdf(
     let r = roughness.clamp(0.0, 1.0);
     let alpha = r * r;
     let ior = if m.ior > 0.0 { m.ior } else { f32::INFINITY };
+    let tint = m.transmission_color.unwrap_or(base);
     Some(match m.volume {
         Some(_) => {
             let eta = if ctx.front {
@@ -647,9 +649,9 @@ fn dielectric_bsdf(
             } else {
                 ctx.outside_ior / ior
             };
-            Bsdf::Dielectric(Dielectric::new(eta, alpha, base))
+            Bsdf::Dielectric(Dielectric::new(eta, alpha, tint))
         }
-        None => Bsdf::ThinDielectric(ThinDielectric::new(ior / ctx.outside_ior, alpha, base)),
+        None => Bsdf::ThinDielectric(ThinDielectric::new(ior / ctx.outside_ior, alpha, tint)),
     })
 }
 

@@ -573,6 +573,7 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
         let unit = |x: f32| (0.0..=1.0).contains(&x);
         let colour = |c: Vec3| c.is_finite() && c.min_element() >= 0.0;
         let extensions_ok = unit(m.transmission)
+            && m.transmission_color.is_none_or(colour)
             && m.clearcoat_normal_scale.is_finite()
             && m.volume.is_none_or(|v| colour(v.absorption))
             && unit(m.specular.weight)

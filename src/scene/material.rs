@@ -50,6 +50,10 @@ pub struct Material {
     pub transmission: f32,
     #[serde(default)]
     pub transmission_texture: Option<TextureRef>,
+    /// The colour transmitted light is tinted by at each crossing; `None`: the base colour
+    /// (glTF's rule). UsdPreviewSurface glass is untinted (white).
+    #[serde(default)]
+    pub transmission_color: Option<Vec3>,
     /// The material bounds a volume (KHR_materials_volume with a thickness): light refracts
     /// into it and is absorbed inside. `None`: a thin wall, which transmits without bending.
     #[serde(default)]
@@ -182,6 +186,7 @@ impl Default for Material {
             clearcoat_normal_scale: 1.0,
             transmission: 0.0,
             transmission_texture: None,
+            transmission_color: None,
             volume: None,
             specular: Specular::default(),
             sheen: None,

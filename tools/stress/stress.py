@@ -58,6 +58,8 @@ class Stress:
         self.cornell_path = self.work / "cornell.lucerna"
         run([lt.BINARY, "convert", str(ROOT / "scenes/cornell-box/cornell-box.gltf"),
              "-o", str(self.cornell_path)])
+        self.glass_path = self.work / "glass-box.lucerna"
+        run([lt.BINARY, "convert", str(ROOT / "scenes/glass-box/glass-box.gltf"), "-o", str(self.glass_path)])
         self.rendered = {}
 
     def cornell(self):
@@ -529,6 +531,83 @@ def memory_estimate(s):
     return figures
 
 
+def glass(**fields):
+    """A glass material: smooth, ior 1.5, bounding a clear volume (fields override)."""
+    return {"model": "gltf_pbr", "base_color": [1, 1, 1, 1], "metallic": 0.0, "roughness": 0.0, "ior": 1.5,
+            "transmission": 1.0, "volume": {"absorption": [0.0, 0.0, 0.0]}, **fields}
+
+
+def glass_index_matched(s):
+    """A glass ball of ior 1.0 (nothing reflects or bends; every path enters and leaves a
+    volume) is invisible: the box renders as without it"""
+    return s.against_twin(spheres_scene(s, "glass-ior-1", [("glass", glass(ior=1.0))]),
+                          spheres_scene(s, "no-spheres", []))
+
+
+def glass_extremes(s):
+    """Glass balls of ior 3 (total internal reflection past 19.5 degrees), thin walls of ior 3,
+    roughness 1, strong absorption and ior 1.0001 render finite; nearly smooth rough glass
+    (GGX alpha 1.2e-3, just above the delta threshold: D peaks near 2e5) renders like smooth
+    glass"""
+    s.render(spheres_scene(s, "glass-extremes", [
+        ("dense", glass(ior=3.0)), ("thin-dense", glass(ior=3.0, volume=None)),
+        ("rough", glass(ior=3.0, roughness=1.0)), ("absorbing", glass(volume={"absorption": [5.0, 40.0, 300.0]})),
+        ("almost-matched", glass(ior=1.0001))]))
+    return s.against_twin(spheres_scene(s, "glass-nearly-smooth", [("g", glass(roughness=0.035))]),
+                          spheres_scene(s, "glass-smooth", [("g", glass())]))
+
+
+def moved_glass(scale, offset):
+    def case(s):
+        scene = lt.SceneFile(s.glass_path)
+        m = scene.manifest
+        for inst in m["instances"]:
+            inst["transform"] = affine(inst["transform"], scale, offset)
+        for sphere in m["spheres"]:
+            sphere["centre"] = [scale * c + offset for c in sphere["centre"]]
+            sphere["radius"] *= scale
+        for cam in m["cameras"]:
+            cam["transform"] = affine(cam["transform"], scale, offset)
+            cam["clip_near"] *= scale
+            cam["focus_distance"] *= scale
+        for mat in m["materials"]:
+            if mat.get("volume"):
+                mat["volume"]["absorption"] = [a / scale for a in mat["volume"]["absorption"]]
+        return s.against_twin(scene.write(s.work / f"glass-{scale:g}-{offset:g}.lucerna"), s.glass_path)
+    case.__doc__ = (f"The glass box (refracting ball, rough slab, thin pane) {offset:g} units from the origin "
+                    "renders like the original (paths through glass diverge with rounding, so only within the "
+                    "noise)")
+    return case
+
+
+def glass_grazing(s):
+    """A thin glass pane and a 1 cm rough glass slab nearly containing the camera's view
+    axis (rays meet them at up to 89.8 degrees: Fresnel near 1, refraction at the critical
+    angle, TIR inside the slab) render finite"""
+    scene = s.cornell()
+    m = scene.manifest
+    thin = scene.add_material("thin", **glass(volume=None))
+    rough = scene.add_material("rough", **glass(roughness=0.4))
+    tilt = math.radians(0.2)
+    # Planes through the camera's height, rising 0.2 degrees over the depth of the box.
+    y0, z0, z1 = 0.2, -0.5, 0.6
+    def quad(y, x0, x1):
+        return [[x0, y, z0], [x1, y, z0], [x1, y + (z1 - z0) * math.tan(tilt), z1], [x0, y + (z1 - z0) * math.tan(tilt), z1]]
+    pane = quad(y0, 0.0, 0.28)
+    scene.add_mesh("pane", pane, [[0, 1, 2], [0, 2, 3]], thin)
+    bottom, top = quad(y0 + 0.05, 0.28, 0.56), quad(y0 + 0.06, 0.28, 0.56)
+    slab = bottom + top
+    faces = [[0, 2, 1], [0, 3, 2], [4, 5, 6], [4, 6, 7], [0, 1, 5], [0, 5, 4], [1, 2, 6], [1, 6, 5],
+             [2, 3, 7], [2, 7, 6], [3, 0, 4], [3, 4, 7]]
+    scene.add_mesh("slab", slab, faces, rough)
+    cam = m["cameras"][0]
+    t = cam["transform"]
+    cam["transform"] = t[:12] + [t[12], y0 + 0.0005, t[14], 1.0]
+    path = scene.write(s.work / "glass-grazing.lucerna")
+    _, _, figures = s.render(path)
+    return figures
+
+
 def parse_bytes(text):
     number, unit = text.split()
     return float(number) * {"B": 1, "KiB": 2 ** 10, "MiB": 2 ** 20, "GiB": 2 ** 30, "TiB": 2 ** 40}[unit]
@@ -558,6 +637,12 @@ CASES = [
     ("bad-values", bad_values, True),
     ("memory-limit", memory_limit, True),
     ("memory-estimate", memory_estimate, False),
+    ("glass-index-matched", glass_index_matched, True),
+    ("glass-extremes", glass_extremes, True),
+    ("glass-far-1e5", moved_glass(1.0, 1e5), False),
+    ("glass-far-1e7", moved_glass(1.0, 1e7), True),
+    ("glass-scaled-1e-3", moved_glass(1e-3, 0.0), False),
+    ("glass-grazing", glass_grazing, True),
 ]
 
 

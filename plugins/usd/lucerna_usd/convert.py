@@ -213,7 +213,8 @@ class Converter:
         double_sided = bool(gprim.GetDoubleSidedAttr().Get(self.time))
         material = self._material(prim, inherited, double_sided)
         if material is None:
-            material = self.materials.display_color(self._constant_display_color(gprim), double_sided)
+            material = self.materials.display_color(self._constant_display_color(gprim), double_sided,
+                                                    self._constant_display_opacity(gprim))
         if prim.IsA(UsdGeom.Sphere):
             radius = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time))
             return [Group("sphere", (radius, material[0], path))]
@@ -223,6 +224,14 @@ class Converter:
         triangles = np.array([[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces])
         mesh = self.writer.add_mesh(path, material[0], corners, triangles)
         return [Group("mesh", (mesh, path))]
+
+    def _constant_display_opacity(self, gprim):
+        pv = gprim.GetDisplayOpacityPrimvar()
+        if pv and pv.HasAuthoredValue() and pv.GetInterpolation() == UsdGeom.Tokens.constant:
+            values = pv.ComputeFlattened(self.time)
+            if values:
+                return values[0]
+        return None
 
     def _constant_display_color(self, gprim):
         pv = gprim.GetDisplayColorPrimvar()
@@ -293,7 +302,7 @@ class Converter:
         for name, faces, mat in parts:
             if mat is None:
                 color = self._constant_display_color(mesh)
-                mat = self.materials.display_color(color, double_sided)
+                mat = self.materials.display_color(color, double_sided, self._constant_display_opacity(mesh))
                 color_primvar = None if color is not None else "displayColor"
                 mat = (mat[0], None, color_primvar)
             index, st_name, color_primvar = mat

@@ -10,7 +10,15 @@ scaled, biased, swizzled or decoded differently is baked to linear float texels.
 
 clearcoat and clearcoatRoughness become the material's clear coat (ior 1.5, as both
 UsdPreviewSurface and the renderer fix it); useSpecularWorkflow makes specularColor the
-dielectric's reflectance at normal incidence (white at grazing), metallic unused."""
+dielectric's reflectance at normal incidence (white at grazing), metallic unused; ior sets
+the dielectric's reflectance otherwise.
+
+opacity follows the specification's opacityMode: "transparent" (the default) makes
+opacity < 1 transmission, 1 - opacity of the dielectric base, untinted (UsdPreviewSurface has
+no transmission colour): a volume that refracts by `ior` (a thin wall when ior is 1);
+"presence" makes it coverage (stochastic blending); opacityThreshold > 0 makes it a cut-out
+in either mode. A gprim without a material shows displayColor, and displayOpacity as
+coverage."""
 
 import math
 
@@ -103,15 +111,18 @@ class MaterialConverter:
             self._cache[key] = self._convert(material, double_sided)
         return self._cache[key]
 
-    def display_color(self, color, double_sided):
+    def display_color(self, color, double_sided, opacity=None):
         """The material of a mesh without a bound material: UsdPreviewSurface defaults with
-        `color` (a constant displayColor, or None for per-vertex colours) as diffuse."""
+        `color` (a constant displayColor, or None for per-vertex colours) as diffuse, and a
+        constant displayOpacity below 1 as coverage."""
         rgb = tuple(float(c) for c in color) if color is not None else (1.0, 1.0, 1.0)
-        key = ("displayColor", rgb, double_sided)
+        alpha = 1.0 if opacity is None else min(max(float(opacity), 0.0), 1.0)
+        key = ("displayColor", rgb, alpha, double_sided)
         if key not in self._cache:
+            fields = {"alpha_mode": "blend"} if alpha < 1.0 else {}
             index = self.writer.add_material(default_material(
-                "displayColor", base_color=[*rgb, 1.0], metallic=0.0, roughness=0.5,
-                double_sided=double_sided))
+                "displayColor", base_color=[*rgb, alpha], metallic=0.0, roughness=0.5,
+                double_sided=double_sided, **fields))
             self._cache[key] = (index, None, None)
         return self._cache[key]
 
@@ -253,27 +264,42 @@ class MaterialConverter:
             st_names.append(source.st_name)
             return {"texture": texture_index, "tex_coord": 0, "transform": source.transform}
 
-        # Base colour and opacity.
+        # Base colour and opacity: coverage (a cut-out, or presence), or transmission.
         kind, diffuse = sources["diffuseColor"]
         okind, opacity = sources["opacity"]
+        threshold = float(sources["opacityThreshold"][1]) if sources["opacityThreshold"][0] == "value" else 0.0
+        mode = str(self._value(shader, "opacityMode", "transparent"))
+        if mode not in ("transparent", "presence"):
+            self.warn(name, f"unknown opacityMode {mode!r}: 'transparent' is used")
+            mode = "transparent"
+        see_through = okind == "texture" or float(opacity if okind == "value" else 1.0) < 1.0
+        coverage = see_through and (threshold > 0.0 or mode == "presence")
+        transmits = see_through and not coverage
         rgb = [1.0, 1.0, 1.0] if kind != "value" else [float(c) for c in diffuse]
-        alpha = 1.0 if okind != "value" else float(opacity)
+        alpha = float(opacity) if okind == "value" and coverage else 1.0
         if kind == "primvar":
             color_primvar = diffuse
-        if kind == "texture" or okind == "texture":
+        coverage_texture = okind == "texture" and coverage
+        if kind == "texture" or coverage_texture:
             index, src = self._base_color_texture(
                 diffuse if kind == "texture" else None,
-                opacity if okind == "texture" else None,
+                opacity if coverage_texture else None,
                 None if kind == "texture" else rgb, name)
             out["base_color_texture"] = ref(index, src)
             if kind == "texture":
                 rgb = [1.0, 1.0, 1.0]
         out["base_color"] = [*rgb, alpha]
-        threshold = float(sources["opacityThreshold"][1]) if sources["opacityThreshold"][0] == "value" else 0.0
-        if threshold > 0.0:
+        if coverage and threshold > 0.0:
             out["alpha_mode"] = {"mask": {"cutoff": threshold}}
-        elif okind == "texture" or alpha < 1.0:
+        elif coverage:
             out["alpha_mode"] = "blend"
+        if transmits:
+            if okind == "texture":
+                out["transmission"] = 1.0
+                out["transmission_texture"] = ref(self._transmission_texture(opacity, name), opacity)
+            else:
+                out["transmission"] = 1.0 - min(max(float(opacity), 0.0), 1.0)
+            out["transmission_color"] = [1.0, 1.0, 1.0]
 
         # Metallic and roughness: G and B of one texture.
         mk, metallic = sources["metallic"]
@@ -301,6 +327,8 @@ class MaterialConverter:
 
         ik, ior = sources["ior"]
         out["ior"] = float(ior) if ik == "value" else 1.5
+        if transmits and out["ior"] != 1.0:
+            out["volume"] = {"absorption": [0.0, 0.0, 0.0]}
         if sources["useSpecularWorkflow"][0] == "value" and int(sources["useSpecularWorkflow"][1]) == 1:
             sk, spec = sources["specularColor"]
             if sk != "value":
@@ -346,6 +374,12 @@ class MaterialConverter:
         if opacity is not None:
             out[..., 3] = images.resample(opacity.values(1), shape)[..., 0]
         return self.writer.add_texture(name + ":base_color", out, src.wrap), src
+
+    def _transmission_texture(self, source, name):
+        """1 - opacity in R (the transmission texture's channel)."""
+        out = np.ones((*source.image.shape, 4), np.float32)
+        out[..., 0] = 1.0 - np.clip(source.values(1)[..., 0], 0.0, 1.0)
+        return self.writer.add_texture(name + ":transmission", out, source.wrap)
 
     def _color_texture(self, source, name):
         if (source.plain and source.srgb and source.image.raw8 is not None

@@ -112,12 +112,57 @@ def test_metallic_and_roughness_from_two_images_share_one_texture(stage_file, co
     assert (m["metallic"], m["roughness"]) == (1.0, 1.0)
 
 
-def test_opacity_threshold_masks_and_opacity_blends(stage_file, converted, tmp_path):
+def test_opacity_threshold_masks_and_presence_blends(stage_file, converted, tmp_path):
     s = converted(stage_file(stage("float inputs:opacity = 0.3\n float inputs:opacityThreshold = 0.5")))
     assert material(s)["alpha_mode"] == {"mask": {"cutoff": 0.5}}
     assert material(s)["base_color"][3] == pytest.approx(0.3)
-    s = converted(stage_file(stage("float inputs:opacity = 0.3"), "blend.usda"))
+    assert material(s).get("transmission", 0.0) == 0.0
+    s = converted(stage_file(stage('float inputs:opacity = 0.3\n uniform token inputs:opacityMode = "presence"'),
+                             "blend.usda"))
     assert material(s)["alpha_mode"] == "blend"
+    assert material(s)["base_color"][3] == pytest.approx(0.3)
+
+
+def test_transparent_opacity_is_glass(stage_file, converted, tmp_path):
+    """opacity < 1 in the default opacityMode is transmission (the specification's glass):
+    untinted, refracting by the ior."""
+    s = converted(stage_file(stage("float inputs:opacity = 0.2\n float inputs:ior = 1.33\n"
+                                   " color3f inputs:diffuseColor = (0.8, 0.1, 0.1)")))
+    m = material(s)
+    assert m["alpha_mode"] == "opaque" and m["base_color"][3] == 1.0
+    assert m["transmission"] == pytest.approx(0.8)
+    assert m["transmission_color"] == [1.0, 1.0, 1.0]
+    assert m["volume"] == {"absorption": [0.0, 0.0, 0.0]} and m["ior"] == pytest.approx(1.33)
+    # ior 1: a thin wall, which does not bend light.
+    s = converted(stage_file(stage("float inputs:opacity = 0.0\n float inputs:ior = 1.0"), "thin.usda"))
+    assert material(s)["transmission"] == 1.0 and material(s).get("volume") is None
+    # A texture on opacity: transmission 1 - opacity in the R channel.
+    write_image(tmp_path / "mask.png", np.array([[[51], [255]]]))
+    s = converted(stage_file(stage(
+        "float inputs:opacity.connect = </World/M/T.outputs:r>",
+        texture("T", "mask.png", "float outputs:r", 'token inputs:sourceColorSpace = "raw"')), "tex.usda"))
+    m = material(s)
+    assert m["transmission"] == 1.0 and m["alpha_mode"] == "opaque"
+    t = texels(s, m["transmission_texture"])
+    assert t[0, :, 0] == pytest.approx([0.8, 0.0], abs=1e-3)
+
+
+DISPLAY_OPACITY = '''def Xform "World" {
+    def Mesh "Quad" {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+        color3f[] primvars:displayColor = [(0.2, 0.4, 0.6)] (interpolation = "constant")
+        float[] primvars:displayOpacity = [0.25] (interpolation = "constant")
+    }
+}
+'''
+
+
+def test_display_opacity_is_coverage(stage_file, converted):
+    s = converted(stage_file(DISPLAY_OPACITY))
+    m = s["materials"][s.mesh("/World/Quad")["material"]]
+    assert m["alpha_mode"] == "blend" and m["base_color"] == pytest.approx([0.2, 0.4, 0.6, 0.25])
 
 
 def test_opacity_from_the_diffuse_texture_alpha(stage_file, converted, tmp_path):
