@@ -22,7 +22,7 @@ use crate::geometry::{
     ALPHA_TESTED, Bvh, CULL_BACK, Hit, NOT_PLACED, Primitive, PrimitiveHit, quadric, sphere,
 };
 use crate::integrator::LightSelect;
-use crate::light::emission_texture::EmissionPyramid;
+use crate::light::emission_texture::{self, EmissionPyramid, TriangleEmission};
 use crate::light::environment::{Environment, EnvironmentMap};
 use crate::light::{Light, LightSet, QuadricLight, SphereLight, TriangleLight};
 use crate::material::{self, SurfaceAttributes};
@@ -31,6 +31,7 @@ use crate::plan::SceneFeatures;
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
 use glam::{Affine3A, DMat3, DMat4, DVec3, Mat3A, Vec2, Vec3, Vec4};
+use std::sync::Arc;
 
 /// World space to render space: `(p - centre) * scale`, `scale` a power of two.
 #[derive(Clone, Copy, Debug)]
@@ -294,29 +295,86 @@ impl<'t> TexturedEmission<'t> {
         }
     }
 
-    /// Mean emitted radiance of material `m` over the texture coordinates of `uvs` (their
-    /// bounding box; the whole texture for `None`), as a grey of the right luminance.
-    fn mean(&mut self, m: &Material, uvs: Option<[Vec2; 3]>) -> Vec3 {
-        let Some(slot) = m.emissive_texture else {
-            return m.emissive;
-        };
+    /// The pyramid of material `m`'s emissive texture and the texture coordinates `uvs`
+    /// after its texture transform, or `None` for untextured emission.
+    fn footprint(
+        &mut self,
+        m: &Material,
+        uvs: Option<[Vec2; 3]>,
+    ) -> Option<(&EmissionPyramid, Option<[Vec2; 3]>)> {
+        let slot = m.emissive_texture?;
         let textures = self.textures;
         let pyramid = self
             .pyramids
             .entry((slot.texture, m.emissive.to_array().map(f32::to_bits)))
             .or_insert_with(|| EmissionPyramid::new(&textures[slot.texture as usize], m.emissive));
+        let uvs = uvs.map(|uvs| uvs.map(|uv| slot.transform.map_or(uv, |t| t.apply(uv))));
+        Some((pyramid, uvs))
+    }
+
+    /// Mean emitted radiance of material `m` over the texture coordinates of `uvs` (their
+    /// bounding box; the whole texture for `None`), as a grey of the right luminance.
+    fn mean(&mut self, m: &Material, uvs: Option<[Vec2; 3]>) -> Vec3 {
+        let Some((pyramid, uvs)) = self.footprint(m, uvs) else {
+            return m.emissive;
+        };
         let (lo, hi) = match uvs {
-            Some(uvs) => {
-                let uvs = uvs.map(|uv| slot.transform.map_or(uv, |t| t.apply(uv)));
-                (
-                    uvs[0].min(uvs[1]).min(uvs[2]),
-                    uvs[0].max(uvs[1]).max(uvs[2]),
-                )
-            }
+            Some(uvs) => (
+                uvs[0].min(uvs[1]).min(uvs[2]),
+                uvs[0].max(uvs[1]).max(uvs[2]),
+            ),
             None => (Vec2::ZERO, Vec2::ONE),
         };
         Vec3::splat(pyramid.mean_over(lo, hi))
     }
+
+    /// The subdivision a triangle with texture coordinates `uvs` asks for (0 for
+    /// untextured emission).
+    fn depth(&mut self, m: &Material, uvs: [Vec2; 3]) -> u32 {
+        self.footprint(m, Some(uvs))
+            .and_then(|(pyramid, uvs)| Some(TriangleEmission::depth_for(pyramid, uvs?)))
+            .unwrap_or(0)
+    }
+
+    /// The sampling tree of a triangle with texture coordinates `uvs`, subdivided at most
+    /// `max_depth` times.
+    fn tree(
+        &mut self,
+        m: &Material,
+        uvs: [Vec2; 3],
+        max_depth: u32,
+    ) -> Option<Arc<TriangleEmission>> {
+        let (pyramid, uvs) = self.footprint(m, Some(uvs))?;
+        TriangleEmission::new(pyramid, uvs?, max_depth).map(Arc::new)
+    }
+}
+
+/// The most memory the sampling trees of textured emitting triangles may take, in floats
+/// (16 MiB): over it, every tree is subdivided less deeply.
+const EMISSION_TREE_FLOATS: usize = 4 << 20;
+
+/// Floats of a sampling tree of `depth` levels.
+fn tree_floats(depth: u32) -> usize {
+    if depth == 0 {
+        0
+    } else {
+        ((1usize << (2 * (depth + 1))) - 1) / 3
+    }
+}
+
+/// The deepest subdivision that keeps trees of the wanted `depths` within
+/// [`EMISSION_TREE_FLOATS`].
+fn tree_depth_limit(depths: &[u32]) -> u32 {
+    (0..=emission_texture::MAX_DEPTH)
+        .rev()
+        .find(|&limit| {
+            depths
+                .iter()
+                .map(|&d| tree_floats(d.min(limit)))
+                .sum::<usize>()
+                <= EMISSION_TREE_FLOATS
+        })
+        .unwrap_or(0)
 }
 
 /// The BVH intersection flags of primitives made of material `m`: back faces are culled
@@ -466,13 +524,28 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
             .map_or(0, |t| t.width as u64 * t.height as u64),
         _ => 0,
     };
+    // Sampling trees of textured emitting triangles: at most the budget.
+    let textured_emitters: u64 = scene
+        .instances
+        .iter()
+        .map(|inst| &scene.meshes[inst.mesh as usize])
+        .filter(|mesh| {
+            let m = &scene.materials[mesh.material as usize];
+            m.is_emissive() && m.emissive_texture.is_some()
+        })
+        .map(|mesh| mesh.triangles.len() as u64)
+        .sum();
+    let trees = (textured_emitters * tree_floats(emission_texture::MAX_DEPTH) as u64)
+        .min(EMISSION_TREE_FLOATS as u64)
+        * 4;
     MemoryEstimate {
         scene: scene.data_bytes(),
         geometry,
         bvh,
         // The environment's sampling distribution holds about two floats a texel.
         lights: emitters * (size_of::<Light>() as u64 + LIGHT_SELECTION_BYTES)
-            + environment_texels * 8,
+            + environment_texels * 8
+            + trees,
         film: 0,
     }
 }
@@ -592,24 +665,36 @@ fn area_lights(
     let mut lights = Vec::new();
     let mut prim_light = vec![NO_LIGHT; prims.len()];
     let mut textured = TexturedEmission::new(textures);
+    // The texture coordinates of an emitting triangle with an emissive texture.
+    let texture_uvs = |r: &PrimRef, m: &Material| match (*r, m.emissive_texture) {
+        (PrimRef::Triangle { mesh, tri }, Some(slot)) => {
+            let mesh = &meshes[mesh as usize];
+            let set = (slot.tex_coord as usize).min(1);
+            Some(mesh.triangles[tri as usize].map(|v| {
+                mesh.uvs[set]
+                    .as_ref()
+                    .map_or(Vec2::ZERO, |uv| uv[v as usize])
+            }))
+        }
+        _ => None,
+    };
+    // How deeply textured triangles may be subdivided for sampling, within the budget.
+    let wanted: Vec<u32> = refs
+        .iter()
+        .filter_map(|r| {
+            let m = &surfaces_materials[material_of(r) as usize];
+            let uvs = texture_uvs(r, m).filter(|_| m.is_emissive())?;
+            Some(textured.depth(m, uvs))
+        })
+        .collect();
+    let max_depth = tree_depth_limit(&wanted);
     for (i, (prim, r)) in prims.iter().zip(refs).enumerate() {
         let m = &surfaces_materials[material_of(r) as usize];
         if !m.is_emissive() {
             continue;
         }
         prim_light[i] = lights.len() as u32;
-        let uvs = match (*r, m.emissive_texture) {
-            (PrimRef::Triangle { mesh, tri }, Some(slot)) => {
-                let mesh = &meshes[mesh as usize];
-                let set = (slot.tex_coord as usize).min(1);
-                Some(mesh.triangles[tri as usize].map(|v| {
-                    mesh.uvs[set]
-                        .as_ref()
-                        .map_or(Vec2::ZERO, |uv| uv[v as usize])
-                }))
-            }
-            _ => None,
-        };
+        let uvs = texture_uvs(r, m);
         let mean_radiance = textured.mean(m, uvs);
         lights.push(match *prim {
             Primitive::Triangle(p) => {
@@ -621,6 +706,7 @@ fn area_lights(
                     area: 0.5 * n.length(),
                     two_sided: m.double_sided,
                     mean_radiance,
+                    emission: uvs.and_then(|uvs| textured.tree(m, uvs, max_depth)),
                 })
             }
             Primitive::Sphere { centre, radius } => Light::Sphere(SphereLight {

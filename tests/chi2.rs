@@ -10,6 +10,7 @@ use lucerna::geometry::ray::Ray;
 use lucerna::geometry::sphere;
 use lucerna::geometry::triangle::{RayShear, TriangleBlock, intersect};
 use lucerna::integrator::LightSampling;
+use lucerna::light::emission_texture::{self, EmissionPyramid, TriangleEmission};
 use lucerna::light::environment::{Environment, EnvironmentMap};
 use lucerna::light::{Light, QuadricLight, SphereLight, TriangleLight};
 use lucerna::material::Bsdf;
@@ -151,7 +152,156 @@ fn triangle_light(two_sided: bool) -> TriangleLight {
         area: 0.5 * n.length(),
         two_sided,
         mean_radiance: Vec3::ONE,
+        emission: None,
     }
+}
+
+/// An emissive texture of 256² texels: a bright 24 × 12 patch and a faint dot on black
+/// (`background` 0), or on a dim grey.
+fn patch_texture(background: f32) -> Texture {
+    let (w, h) = (256u32, 256u32);
+    let mut texels = vec![[background, background, background, 1.0]; (w * h) as usize];
+    for y in 40..52 {
+        for x in 60..84 {
+            texels[(y * w + x) as usize] = [40.0, 30.0, 20.0, 1.0];
+        }
+    }
+    texels[(150 * w + 30) as usize] = [2.0, 2.0, 2.0, 1.0];
+    Texture {
+        name: "patch".into(),
+        width: w,
+        height: h,
+        texels: Arc::new(Texels::RgbaF32(texels)),
+        wrap_u: Wrap::Repeat,
+        wrap_v: Wrap::Repeat,
+        nearest: false,
+    }
+}
+
+/// Texture coordinates of [`triangle_light`]'s vertices on [`patch_texture`].
+const PATCH_UVS: [Vec2; 3] = [
+    Vec2::new(0.05, 0.05),
+    Vec2::new(0.95, 0.1),
+    Vec2::new(0.1, 0.9),
+];
+
+/// [`triangle_light`] showing `texture` with its samples following it.
+fn textured_triangle_light(texture: &Texture) -> TriangleLight {
+    let pyramid = EmissionPyramid::new(texture, Vec3::ONE);
+    let tree = TriangleEmission::new(&pyramid, PATCH_UVS, emission_texture::MAX_DEPTH)
+        .expect("a varied footprint of many texels gets a tree");
+    TriangleLight {
+        emission: Some(Arc::new(tree)),
+        ..triangle_light(false)
+    }
+}
+
+/// Light samples of a triangle with an emissive texture follow the texture: their points
+/// (barycentrics) have the tree's density, which `Light::pdf` reports, and that density is
+/// positive wherever the texture emits.
+#[test]
+fn textured_triangle_light_samples_follow_the_texture() {
+    for background in [0.0, 0.05] {
+        let texture = patch_texture(background);
+        let light = Light::Triangle(textured_triangle_light(&texture));
+        let Light::Triangle(t) = &light else {
+            unreachable!()
+        };
+        let tree = t.emission.as_deref().unwrap();
+        let label = format!("textured triangle light, background {background}");
+        let mut rng = Pcg32::new(11, (background * 100.0) as u64);
+        let corners = [Vec2::ZERO, Vec2::X, Vec2::Y];
+        let outcome = chi2::test(
+            &label,
+            // 60 cells a side, so that no cell edge lies on a sub-triangle's edge (at
+            // multiples of 1/32), where a sample on the edge would be counted in the cell
+            // beyond.
+            &chi2::Domain {
+                x: (0.0, 1.0),
+                y: (0.0, 1.0),
+                cells: (60, 60),
+            },
+            N,
+            |_| {
+                let (b, _) = tree.sample(u2(&mut rng));
+                Some((b.x as f64, b.y as f64))
+            },
+            |x, y| {
+                let b = Vec2::new(x as f32, y as f32);
+                if inside(corners, b) {
+                    2.0 * tree.density(b) as f64
+                } else {
+                    0.0
+                }
+            },
+        );
+        chi2::assert_passes(&label, &outcome);
+        // Through the light: the density a sample reports is the one `pdf` finds, and a
+        // point where the texture is black is never chosen.
+        let origin = Vec3::new(0.1, -0.2, 0.05);
+        for _ in 0..20_000 {
+            let Some(s) = light.sample(origin, None, LightSampling::Auto, u2(&mut rng)) else {
+                continue;
+            };
+            // The distance to the sampled point itself (the shadow ray's target is short
+            // of it by an offset, which moves the point across the plane).
+            let b = s.area_point.unwrap().1;
+            let y = t.p[0] * (1.0 - b.x - b.y) + t.p[1] * b.x + t.p[2] * b.y;
+            let pdf = light.pdf(origin, s.wi, (y - origin).length(), LightSampling::Auto);
+            assert!(
+                (pdf - s.pdf).abs() <= 2e-3 * s.pdf,
+                "{label}: pdf {pdf} vs sample {} at {b}",
+                s.pdf
+            );
+        }
+        // Wherever the triangle emits, the density is positive (the estimate is unbiased).
+        for _ in 0..200_000 {
+            let b = warp::square_to_uniform_triangle(u2(&mut rng));
+            let uv = PATCH_UVS[0] * (1.0 - b.x - b.y) + PATCH_UVS[1] * b.x + PATCH_UVS[2] * b.y;
+            if texture.sample(uv, false).x > 0.0 {
+                assert!(tree.density(b) > 0.0, "{label}: no samples at {b}, uv {uv}");
+            }
+        }
+    }
+}
+
+/// The emitted light a point receives, estimated through light samples that follow the
+/// texture and through uniform samples by area: the same mean (both are unbiased; the
+/// tree drops only sub-triangles that emit nothing) and far lower variance.
+#[test]
+fn textured_triangle_light_estimates_are_unbiased_and_better() {
+    let texture = patch_texture(0.0);
+    let light = Light::Triangle(textured_triangle_light(&texture));
+    let origin = Vec3::new(0.1, -0.2, 0.05);
+    let estimate = |sampling: LightSampling, seed: u64| {
+        let mut rng = Pcg32::new(13, seed);
+        let n = 400_000;
+        let (mut sum, mut sum2) = (0.0f64, 0.0f64);
+        for _ in 0..n {
+            let Some(s) = light.sample(origin, None, sampling, u2(&mut rng)) else {
+                continue;
+            };
+            let b = s.area_point.unwrap().1;
+            let uv = PATCH_UVS[0] * (1.0 - b.x - b.y) + PATCH_UVS[1] * b.x + PATCH_UVS[2] * b.y;
+            let x = texture.sample(uv, false).x as f64 / s.pdf as f64;
+            sum += x;
+            sum2 += x * x;
+        }
+        let mean = sum / n as f64;
+        let variance = sum2 / n as f64 - mean * mean;
+        (mean, (variance / n as f64).sqrt(), variance)
+    };
+    let (tree, tree_se, tree_var) = estimate(LightSampling::Auto, 1);
+    let (uniform, uniform_se, uniform_var) = estimate(LightSampling::Area, 2);
+    let se = (tree_se * tree_se + uniform_se * uniform_se).sqrt();
+    assert!(
+        (tree - uniform).abs() <= 4.0 * se,
+        "texture-following {tree} ± {tree_se}, uniform {uniform} ± {uniform_se}"
+    );
+    assert!(
+        tree_var < 0.05 * uniform_var,
+        "variance {tree_var} against uniform {uniform_var}"
+    );
 }
 
 /// Density of `light`'s samples from `origin` in direction `w`, by tracing to the light.

@@ -16,13 +16,35 @@
 //! [`FOOTPRINT_TEXELS`] texels a side, following the texture's wrap modes; so the whole
 //! preparation is linear in texels plus triangles. All values are non-negative sums, so a
 //! footprint averages to zero exactly when every texel it can read is black.
+//!
+//! Within a triangle whose footprint covers many texels, light samples follow the texture
+//! too ([`TriangleEmission`]): the triangle is split by midpoint subdivision into 4^d
+//! sub-triangles of equal area (d up to [`MAX_DEPTH`], each covering about
+//! [`LEAF_TEXELS`] texels or more), each weighted by its footprint's mean from the pyramid,
+//! and the weights are kept as a tree of sums. A sample descends the tree to a sub-triangle
+//! with probability proportional to its weight and takes a uniform point in it; the density
+//! at a point descends the same tree by the point's barycentrics. A sub-triangle of weight
+//! zero is never sampled, which is exact for the same reason as above. So a screen of two
+//! triangles showing a small bright logo sends its light samples to the logo, not across
+//! the black around it. Triangles whose sub-triangles differ little keep uniform sampling
+//! (no tree, no memory).
 
 use crate::color::luminance;
+use crate::sampling::warp::square_to_uniform_triangle;
 use crate::scene::{Texture, Wrap};
 use glam::{Vec2, Vec3};
 
 /// The widest a footprint is read, in texels of the level it is read at.
 const FOOTPRINT_TEXELS: usize = 16;
+
+/// The deepest subdivision of an emitting triangle: 4^5 = 1024 sub-triangles, a tree of
+/// 1365 sums (5.3 kB).
+pub const MAX_DEPTH: u32 = 5;
+/// The texels a sub-triangle's footprint covers at least (by area).
+const LEAF_TEXELS: f32 = 16.0;
+/// Sub-triangles whose weights all lie within this factor of each other are sampled
+/// uniformly: the tree would gain little.
+const UNIFORM_SPREAD: f32 = 1.25;
 
 /// One level of the pyramid.
 struct Level {
@@ -83,6 +105,11 @@ impl EmissionPyramid {
         }
     }
 
+    /// Width and height of the texture in texels.
+    pub fn size(&self) -> (usize, usize) {
+        (self.levels[0].width, self.levels[0].height)
+    }
+
     /// Mean emitted luminance over the texels that lookups at texture coordinates inside
     /// the box `lo`..`hi` can read (bilinear reach included).
     pub fn mean_over(&self, lo: Vec2, hi: Vec2) -> f32 {
@@ -125,6 +152,163 @@ impl EmissionPyramid {
         } else {
             (sum / count as f64) as f32
         }
+    }
+}
+
+/// Light samples on one emitting triangle that follow its emissive texture (see the module
+/// doc). Positions are barycentrics (b1, b2): the point is p0 (1 - b1 - b2) + p1 b1 + p2 b2,
+/// and (b1, b2) are also coordinates in the triangle (0, 0), (1, 0), (0, 1), which the
+/// subdivision splits: child 0 at corner 0, child 1 at corner 1, child 2 at corner 2, child
+/// 3 the middle one, turned over.
+#[derive(Clone, Debug)]
+pub struct TriangleEmission {
+    depth: u32,
+    /// The sub-triangles' weights and their sums, level by level from the root: level l
+    /// starts at (4^l - 1) / 3, and node i of level l has children 4i..4i+3 of level l + 1.
+    sums: Vec<f32>,
+}
+
+/// Index of the first node of level `l` in [`TriangleEmission::sums`].
+#[inline]
+fn level_start(l: u32) -> usize {
+    ((1usize << (2 * l)) - 1) / 3
+}
+
+/// The child of a subdivided triangle holding local point `b`, and `b` in the child's own
+/// coordinates.
+#[inline]
+fn child_at(b: Vec2) -> (usize, Vec2) {
+    if b.x + b.y < 0.5 {
+        (0, 2.0 * b)
+    } else if b.x >= 0.5 {
+        (1, Vec2::new(2.0 * b.x - 1.0, 2.0 * b.y))
+    } else if b.y >= 0.5 {
+        (2, Vec2::new(2.0 * b.x, 2.0 * b.y - 1.0))
+    } else {
+        (3, Vec2::ONE - 2.0 * b)
+    }
+}
+
+/// Point `b` of child `c`, in the parent's coordinates ([`child_at`] undone).
+#[inline]
+fn from_child(c: usize, b: Vec2) -> Vec2 {
+    match c {
+        0 => 0.5 * b,
+        1 => Vec2::new(0.5 * (b.x + 1.0), 0.5 * b.y),
+        2 => Vec2::new(0.5 * b.x, 0.5 * (b.y + 1.0)),
+        _ => 0.5 * (Vec2::ONE - b),
+    }
+}
+
+impl TriangleEmission {
+    /// The sampling tree of a triangle whose vertices have texture coordinates `uvs` (the
+    /// texture transform applied) on `pyramid`'s texture, with subdivision at most
+    /// `max_depth`; `None` where uniform sampling is as good (a footprint of few texels,
+    /// or nearly even emission) or nothing is emitted.
+    pub fn new(pyramid: &EmissionPyramid, uvs: [Vec2; 3], max_depth: u32) -> Option<Self> {
+        let depth = Self::depth_for(pyramid, uvs).min(max_depth);
+        if depth == 0 {
+            return None;
+        }
+        let leaves = 1usize << (2 * depth);
+        let mut sums = vec![0.0f32; level_start(depth + 1)];
+        // Leaves in tree order: a leaf's index holds, two bits a level, the child taken at
+        // each level, the root's child in the highest bits.
+        let uv_at = |b: Vec2| uvs[0] * (1.0 - b.x - b.y) + uvs[1] * b.x + uvs[2] * b.y;
+        let first_leaf = level_start(depth);
+        for leaf in 0..leaves {
+            let corners = [Vec2::ZERO, Vec2::X, Vec2::Y].map(|mut b| {
+                for l in (0..depth).rev() {
+                    let c = (leaf >> (2 * (depth - 1 - l))) & 3;
+                    b = from_child(c, b);
+                }
+                uv_at(b)
+            });
+            let lo = corners[0].min(corners[1]).min(corners[2]);
+            let hi = corners[0].max(corners[1]).max(corners[2]);
+            sums[first_leaf + leaf] = pyramid.mean_over(lo, hi);
+        }
+        let weights = &sums[first_leaf..];
+        let (min, max) = weights
+            .iter()
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &w| {
+                (lo.min(w), hi.max(w))
+            });
+        if !(max > 0.0) || (min > 0.0 && max <= UNIFORM_SPREAD * min) {
+            return None;
+        }
+        for l in (0..depth).rev() {
+            let (start, below) = (level_start(l), level_start(l + 1));
+            for i in 0..(1usize << (2 * l)) {
+                let c = below + 4 * i;
+                sums[start + i] = sums[c] + sums[c + 1] + sums[c + 2] + sums[c + 3];
+            }
+        }
+        Some(Self { depth, sums })
+    }
+
+    /// The subdivision depth a triangle's footprint asks for: sub-triangles of at least
+    /// [`LEAF_TEXELS`] texels, at most [`MAX_DEPTH`] levels.
+    pub fn depth_for(pyramid: &EmissionPyramid, uvs: [Vec2; 3]) -> u32 {
+        let (w, h) = pyramid.size();
+        let texels = 0.5 * (uvs[1] - uvs[0]).perp_dot(uvs[2] - uvs[0]).abs() * (w * h) as f32;
+        if !(texels >= 4.0 * LEAF_TEXELS) {
+            return 0;
+        }
+        ((texels / LEAF_TEXELS).log2() / 2.0)
+            .floor()
+            .min(MAX_DEPTH as f32) as u32
+    }
+
+    /// A point (barycentrics) and its density relative to uniform sampling by area.
+    pub fn sample(&self, u: Vec2) -> (Vec2, f32) {
+        let mut ux = u.x;
+        let mut node = 0usize;
+        let mut path = [0usize; MAX_DEPTH as usize];
+        for (l, step) in path.iter_mut().enumerate().take(self.depth as usize) {
+            let first = level_start(l as u32 + 1) + 4 * node;
+            let children = &self.sums[first..first + 4];
+            let total: f32 = children.iter().sum();
+            let mut target = ux * total;
+            let mut chosen = None;
+            for (c, &w) in children.iter().enumerate() {
+                if w > 0.0 {
+                    chosen = Some(c);
+                    if target < w {
+                        break;
+                    }
+                    target -= w;
+                }
+            }
+            // Rounding can leave the target past the last child of weight: it is taken.
+            let c = chosen.unwrap_or(0);
+            ux = (target / children[c]).clamp(0.0, 1.0 - f32::EPSILON / 2.0);
+            *step = c;
+            node = 4 * node + c;
+        }
+        let mut b = square_to_uniform_triangle(Vec2::new(ux, u.y));
+        for &c in path[..self.depth as usize].iter().rev() {
+            b = from_child(c, b);
+        }
+        (b, self.relative_density(node))
+    }
+
+    /// Density at barycentrics `b` relative to uniform sampling by area.
+    pub fn density(&self, b: Vec2) -> f32 {
+        let mut local = b;
+        let mut node = 0usize;
+        for _ in 0..self.depth {
+            let (c, inner) = child_at(local);
+            local = inner;
+            node = 4 * node + c;
+        }
+        self.relative_density(node)
+    }
+
+    #[inline]
+    fn relative_density(&self, leaf: usize) -> f32 {
+        self.sums[level_start(self.depth) + leaf] / self.sums[0]
+            * (1usize << (2 * self.depth)) as f32
     }
 }
 

@@ -378,6 +378,7 @@ mod tests {
                 area: 0.5 * n.length(),
                 two_sided,
                 mean_radiance: Vec3::ONE,
+                emission: None,
             })
         };
         let sphere = |centre: Vec3, radius: f32, two_sided: bool, prim: u32| {

@@ -20,10 +20,12 @@ use crate::integrator::LightSampling;
 use crate::sampling::warp::{
     square_to_uniform_cone, square_to_uniform_sphere, square_to_uniform_triangle, uniform_cone_pdf,
 };
+use emission_texture::TriangleEmission;
 use environment::Environment;
 use glam::{Vec2, Vec3};
 pub use selection::LightSet;
 use std::f32::consts::PI;
+use std::sync::Arc;
 
 /// One light.
 #[derive(Clone, Debug)]
@@ -73,6 +75,42 @@ pub struct TriangleLight {
     pub two_sided: bool,
     /// Mean emitted radiance, for selection by power.
     pub mean_radiance: Vec3,
+    /// Where its emissive texture varies over many texels: the distribution of its light
+    /// samples over the triangle (`emission_texture`), used unless light sampling is
+    /// [`LightSampling::Area`] (uniform by area).
+    pub emission: Option<Arc<TriangleEmission>>,
+}
+
+impl TriangleLight {
+    /// The distribution of light samples over the triangle under `sampling`, where it
+    /// follows the emissive texture.
+    #[inline]
+    pub fn textured_sampling(&self, sampling: LightSampling) -> Option<&TriangleEmission> {
+        self.emission
+            .as_deref()
+            .filter(|_| sampling != LightSampling::Area)
+    }
+
+    /// Barycentrics (b1, b2) of point `y` of the triangle's plane, from the sub-triangles'
+    /// areas (cross products against the normal: accurate to rounding wherever `y` is,
+    /// unlike the normal equations), clamped into the triangle.
+    #[inline]
+    fn barycentrics(&self, y: Vec3) -> Vec2 {
+        let [p0, p1, p2] = self.p;
+        let (e1, e2, d) = (p1 - p0, p2 - p0, y - p0);
+        let twice_area = self.n.dot(e1.cross(e2));
+        if !(twice_area != 0.0) {
+            return Vec2::splat(1.0 / 3.0);
+        }
+        let b1 = (self.n.dot(d.cross(e2)) / twice_area).max(0.0);
+        let b2 = (self.n.dot(e1.cross(d)) / twice_area).max(0.0);
+        let sum = b1 + b2;
+        if sum > 1.0 {
+            Vec2::new(b1, b2) / sum
+        } else {
+            Vec2::new(b1, b2)
+        }
+    }
 }
 
 /// An emissive sphere, emitting outwards (and inwards when two-sided).
@@ -222,6 +260,13 @@ impl Light {
     ) -> Option<LightSample> {
         match self {
             Self::Triangle(t) => {
+                if let Some(tree) = t.textured_sampling(sampling) {
+                    let (b, density) = tree.sample(u);
+                    let y = t.p[0] * (1.0 - b.x - b.y) + t.p[1] * b.x + t.p[2] * b.y;
+                    let (mut s, to_solid_angle) = area_sample(p, y, t.n, t.two_sided, t.prim, b)?;
+                    s.pdf = to_solid_angle * density / t.area;
+                    return Some(s);
+                }
                 if sampling.triangles_by_solid_angle()
                     && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
                 {
@@ -363,17 +408,19 @@ impl Light {
     pub fn pdf(&self, p: Vec3, wi: Vec3, dist: f32, sampling: LightSampling) -> f32 {
         match self {
             Self::Triangle(t) => {
-                if sampling.triangles_by_solid_angle()
+                let tree = t.textured_sampling(sampling);
+                if tree.is_none()
+                    && sampling.triangles_by_solid_angle()
                     && let Some(omega) = solid_angle::triangle_uses_solid_angle(p, &t.p)
                 {
                     return 1.0 / omega;
                 }
                 let cos_light = t.n.dot(wi).abs();
-                if cos_light > 0.0 {
-                    dist * dist / (cos_light * t.area)
-                } else {
-                    0.0
+                if !(cos_light > 0.0) {
+                    return 0.0;
                 }
+                let density = tree.map_or(1.0, |tree| tree.density(t.barycentrics(p + wi * dist)));
+                density * dist * dist / (cos_light * t.area)
             }
             Self::Sphere(sp) => {
                 if sampling.spheres_by_cone()
@@ -447,6 +494,7 @@ mod tests {
             area: 2.0,
             two_sided: false,
             mean_radiance: Vec3::ONE,
+            emission: None,
         });
         let sphere = Light::Sphere(SphereLight {
             prim: 1,

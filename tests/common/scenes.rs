@@ -251,3 +251,56 @@ pub fn make_tall_block_a_mirror(scene: &mut Scene) {
     scene.materials.push(mirror);
     scene.meshes[tall].material = (scene.materials.len() - 1) as u32;
 }
+
+/// Makes the Cornell box's light a screen: an emissive texture of 128² texels, black but
+/// for a bright 56 × 40 patch and a dim 8 × 8 one, mapped once over the light's quad, with
+/// the emission scaled so that the light gives off what it did. Light samples that follow
+/// the texture (`light::emission_texture`) then differ from uniform ones.
+#[allow(dead_code)]
+pub fn make_the_light_a_screen(scene: &mut Scene) {
+    use lucerna::scene::{Texels, Texture, TextureRef, Wrap};
+    let light = scene
+        .instances
+        .iter()
+        .find(|i| i.name == "light")
+        .expect("the Cornell box has a light")
+        .mesh as usize;
+    let (w, h) = (128u32, 128u32);
+    let mut texels = vec![[0.0f32, 0.0, 0.0, 1.0]; (w * h) as usize];
+    let mut lit = 0.0f32;
+    for (x0, y0, sx, sy, value) in [(60, 20, 56, 40, 1.0f32), (20, 90, 8, 8, 0.3)] {
+        for y in y0..y0 + sy {
+            for x in x0..x0 + sx {
+                texels[(y * w + x) as usize] = [value, value, value, 1.0];
+                lit += value;
+            }
+        }
+    }
+    scene.textures.push(Texture {
+        name: "screen".into(),
+        width: w,
+        height: h,
+        texels: std::sync::Arc::new(Texels::RgbaF32(texels)),
+        wrap_u: Wrap::ClampToEdge,
+        wrap_v: Wrap::ClampToEdge,
+        nearest: false,
+    });
+    let mesh = &mut scene.meshes[light];
+    let (lo, hi) = mesh.positions.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    mesh.uvs[0] = Some(
+        mesh.positions
+            .iter()
+            .map(|p| glam::Vec2::new((p.x - lo.x) / (hi.x - lo.x), (p.z - lo.z) / (hi.z - lo.z)))
+            .collect(),
+    );
+    let m = &mut scene.materials[mesh.material as usize];
+    m.emissive *= (w * h) as f32 / lit;
+    m.emissive_texture = Some(TextureRef {
+        texture: (scene.textures.len() - 1) as u32,
+        tex_coord: 0,
+        transform: None,
+    });
+}
