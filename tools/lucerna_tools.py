@@ -170,6 +170,11 @@ class SceneFile:
                 arrays[key] = None if view is None else np.frombuffer(
                     buffer, dtype, view["count"] * width, view["offset"]).reshape(-1, width).copy()
             self.arrays.append(arrays)
+        # Texel bytes of each texture (4 bytes a texel for rgba8, 16 for rgba32f).
+        self.texels = []
+        for t in self.manifest.get("textures", []):
+            size = t["texels"]["count"] * (4 if t["encoding"] == "rgba8" else 16)
+            self.texels.append(buffer[t["texels"]["offset"]:t["texels"]["offset"] + size])
 
     @staticmethod
     def _view(mesh, key):
@@ -194,6 +199,11 @@ class SceneFile:
                     mesh["uvs"][int(key[3])] = view
                 else:
                     mesh[key] = view
+        for texture, texels in zip(manifest.get("textures", []), self.texels):
+            while len(blob) % 4:
+                blob.append(0)
+            texture["texels"] = {"offset": len(blob), "count": texture["texels"]["count"]}
+            blob += texels
         manifest["buffer"] = path.name + ".bin"
         manifest["buffer_bytes"] = len(blob)
         (path.parent / manifest["buffer"]).write_bytes(bytes(blob))
