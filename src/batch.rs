@@ -63,6 +63,9 @@ pub struct Task {
     /// Arguments of `lucerna render`.
     pub args: Vec<String>,
     pub log: PathBuf,
+    /// The render's settings (TOML), its resolution if the job gives one.
+    pub settings: String,
+    pub resolution: Option<String>,
 }
 
 /// How a frame ended.
@@ -89,6 +92,8 @@ pub struct FrameReport {
     pub nan_inf_discarded: Option<f64>,
     pub exit_code: Option<i32>,
     pub error: Option<String>,
+    /// Why an existing output was rendered again (settings changed, unreadable, ...).
+    pub note: Option<String>,
     pub log: PathBuf,
 }
 
@@ -106,8 +111,9 @@ pub struct Summary {
 
 /// Reads a job file and expands it into one task per frame; logs go to `logs`.
 pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
-    let text = std::fs::read_to_string(job_path)
-        .map_err(|e| Error::bad_input(job_path, "file", format!("cannot read: {e}")))?;
+    let text = crate::files::read_input(job_path)
+        .and_then(|b| String::from_utf8(b).map_err(|_| "not UTF-8 text".to_string()))
+        .map_err(|e| Error::bad_input(job_path, "file", e))?;
     let job: Job = toml::from_str(&text)
         .map_err(|e| Error::bad_input(job_path, "job", e.message().to_string()))?;
     if job.render.is_empty() {
@@ -192,26 +198,139 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
             let name = output
                 .file_name()
                 .map_or("frame".into(), |n| n.to_string_lossy().into_owned());
+            // Render index and frame make the name unique (outputs in different folders
+            // may share a file name).
+            let log = match frame {
+                Some(f) => logs.join(format!("render{i}.frame{f}.{name}.log")),
+                None => logs.join(format!("render{i}.{name}.log")),
+            };
+            if let Some(earlier) = tasks.iter().find(|t: &&Task| same_file(&t.output, &output)) {
+                return Err(bad(
+                    "output",
+                    format!(
+                        "{} is also the output of {}{}: two renders cannot write one file",
+                        output.display(),
+                        earlier.log.file_name().map_or(String::new(), |n| {
+                            n.to_string_lossy()
+                                .split('.')
+                                .next()
+                                .unwrap_or("")
+                                .to_string()
+                        }),
+                        earlier
+                            .frame
+                            .map_or(String::new(), |f| format!(" frame {f}"))
+                    ),
+                ));
+            }
             tasks.push(Task {
                 scene: scene.clone(),
                 frame,
-                log: logs.join(format!("{name}.log")),
+                log,
                 output,
                 args,
+                settings: settings_text.clone(),
+                resolution: render.resolution.clone(),
             });
         }
     }
     Ok(tasks)
 }
 
-/// What an existing output holds: `Some(true)` complete, `Some(false)` a checkpoint to
-/// resume, `None` nothing usable (absent or unreadable: rendered from the start).
-fn output_state(path: &Path) -> Option<bool> {
+/// Whether two output paths name one file (absolute, `.` and `..` resolved lexically, and
+/// through their directories' links where those exist).
+fn same_file(a: &Path, b: &Path) -> bool {
+    let normal = |p: &Path| {
+        let mut absolute = PathBuf::new();
+        for part in std::path::absolute(p)
+            .unwrap_or_else(|_| p.to_path_buf())
+            .components()
+        {
+            match part {
+                std::path::Component::ParentDir => {
+                    absolute.pop();
+                }
+                std::path::Component::CurDir => {}
+                other => absolute.push(other),
+            }
+        }
+        let dir = absolute
+            .parent()
+            .and_then(|d| std::fs::canonicalize(d).ok())
+            .unwrap_or_else(|| absolute.parent().unwrap_or(Path::new("")).to_path_buf());
+        dir.join(absolute.file_name().unwrap_or_default())
+    };
+    normal(a) == normal(b)
+}
+
+/// What an existing output is to the job.
+#[derive(Debug, PartialEq)]
+enum OutputState {
+    Absent,
+    /// Complete and made as the job asks: skipped.
+    Complete,
+    /// A checkpoint of this job's render: resumed.
+    Checkpoint,
+    /// Unreadable, or made otherwise than the job asks: rendered again from the start.
+    Stale(String),
+}
+
+/// Reads the output of `task` back whole (header and every pixel) and compares how it was
+/// made with what the job asks: settings, scene file (by content), frame and resolution.
+fn output_state(task: &Task) -> OutputState {
+    let path = &task.output;
     if !path.exists() {
-        return None;
+        return OutputState::Absent;
     }
-    let header = exr::read_header(path).ok()?;
-    header.number("lucerna/complete").map(|c| c == 1.0)
+    let (planes, header) = match exr::read(path) {
+        Ok(read) => read,
+        Err(e) => return OutputState::Stale(format!("the existing file is unreadable ({e})")),
+    };
+    let mut job = RenderOptions::default();
+    let mut made = RenderOptions::default();
+    if job.load_settings(&task.settings).is_err()
+        || made
+            .load_settings(header.text("lucerna/settings").unwrap_or_default())
+            .is_err()
+    {
+        return OutputState::Stale("its settings cannot be read".into());
+    }
+    let complete = header.number("lucerna/complete") == Some(1.0);
+    if let Some(what) = job.differs_from(&made) {
+        return OutputState::Stale(format!("its {what} differ from the job's"));
+    }
+    if complete
+        && job.time.is_none()
+        && job.noise_threshold.is_none()
+        && job.spp.is_some_and(|s| Some(s) != made.spp)
+    {
+        return OutputState::Stale(format!(
+            "it has {} samples per pixel, the job asks for {}",
+            made.spp.unwrap_or(0),
+            job.spp.unwrap_or(0)
+        ));
+    }
+    if let (Some(theirs), Some((_, ours))) = (
+        header.text("lucerna/scene_fingerprint"),
+        crate::ingest::scene_identity(task.scene.as_deref()),
+    ) && theirs != ours
+    {
+        return OutputState::Stale("the scene file has changed".into());
+    }
+    if header.number("lucerna/frame") != task.frame {
+        return OutputState::Stale("it is another frame".into());
+    }
+    if let Some(resolution) = &task.resolution {
+        let (w, h) = planes.display;
+        if !resolution.eq_ignore_ascii_case(&format!("{w}x{h}")) {
+            return OutputState::Stale(format!("it is {w}x{h}, the job asks for {resolution}"));
+        }
+    }
+    if complete {
+        OutputState::Complete
+    } else {
+        OutputState::Checkpoint
+    }
 }
 
 /// Runs `task` with the `lucerna` binary `exe`; `stop` (set by a signal) forwards SIGTERM
@@ -232,15 +351,24 @@ fn run_task(exe: &Path, task: &Task, stop: &AtomicBool) -> FrameReport {
         nan_inf_discarded: None,
         exit_code: None,
         error: None,
+        note: None,
         log: task.log.clone(),
     };
-    let state = output_state(&task.output);
-    if state == Some(true) {
+    let state = output_state(task);
+    if state == OutputState::Complete {
         report.status = Status::Skipped;
     } else {
         let mut args = task.args.clone();
-        if state == Some(false) {
-            args.push("--resume".into());
+        match state {
+            OutputState::Checkpoint => args.push("--resume".into()),
+            OutputState::Stale(why) => {
+                eprintln!(
+                    "lucerna: batch: rendering {} again: {why}",
+                    task.output.display()
+                );
+                report.note = Some(format!("rendered again: {why}"));
+            }
+            _ => {}
         }
         let start = Instant::now();
         match spawn_and_wait(exe, &args, &task.log, stop) {

@@ -13,8 +13,6 @@ use lucerna::world::World;
 use lucerna::{film, ingest, memory};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 #[derive(Parser)]
 #[command(
@@ -84,7 +82,7 @@ enum Command {
 struct LoadArgs {
     /// Frame of an animated scene: a USD time code (default: the stage's start time code);
     /// in glTF the time FRAME / fps seconds (default: the nodes' rest transforms).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_frame)]
     frame: Option<f64>,
     /// Frames per second of glTF animations.
     #[arg(long, default_value_t = ingest::DEFAULT_FPS, value_parser = parse_fps)]
@@ -92,6 +90,9 @@ struct LoadArgs {
     /// Convert a USD stage even if usd-core's validators report errors.
     #[arg(long)]
     no_validate: bool,
+    /// Seconds the USD plugin may take to convert a stage before it is stopped.
+    #[arg(long, default_value_t = ingest::DEFAULT_PLUGIN_TIMEOUT.as_secs_f64(), value_parser = parse_timeout)]
+    usd_timeout: f64,
 }
 
 impl LoadArgs {
@@ -100,6 +101,7 @@ impl LoadArgs {
             frame: self.frame,
             fps: self.fps,
             validate: !self.no_validate,
+            plugin_timeout: std::time::Duration::from_secs_f64(self.usd_timeout),
         }
     }
 }
@@ -234,8 +236,9 @@ impl RenderArgs {
             ..Default::default()
         };
         if let Some(path) = &self.settings {
-            let text = std::fs::read_to_string(path)
-                .map_err(|e| Error::bad_input(path, "file", format!("cannot read: {e}")))?;
+            let text = lucerna::files::read_input(path)
+                .and_then(|b| String::from_utf8(b).map_err(|_| "not UTF-8 text".to_string()))
+                .map_err(|e| Error::bad_input(path, "file", e))?;
             options
                 .load_settings(&text)
                 .map_err(|e| Error::bad_input(path, "settings", e))?;
@@ -285,6 +288,20 @@ fn parse_fps(s: &str) -> std::result::Result<f64, String> {
         .ok_or_else(|| format!("frames per second must be a positive number, got {s:?}"))
 }
 
+fn parse_frame(s: &str) -> std::result::Result<f64, String> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|f| f.is_finite() && f.abs() < 1e9)
+        .ok_or_else(|| format!("a frame is a finite number, got {s:?}"))
+}
+
+fn parse_timeout(s: &str) -> std::result::Result<f64, String> {
+    s.parse::<f64>()
+        .ok()
+        .filter(|t| t.is_finite() && *t > 0.0 && *t < 1e7)
+        .ok_or_else(|| format!("a timeout is a positive number of seconds, got {s:?}"))
+}
+
 fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
@@ -314,10 +331,11 @@ fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
         [r, g, b] => Vec3::new(r, g, b),
         _ => return Err("expected one value or R,G,B".into()),
     };
-    if c.is_finite() && c.min_element() >= 0.0 {
+    // Radiance beyond 1e18 leaves no headroom for f32 sums over samples and pixels.
+    if c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1e18 {
         Ok(c)
     } else {
-        Err("values must be finite and non-negative".into())
+        Err("values must be finite, non-negative and at most 1e18".into())
     }
 }
 
@@ -341,22 +359,9 @@ fn thread_pool(threads: Option<u32>) -> Result<rayon::ThreadPool> {
         .map_err(|e| Error::other("", "threads", e.to_string()))
 }
 
-/// Stops renders on SIGINT or SIGTERM so that they write what they have; a second signal
-/// ends the process at once. Returns the stop flag and the number of the signal received.
-fn watch_signals() -> Result<(Arc<AtomicBool>, Arc<AtomicUsize>)> {
-    use signal_hook::consts::{SIGINT, SIGTERM};
-    let stop = Arc::new(AtomicBool::new(false));
-    let received = Arc::new(AtomicUsize::new(0));
-    for signal in [SIGINT, SIGTERM] {
-        let register = || -> std::io::Result<()> {
-            signal_hook::flag::register_conditional_shutdown(signal, 128 + signal, stop.clone())?;
-            signal_hook::flag::register_usize(signal, received.clone(), signal as usize)?;
-            signal_hook::flag::register(signal, stop.clone())?;
-            Ok(())
-        };
-        register().map_err(|e| Error::other("", "signals", e.to_string()))?;
-    }
-    Ok((stop, received))
+/// 128 + the signal that stopped the process, as shells report it.
+fn interrupted_exit_code() -> u8 {
+    (128 + lucerna::interrupt::received().clamp(1, 127)) as u8
 }
 
 /// Most light groups a render writes layers for.
@@ -371,7 +376,12 @@ struct Resumed {
 
 /// Reads the render to continue from `path`, checking that it is this render's (same
 /// scene, settings, AOVs, window and pass); `None` if there is no file yet.
-fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result<Option<Resumed>> {
+fn read_checkpoint(
+    path: &Path,
+    source: &str,
+    identity: Option<&(String, String)>,
+    options: &RenderOptions,
+) -> Result<Option<Resumed>> {
     if !path.exists() {
         eprintln!(
             "lucerna: {} does not exist yet; rendering from the start",
@@ -381,7 +391,38 @@ fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result
     }
     let (planes, header) = film::exr::read(path)?;
     let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
-    if header.text("lucerna/scene") != Some(source) {
+    if header.number("lucerna/samples") == Some(0.0) {
+        eprintln!(
+            "lucerna: {} holds no samples; rendering from the start",
+            path.display()
+        );
+        return Ok(None);
+    }
+    // The same scene: by its content where both have a fingerprint (any path may name
+    // it), else by canonical path, else as named.
+    let same_scene = match (header.text("lucerna/scene_fingerprint"), identity) {
+        (Some(theirs), Some((_, ours))) => theirs == ours,
+        (None, Some((canonical, _))) => {
+            header.text("lucerna/scene") == Some(source)
+                || header
+                    .text("lucerna/scene")
+                    .and_then(|s| std::fs::canonicalize(s).ok())
+                    .is_some_and(|c| c.to_string_lossy() == canonical.as_str())
+        }
+        _ => header.text("lucerna/scene") == Some(source),
+    };
+    if !same_scene {
+        if let (Some(_), Some((canonical, _))) =
+            (header.text("lucerna/scene_fingerprint"), identity)
+            && header.text("lucerna/scene_path") == Some(canonical.as_str())
+        {
+            return Err(bad(
+                "lucerna/scene_fingerprint",
+                format!(
+                    "{source:?} has changed since this checkpoint was written: it cannot be continued"
+                ),
+            ));
+        }
         return Err(bad(
             "lucerna/scene",
             format!(
@@ -394,18 +435,7 @@ fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result
     earlier
         .load_settings(header.text("lucerna/settings").unwrap_or_default())
         .map_err(|e| bad("lucerna/settings", e))?;
-    let differs = [
-        ("integrator settings", earlier.settings != options.settings),
-        ("AOVs", earlier.aovs != options.aovs),
-        (
-            "pixel filter",
-            earlier.filter.describe() != options.filter.describe(),
-        ),
-        ("crop", earlier.crop != options.crop),
-        ("light groups", earlier.light_groups != options.light_groups),
-        ("pass", earlier.pass != options.pass),
-    ];
-    if let Some((what, _)) = differs.iter().find(|(_, d)| *d) {
+    if let Some(what) = earlier.differs_from(options) {
         return Err(bad(
             "lucerna/settings",
             format!(
@@ -428,8 +458,7 @@ fn read_checkpoint(path: &Path, source: &str, options: &RenderOptions) -> Result
 
 fn render_command(args: RenderArgs) -> Result<ExitCode> {
     let mut options = args.options()?;
-    let (stop, received) = watch_signals()?;
-    options.interrupt = Some(stop);
+    options.interrupt = Some(lucerna::interrupt::install()?);
     if args.resume && options.decides_from_whole_image() {
         return Err(Error::bad_input(
             "",
@@ -452,7 +481,7 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         None => vec![args.load.frame],
     };
     for frame in frames {
-        if let Some(code) = render_frame(&args, &options, &pool, frame, &received)? {
+        if let Some(code) = render_frame(&args, &options, &pool, frame)? {
             return Ok(ExitCode::from(code));
         }
     }
@@ -465,7 +494,6 @@ fn render_frame(
     options: &RenderOptions,
     pool: &rayon::ThreadPool,
     frame: Option<f64>,
-    received: &AtomicUsize,
 ) -> Result<Option<u8>> {
     let load = ingest::LoadOptions {
         frame,
@@ -486,17 +514,18 @@ fn render_frame(
     };
     let output = output_path(&args.output, frame, &stem, &camera_name)
         .map_err(|e| Error::bad_input("", "--output", e))?;
-    // The output's directory is made before rendering, so an impossible path fails at once.
-    if let Some(dir) = output.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::other(dir, "output directory", e.to_string()))?;
-    }
+    // Checked (and its directory made) before rendering, so an impossible output fails
+    // at once.
+    lucerna::files::check_output(&output, "--output")?;
     let preview = args
         .preview
         .as_ref()
         .map(|p| output_path(p, frame, &stem, &camera_name))
         .transpose()
         .map_err(|e| Error::bad_input("", "--preview", e))?;
+    if let Some(png) = &preview {
+        lucerna::files::check_output(png, "--preview")?;
+    }
     if let Some(radiance) = args.env {
         ingest::set_constant_environment(&mut scene, radiance);
     }
@@ -510,6 +539,7 @@ fn render_frame(
     memory_estimate(&scene, args.camera.as_deref(), args.resolution, options)
         .check(limit, &scene.source)?;
     let source = scene.source.clone();
+    let identity = ingest::scene_identity(args.scene.as_deref());
     let build_start = std::time::Instant::now();
     let world = pool.install(|| {
         World::build(
@@ -545,8 +575,15 @@ fn render_frame(
         }
     }
     let mut film = options.film(&world);
+    // Names come from the scene (light groups): refused now rather than after the render.
+    film::exr::check_names(
+        film::exr::channel_names(&film, &[Aov::Spp])
+            .iter()
+            .map(|n| n.as_str()),
+    )
+    .map_err(|reason| Error::bad_input(&source, "light groups", reason))?;
     let resumed = if args.resume {
-        read_checkpoint(&output, &source, options)?
+        read_checkpoint(&output, &source, identity.as_ref(), options)?
     } else {
         None
     };
@@ -559,7 +596,17 @@ fn render_frame(
             film.min_samples()
         );
     }
+    // From here a first signal stops sampling and the checkpoint is written; before, it ends
+    // the process (src/interrupt.rs).
+    let _sampling = lucerna::interrupt::defer();
     let (film, mut stats) = pool.install(|| render::render_into(&world, options, film));
+    if stats.interrupted && film.total_samples() == 0 {
+        eprintln!(
+            "lucerna: interrupted (signal {}) before the first sample; nothing written",
+            lucerna::interrupt::received()
+        );
+        return Ok(Some(interrupted_exit_code()));
+    }
     stats.seconds += resumed.as_ref().map_or(0.0, |r| r.seconds);
 
     // glam's column-major listing of a column-vector matrix is the row-major listing of
@@ -601,6 +648,10 @@ fn render_frame(
             ),
         ],
     };
+    if let Some((canonical, fingerprint)) = identity {
+        header.set("lucerna/scene_path", Attribute::Text(canonical));
+        header.set("lucerna/scene_fingerprint", Attribute::Text(fingerprint));
+    }
     if let Some(f) = frame {
         header.set("lucerna/frame", Attribute::Double(f));
     }
@@ -627,13 +678,13 @@ fn render_frame(
     };
     film::exr::write(&output, &film, &header, extra)?;
     if stats.interrupted {
-        let signal = received.load(Ordering::Relaxed);
         eprintln!(
-            "lucerna: interrupted (signal {signal}): wrote the {} samples taken so far to {}; continue with --resume",
+            "lucerna: interrupted (signal {}): wrote the {} samples taken so far to {}; continue with --resume",
+            lucerna::interrupt::received(),
             stats.samples,
             output.display()
         );
-        return Ok(Some((128 + signal.min(127)) as u8));
+        return Ok(Some(interrupted_exit_code()));
     }
     if let Some(png) = &preview {
         film::preview::write(png, &film)?;
@@ -667,7 +718,9 @@ fn batch_command(job: &Path, logs: Option<PathBuf>, summary: Option<PathBuf>) ->
     let logs = logs.unwrap_or_else(|| beside("logs"));
     let summary_path = summary.unwrap_or_else(|| beside("summary.json"));
     let tasks = lucerna::batch::plan(job, &logs)?;
-    let (stop, received) = watch_signals()?;
+    let stop = lucerna::interrupt::install()?;
+    // The children take their own signals; the batch forwards them and waits.
+    let _forwarding = lucerna::interrupt::defer();
     let exe = std::env::current_exe().map_err(|e| Error::other("", "batch", e.to_string()))?;
     let summary = lucerna::batch::run(job, &exe, &tasks, &stop);
     let json = serde_json::to_string_pretty(&summary).expect("the summary serialises");
@@ -690,7 +743,7 @@ fn batch_command(job: &Path, logs: Option<PathBuf>, summary: Option<PathBuf>) ->
         summary_path.display()
     );
     Ok(if summary.interrupted {
-        ExitCode::from((128 + received.load(Ordering::Relaxed).clamp(1, 127)) as u8)
+        ExitCode::from(interrupted_exit_code())
     } else if summary.failed > 0 {
         ExitCode::from(1)
     } else {
@@ -699,6 +752,9 @@ fn batch_command(job: &Path, logs: Option<PathBuf>, summary: Option<PathBuf>) ->
 }
 
 fn merge_command(inputs: &[PathBuf], output: &Path) -> Result<ExitCode> {
+    // A signal ends the merge at once, removing its temporary output.
+    lucerna::interrupt::install()?;
+    lucerna::files::check_output(output, "--output")?;
     let parts = inputs
         .iter()
         .map(|path| {
@@ -747,6 +803,8 @@ fn memory_estimate(
 }
 
 fn convert_command(path: &Path, output: &Path, load: &LoadArgs) -> Result<ExitCode> {
+    // A signal ends the conversion at once, stopping the USD plugin (src/interrupt.rs).
+    lucerna::interrupt::install()?;
     let scene = load_scene(Some(path), &load.options())?;
     lucerna::scene::file::write(&scene, output)?;
     eprintln!(
@@ -765,6 +823,7 @@ fn inspect_command(
     aov: Option<&str>,
     plan_mode: Option<&str>,
 ) -> Result<ExitCode> {
+    lucerna::interrupt::install()?;
     let mut options = RenderOptions::default();
     for (name, value) in [("aov", aov), ("plan", plan_mode)] {
         if let Some(v) = value {
@@ -874,6 +933,10 @@ fn inspect_command(
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    lucerna::memory::set_process_limit(match &cli.command {
+        Command::Render(args) => args.max_memory.or_else(lucerna::memory::default_limit),
+        _ => lucerna::memory::default_limit(),
+    });
     let result = match cli.command {
         Command::Render(args) => render_command(*args),
         Command::Inspect {

@@ -7,6 +7,7 @@
 
 use crate::error::{Error, Result};
 use std::fmt;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Share of the machine's memory a render may use by default: the rest is left to the
 /// system and to other jobs.
@@ -117,19 +118,80 @@ pub fn parse_limit(text: &str) -> std::result::Result<u64, String> {
 }
 
 /// The default limit: [`DEFAULT_SHARE`] of the smaller of the physical memory and the
-/// cgroup's memory limit, or `None` where neither can be read (no limit then).
+/// cgroup's memory limit (cgroup v2 `memory.max` or v1 `memory.limit_in_bytes`, of this
+/// process's own cgroup), or `None` where neither can be read (no limit then).
 pub fn default_limit() -> Option<u64> {
     let physical = std::fs::read_to_string("/proc/meminfo")
         .ok()
         .and_then(|text| meminfo_total(&text));
-    let cgroup = std::fs::read_to_string("/sys/fs/cgroup/memory.max")
-        .ok()
+    let own = std::fs::read_to_string("/proc/self/cgroup").unwrap_or_default();
+    let cgroup = cgroup_limit_files(&own)
+        .iter()
+        .find_map(|file| std::fs::read_to_string(file).ok())
         .and_then(|text| text.trim().parse::<u64>().ok());
     let available = match (physical, cgroup) {
         (Some(p), Some(c)) => p.min(c),
         (p, c) => p.or(c)?,
     };
     Some((available as f64 * DEFAULT_SHARE) as u64)
+}
+
+/// Files that may hold this process's cgroup memory limit, most specific first, from the
+/// text of /proc/self/cgroup: v2 (`0::/path` → `/sys/fs/cgroup/path/memory.max`), then v1
+/// (`N:memory:/path` → `/sys/fs/cgroup/memory/path/memory.limit_in_bytes`), then the roots
+/// (what a container sees when its own cgroup is mounted there). "max" (v2) does not parse
+/// and v1's "unlimited" is a huge number: both leave the physical memory to decide.
+fn cgroup_limit_files(proc_self_cgroup: &str) -> Vec<String> {
+    let mut files = Vec::new();
+    for line in proc_self_cgroup.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (Some(_), Some(controllers), Some(path)) = (parts.next(), parts.next(), parts.next())
+        else {
+            continue;
+        };
+        let path = path.trim_end_matches('/');
+        if path.split('/').any(|p| p == "..") {
+            continue;
+        }
+        if controllers.is_empty() {
+            files.push(format!("/sys/fs/cgroup{path}/memory.max"));
+        } else if controllers.split(',').any(|c| c == "memory") {
+            files.push(format!("/sys/fs/cgroup/memory{path}/memory.limit_in_bytes"));
+        }
+    }
+    files.push("/sys/fs/cgroup/memory.max".into());
+    files.push("/sys/fs/cgroup/memory/memory.limit_in_bytes".into());
+    files
+}
+
+/// The limit this process works under (set once by the command line from `--max-memory`
+/// or [`default_limit`]); 0 is none. Readers consult it before decoding anything whose
+/// header declares its size (images), so a small file cannot make them allocate gigabytes.
+static PROCESS_LIMIT: AtomicU64 = AtomicU64::new(0);
+
+/// Sets the limit [`check_allocation`] holds readers to (`None`: no limit).
+pub fn set_process_limit(limit: Option<u64>) {
+    PROCESS_LIMIT.store(limit.unwrap_or(0), Ordering::Relaxed);
+}
+
+/// The limit set by [`set_process_limit`], if any.
+pub fn process_limit() -> Option<u64> {
+    match PROCESS_LIMIT.load(Ordering::Relaxed) {
+        0 | u64::MAX => None,
+        limit => Some(limit),
+    }
+}
+
+/// Refuses to allocate `bytes` for `what` when that alone exceeds the process limit.
+pub fn check_allocation(bytes: u64, what: &str) -> std::result::Result<(), String> {
+    match process_limit() {
+        Some(limit) if bytes > limit => Err(format!(
+            "{what} would need {} to decode, more than the limit of {} (--max-memory)",
+            Bytes(bytes),
+            Bytes(limit)
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// `MemTotal` of /proc/meminfo in bytes.
@@ -154,6 +216,23 @@ mod tests {
         for bad in ["", "G", "-1G", "0", "12X", "1e3M", "NaN"] {
             assert!(parse_limit(bad).is_err(), "{bad:?} accepted");
         }
+    }
+
+    #[test]
+    fn cgroup_limits_are_looked_up_for_v1_and_v2() {
+        let v2 = cgroup_limit_files("0::/user.slice/job-7\n");
+        assert_eq!(v2[0], "/sys/fs/cgroup/user.slice/job-7/memory.max");
+        let v1 = cgroup_limit_files("12:cpu,cpuacct:/x\n4:memory:/docker/abc\n");
+        assert_eq!(
+            v1[0],
+            "/sys/fs/cgroup/memory/docker/abc/memory.limit_in_bytes"
+        );
+        assert_eq!(v1.len(), 3);
+        assert!(cgroup_limit_files("0::/../../etc\n").len() == 2);
+        assert!(
+            cgroup_limit_files("")
+                .contains(&"/sys/fs/cgroup/memory/memory.limit_in_bytes".to_string())
+        );
     }
 
     #[test]

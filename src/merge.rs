@@ -38,8 +38,64 @@ fn overlap(a: &Window, b: &Window) -> bool {
     a.x < b.x + b.width && b.x < a.x + a.width && a.y < b.y + b.height && b.y < a.y + a.height
 }
 
+/// Whether two headers are renders of one scene: by the scene file's fingerprint where
+/// both have one (any path may name the file), else by the scene as named.
+fn same_scene(a: &Header, b: &Header) -> bool {
+    match (
+        a.text("lucerna/scene_fingerprint"),
+        b.text("lucerna/scene_fingerprint"),
+    ) {
+        (Some(x), Some(y)) => x == y,
+        _ => a.text("lucerna/scene") == b.text("lucerna/scene"),
+    }
+}
+
+/// Checks that a part's values can be merged: finite everywhere, sample counts whole and
+/// not negative, and a beauty wherever there is a variance to pool.
+fn check_values(part: &Part) -> Result<()> {
+    for (name, plane) in &part.planes.channels {
+        if let Some(i) = plane.iter().position(|v| !v.is_finite()) {
+            return Err(Error::bad_input(
+                &part.path,
+                name.as_str(),
+                format!(
+                    "holds {} at pixel {i}: a part to merge must be finite",
+                    plane[i]
+                ),
+            ));
+        }
+    }
+    if let Some(spp) = part.planes.channel("spp.Y")
+        && let Some(i) = spp.iter().position(|v| *v < 0.0 || v.fract() != 0.0)
+    {
+        return Err(Error::bad_input(
+            &part.path,
+            "spp.Y",
+            format!(
+                "holds {} at pixel {i}: sample counts are whole and not negative",
+                spp[i]
+            ),
+        ));
+    }
+    for c in ["R", "G", "B"] {
+        if part.planes.channel(&format!("variance.{c}")).is_some()
+            && part.planes.channel(c).is_none()
+        {
+            return Err(Error::bad_input(
+                &part.path,
+                format!("variance.{c}"),
+                "a variance layer without the beauty it describes cannot be merged",
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Checks that `parts` belong to one render and hold no sample twice.
 fn check(parts: &[Part]) -> Result<()> {
+    for part in parts {
+        check_values(part)?;
+    }
     let first = &parts[0];
     let names = |p: &Part| {
         p.planes
@@ -75,7 +131,7 @@ fn check(parts: &[Part]) -> Result<()> {
                 ),
             ));
         }
-        if part.header.text("lucerna/scene") != first.header.text("lucerna/scene") {
+        if !same_scene(&part.header, &first.header) {
             return Err(bad(
                 "lucerna/scene",
                 format!("a render of another scene than {}", first.path.display()),

@@ -257,6 +257,30 @@ impl RenderOptions {
         LightGroups::assign(&world.light_names, &self.light_groups, &world.light_groups)
     }
 
+    /// What makes an image rendered with `self` differ from one rendered with `other`
+    /// besides the samples taken: the first differing group of settings, if any. A
+    /// checkpoint continues only under equal settings; a batch re-renders an output whose
+    /// settings differ from its job's.
+    pub fn differs_from(&self, other: &RenderOptions) -> Option<&'static str> {
+        [
+            ("integrator settings", self.settings != other.settings),
+            ("AOVs", self.aovs != other.aovs),
+            (
+                "pixel filter",
+                self.filter.describe() != other.filter.describe(),
+            ),
+            ("crop", self.crop != other.crop),
+            ("light groups", self.light_groups != other.light_groups),
+            ("pass", self.pass != other.pass),
+            (
+                "adaptive sampling",
+                self.noise_threshold != other.noise_threshold,
+            ),
+        ]
+        .into_iter()
+        .find_map(|(what, differs)| differs.then_some(what))
+    }
+
     /// The empty film this request renders into, for `world`'s camera, with a layer for
     /// each light group if they are requested.
     pub fn film(&self, world: &World) -> Film {

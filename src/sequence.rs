@@ -62,14 +62,55 @@ pub fn output_path(
     };
     Ok(PathBuf::from(
         text.replace("{frame}", &frame_text)
-            .replace("{scene}", scene)
-            .replace("{camera}", camera),
+            .replace("{scene}", &file_name_part(scene))
+            .replace("{camera}", &file_name_part(camera)),
     ))
+}
+
+/// A scene-controlled name (a camera's, a file stem) made safe to put in a file name: path
+/// separators, control characters and a leading dot become `_`, so a name can neither
+/// leave the output's directory (`../x`, `/etc/x`) nor hide the file; empty becomes `_`.
+pub fn file_name_part(name: &str) -> String {
+    let mut part: String = name
+        .chars()
+        .map(|c| {
+            if c == '/' || c == '\\' || c.is_control() {
+                '_'
+            } else {
+                c
+            }
+        })
+        .collect();
+    if part.starts_with('.') || part.is_empty() {
+        part.replace_range(0..part.find(|c| c != '.').unwrap_or(part.len()), "_");
+        if part.is_empty() {
+            part.push('_');
+        }
+    }
+    part
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn scene_names_cannot_leave_the_output_directory() {
+        for (name, safe) in [
+            ("../../etc/passwd", "__.._etc_passwd"),
+            ("/abs/cam", "_abs_cam"),
+            ("..", "_"),
+            ("", "_"),
+            (".hidden", "_hidden"),
+            ("a\\b\nc", "a_b_c"),
+            ("Camera.001", "Camera.001"),
+            ("カメラ", "カメラ"),
+        ] {
+            assert_eq!(file_name_part(name), safe, "{name:?}");
+        }
+        let p = output_path(Path::new("out/{camera}.exr"), None, "s", "../../x").unwrap();
+        assert_eq!(p, Path::new("out/__.._x.exr"));
+    }
 
     #[test]
     fn frame_lists_and_patterns() {

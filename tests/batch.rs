@@ -72,9 +72,13 @@ fn a_broken_scene_fails_alone_and_a_rerun_skips_complete_frames() {
     );
     for name in ["default.0001.exr", "default.0002.exr", "single.exr"] {
         assert!(dir.join("out").join(name).exists(), "{name}");
-        assert!(dir.join("job.logs").join(format!("{name}.log")).exists());
     }
-    let log = std::fs::read_to_string(dir.join("job.logs/broken.exr.log")).unwrap();
+    // One log per frame, each its own file.
+    let logs: std::collections::HashSet<&str> =
+        frames.iter().map(|f| f["log"].as_str().unwrap()).collect();
+    assert_eq!(logs.len(), frames.len());
+    assert!(logs.iter().all(|l| Path::new(l).exists()), "{logs:?}");
+    let log = std::fs::read_to_string(failure["log"].as_str().unwrap()).unwrap();
     assert!(
         log.contains("error: ") && log.contains("broken.gltf"),
         "{log}"

@@ -12,6 +12,7 @@ import base64
 import copy
 import json
 import struct
+import zlib
 from pathlib import Path
 
 OUT = Path(__file__).resolve().parent.parent / "tests" / "bad-gltf"
@@ -54,6 +55,17 @@ def glb(doc, blob):
     total = 12 + 8 + len(js) + 8 + len(blob)
     return (b"glTF" + struct.pack("<II", 2, total) + struct.pack("<I", len(js)) + b"JSON" + js
             + struct.pack("<I", len(blob)) + b"BIN\0" + blob)
+
+
+def png_header_only(width, height):
+    """A PNG whose header declares width x height RGBA pixels, with one tiny IDAT: a few
+    hundred bytes that would decode to gigabytes."""
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+            + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b""))
 
 
 def cases():
@@ -144,6 +156,69 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna", "unknown bsdf \"velvet\"")
+    # What glTF-Validator calls errors and lucerna accepted quietly before.
+    yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
+           "asset.version", "lucerna reads glTF 2.x")
+    yield ("min-version-2.1.gltf", variant(lambda d: d["asset"].update(minVersion="2.1")),
+           "asset.minVersion", "a later glTF than 2.0")
+    yield "glb-trailing-bytes.glb", full + b"\0" * 8, "GLB container", "the header declares"
+    yield ("animation-missing-node.gltf",
+           variant(lambda d: d.update(animations=[{
+               "samplers": [{"input": 1, "output": 0}],
+               "channels": [{"sampler": 0, "target": {"node": 5, "path": "translation"}}]}])),
+           "animations[0].channels[0].target.node", "node 5 does not exist")
+    sparse_blob = blob[:44] + struct.pack("<H", 99) + b"\0\0"
+
+    def sparse(d):
+        d["bufferViews"].append({"buffer": 0, "byteOffset": 44, "byteLength": 2})
+        d["accessors"][0]["sparse"] = {
+            "count": 1, "indices": {"bufferView": 2, "componentType": 5123},
+            "values": {"bufferView": 0}}
+    yield ("sparse-index-out-of-range.gltf", with_blob(sparse_blob, sparse),
+           "attributes.POSITION", "sparse.indices[0] = 99 is past the accessor's 3 elements")
+
+    def with_material(material):
+        def apply(d):
+            d["materials"] = [material]
+            d["meshes"][0]["primitives"][0]["material"] = 0
+        return variant(apply)
+    yield ("negative-roughness.gltf",
+           with_material({"pbrMetallicRoughness": {"roughnessFactor": -0.5}}),
+           "materials[0]", "roughnessFactor is outside its range")
+    yield ("base-color-above-one.gltf",
+           with_material({"pbrMetallicRoughness": {"baseColorFactor": [2, 0.5, 0.5, 1]}}),
+           "materials[0]", "baseColorFactor is outside its range")
+
+    def with_camera(perspective):
+        def apply(d):
+            d["cameras"] = [{"type": "perspective", "perspective": perspective}]
+            d["nodes"].append({"camera": 0, "translation": [0, 0, 3]})
+            d["scenes"][0]["nodes"].append(1)
+        return variant(apply)
+    yield ("znear-beyond-zfar.gltf", with_camera({"yfov": 0.8, "znear": 10, "zfar": 1}),
+           "cameras[0]", "zfar 1 must be greater than znear 10")
+    yield ("aspect-ratio-zero.gltf",
+           with_camera({"yfov": 0.8, "znear": 0.1, "aspectRatio": 0}),
+           "cameras[0]", "aspectRatio 0 must be positive")
+
+    def spot(d):
+        d["extensionsUsed"] = ["KHR_lights_punctual"]
+        d["extensions"] = {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 10,
+             "spot": {"innerConeAngle": 1.0, "outerConeAngle": 0.5}}]}}
+        d["nodes"].append({"extensions": {"KHR_lights_punctual": {"light": 0}}})
+        d["scenes"][0]["nodes"].append(1)
+    yield ("spot-inner-beyond-outer.gltf", variant(spot),
+           "KHR_lights_punctual.lights[0]", "must satisfy 0 <= inner < outer")
+    yield ("png-header-65535-square.gltf",
+           variant(lambda d: d.update(
+               images=[{"uri": "data:image/png;base64,"
+                        + base64.b64encode(png_header_only(65535, 65535)).decode()}],
+               textures=[{"source": 0}],
+               materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "images[0]", "larger than the limit")
     # 1e39 overflows f32: the JSON reader (exact float parsing) rejects it with its position.
     yield ("infinite-transform.gltf",
            variant(lambda d: d["nodes"][0].update(translation=[1e39, 0, 0])),

@@ -27,15 +27,16 @@ pub struct Header {
     pub attributes: Vec<(String, Attribute)>,
 }
 
+/// A header string as UTF-8 bytes. OpenEXR's string attributes are byte strings that
+/// OpenEXR, Nuke and OpenImageIO pass through as `std::string`, i.e. UTF-8 in practice.
 fn text(s: &str) -> Text {
-    // EXR text is Latin-1; anything else is replaced.
-    Text::new_or_none(s).unwrap_or_else(|| {
-        let latin: String = s
-            .chars()
-            .map(|c| if (c as u32) < 256 { c } else { '?' })
-            .collect();
-        Text::new_or_panic(latin)
-    })
+    Text::from_slice_unchecked(s.as_bytes())
+}
+
+/// A header string read back: UTF-8, or Latin-1 where the bytes are not UTF-8 (files of
+/// other writers).
+fn string_of(t: &Text) -> String {
+    String::from_utf8(t.bytes().to_vec()).unwrap_or_else(|_| t.to_string())
 }
 
 /// An EXR image's pixels as lucerna reads and writes them: named 32-bit float planes over
@@ -97,6 +98,36 @@ impl Header {
     }
 }
 
+/// Longest channel or attribute name OpenEXR reads (its "long names" flag; 31 without it).
+pub const MAX_NAME_BYTES: usize = 255;
+
+/// Refuses channel names OpenEXR cannot hold: empty, or longer than [`MAX_NAME_BYTES`]
+/// bytes (a file with one is written by some libraries and read by none).
+pub fn check_names<'a>(
+    names: impl IntoIterator<Item = &'a str>,
+) -> std::result::Result<(), String> {
+    for name in names {
+        if name.is_empty() || name.len() > MAX_NAME_BYTES {
+            return Err(format!(
+                "channel name {:?} has {} bytes; OpenEXR holds 1 to {MAX_NAME_BYTES}",
+                name.chars().take(48).collect::<String>()
+                    + if name.len() > 48 { "…" } else { "" },
+                name.len()
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The channel names `film` writes, with `extra` AOVs.
+pub fn channel_names(film: &Film, extra: &[Aov]) -> Vec<String> {
+    let mut aovs: Vec<Aov> = film.aovs.iter().collect();
+    aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
+    aovs.into_iter()
+        .flat_map(|aov| film.aovs.channel_names(aov))
+        .collect()
+}
+
 /// Writes `film` to `path` atomically (a temporary file in the same directory, renamed
 /// into place), with `header` in the header; `extra` AOVs (data layers the film can always
 /// produce, such as `spp`) are written too even if the film's AOV set lacks them.
@@ -120,10 +151,45 @@ pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result
     write_planes(path, planes, header)
 }
 
+/// Makes every value finite, as no NaN or infinity may reach a file: infinities (sums that
+/// overflowed float range) become the largest float of their sign, NaN becomes 0. Returns
+/// how many values were replaced.
+pub fn make_finite(channels: &mut [(String, Vec<f32>)]) -> u64 {
+    let mut replaced = 0;
+    for (_, plane) in channels {
+        for v in plane.iter_mut().filter(|v| !v.is_finite()) {
+            *v = if v.is_nan() {
+                0.0
+            } else {
+                f32::MAX.copysign(*v)
+            };
+            replaced += 1;
+        }
+    }
+    replaced
+}
+
 /// Writes `planes` to `path` atomically, with `header` in the header. The planes move into
 /// the encoder: no copy of the image is made.
 pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> {
+    check_names(planes.channels.iter().map(|(n, _)| n.as_str()))
+        .and_then(|()| check_names(header.attributes.iter().map(|(n, _)| n.as_str())))
+        .map_err(|reason| Error::bad_input(path, "channels", reason))?;
     let (display, window) = (planes.display, planes.window);
+    let mut planes = planes;
+    let replaced = make_finite(&mut planes.channels);
+    let mut header = header.clone();
+    if replaced > 0 {
+        eprintln!(
+            "lucerna: warning: {}: {replaced} values beyond float range written as the largest float (NaN as 0); lucerna/non_finite_replaced counts them",
+            path.display()
+        );
+        header.set(
+            "lucerna/non_finite_replaced",
+            Attribute::Double(replaced as f64),
+        );
+    }
+    let header = &header;
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = planes
         .channels
         .into_iter()
@@ -171,7 +237,7 @@ fn header_of(attributes: &LayerAttributes) -> Header {
             .iter()
             .filter_map(|(name, value)| {
                 let value = match value {
-                    AttributeValue::Text(t) => Attribute::Text(t.to_string()),
+                    AttributeValue::Text(t) => Attribute::Text(string_of(t)),
                     AttributeValue::I32(i) => Attribute::Int(*i),
                     AttributeValue::F32(f) => Attribute::Float(*f),
                     AttributeValue::F64(f) => Attribute::Double(*f),
@@ -185,6 +251,7 @@ fn header_of(attributes: &LayerAttributes) -> Header {
 
 /// Reads only the header of an EXR's first layer (no pixels).
 pub fn read_header(path: &Path) -> Result<Header> {
+    crate::files::check_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     let meta = exr::meta::MetaData::read_from_file(path, false)
         .map_err(|e| Error::bad_input(path, "EXR", e.to_string()))?;
     let first = meta
@@ -198,6 +265,23 @@ pub fn read_header(path: &Path) -> Result<Header> {
 /// attributes lucerna writes (text and numbers; others are skipped).
 pub fn read(path: &Path) -> Result<(Planes, Header)> {
     let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
+    crate::files::check_input(path).map_err(|e| bad("file", e))?;
+    // The data window and channels decide what reading allocates: checked first.
+    let meta =
+        exr::meta::MetaData::read_from_file(path, false).map_err(|e| bad("EXR", e.to_string()))?;
+    let bytes: u64 = meta
+        .headers
+        .iter()
+        .map(|h| {
+            h.layer_size.area() as u64
+                * h.channels
+                    .list
+                    .iter()
+                    .map(|c| c.sample_type.bytes_per_sample() as u64 + 4)
+                    .sum::<u64>()
+        })
+        .sum();
+    crate::memory::check_allocation(bytes, "its pixels").map_err(|e| bad("dataWindow", e))?;
     let image = exr::prelude::read()
         .no_deep_data()
         .largest_resolution_level()

@@ -557,7 +557,19 @@ impl Film {
                 .map(|n| channel(n))
                 .collect()
         };
+        // Values that would poison every later sample: refused.
+        for (name, plane) in &planes.channels {
+            if let Some(i) = plane.iter().position(|v| !v.is_finite()) {
+                return Err(format!("channel {name} holds {} at pixel {i}", plane[i]));
+            }
+        }
         let spp = channel("spp.Y")?;
+        if let Some(i) = spp.iter().position(|v| *v < 0.0 || v.fract() != 0.0) {
+            return Err(format!(
+                "spp.Y holds {} at pixel {i}: sample counts are whole and not negative",
+                spp[i]
+            ));
+        }
         let light: Vec<Vec<&[f32]>> = self
             .router
             .slots
@@ -775,6 +787,18 @@ where
         name.to_string_lossy(),
         std::process::id()
     ));
+    // Never rename over a device node, FIFO or directory (the render checked this before
+    // it started; this holds for every writer).
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(Error::bad_input(
+            path,
+            "output",
+            "exists and is not a regular file",
+        ));
+    }
+    let _removed_on_signal = crate::interrupt::watch_scratch(tmp.clone());
     let result = (|| {
         let file =
             std::fs::File::create(&tmp).map_err(|e| Error::other(&tmp, "output", e.to_string()))?;

@@ -249,7 +249,9 @@ impl WideBvh {
         mut tmax: f32,
         mut leaf: F,
     ) -> f32 {
-        if subtree.0 == NO_CHILD {
+        // A ray with NaN or infinity (an instance transform of corrupt data makes one)
+        // would pass every slab test, the empty lanes' too: it hits nothing.
+        if subtree.0 == NO_CHILD || !(ray.origin.is_finite() && ray.dir.is_finite()) {
             return tmax;
         }
         let node_ray = NodeRay::new(ray);

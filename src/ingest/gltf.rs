@@ -46,8 +46,7 @@ const MAX_NODE_DEPTH: usize = 1024;
 /// Reads and converts the glTF file at `path`, posed at `time` seconds of its animations
 /// (`None`: the nodes' own transforms).
 pub fn load(path: &Path, time: Option<f64>) -> Result<Scene> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::bad_input(path, "file", format!("cannot read: {e}")))?;
+    let bytes = crate::files::read_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     let base = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
@@ -91,8 +90,8 @@ pub fn import_at(
 }
 
 /// Parses and validates the document. gltf-json's validation indexes a primitive's POSITION
-/// accessor without a bounds check (it panics on a bad index), so that index is checked
-/// first. Missing or malformed POSITION `min`/`max` are tolerated: lucerna computes bounds
+/// accessor without a bounds check (it panics on a bad index), and never checks animation
+/// channels' target nodes, so those indices are checked first. Missing or malformed POSITION `min`/`max` are tolerated: lucerna computes bounds
 /// itself, and several exporters omit them.
 fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
     use gltf::json::validation::{Checked, Validate};
@@ -116,10 +115,22 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
                 format!("the header declares {declared} bytes, less than the 12-byte header"),
             ));
         }
+        // glTF-Validator: GLB_LENGTH_MISMATCH, an error (trailing bytes are not glTF).
+        if declared < bytes.len() {
+            return Err(Error::bad_input(
+                source,
+                "GLB container",
+                format!(
+                    "the header declares {declared} bytes, but the file has {}",
+                    bytes.len()
+                ),
+            ));
+        }
     }
     let gltf =
         gltf::Gltf::from_slice_without_validation(bytes).map_err(|e| parse_error(source, e))?;
     let root = gltf.document.as_json();
+    check_version(root, source)?;
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, primitive) in mesh.primitives.iter().enumerate() {
             let position = primitive
@@ -133,6 +144,22 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
                         "accessor {} does not exist (the file has {})",
                         index.value(),
                         root.accessors.len()
+                    ),
+                ));
+            }
+        }
+    }
+    // Nor does it check an animation channel's target node (the gltf crate then panics).
+    for (a, animation) in root.animations.iter().enumerate() {
+        for (c, channel) in animation.channels.iter().enumerate() {
+            let node = channel.target.node.value();
+            if node >= root.nodes.len() {
+                return Err(Error::bad_input(
+                    source,
+                    format!("animations[{a}].channels[{c}].target.node"),
+                    format!(
+                        "node {node} does not exist (the file has {})",
+                        root.nodes.len()
                     ),
                 ));
             }
@@ -164,6 +191,40 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
         }
     }
     Ok(gltf)
+}
+
+/// `asset.version` (and `minVersion`) must name glTF 2.x, as the specification requires;
+/// glTF-Validator calls another major version an error and a later minor one a warning,
+/// which lucerna prints while loading (the file then may hold what it cannot read).
+fn check_version(root: &gltf::json::Root, source: &str) -> Result<()> {
+    let parse = |v: &str| -> Option<(u32, u32)> {
+        let (major, minor) = v.split_once('.')?;
+        Some((major.parse().ok()?, minor.parse().ok()?))
+    };
+    let version = &root.asset.version;
+    match parse(version) {
+        Some((2, 0)) => {}
+        Some((2, minor)) => eprintln!(
+            "warning: {source}: asset.version: glTF 2.{minor} is newer than the 2.0 lucerna reads; content of 2.{minor} may be missed"
+        ),
+        _ => {
+            return Err(Error::bad_input(
+                source,
+                "asset.version",
+                format!("{version:?}: lucerna reads glTF 2.x (\"2.0\")"),
+            ));
+        }
+    }
+    if let Some(min) = &root.asset.min_version
+        && parse(min).is_none_or(|m| m > (2, 0))
+    {
+        return Err(Error::bad_input(
+            source,
+            "asset.minVersion",
+            format!("{min:?}: the file needs a reader of a later glTF than 2.0"),
+        ));
+    }
+    Ok(())
 }
 
 fn parse_error(source: &str, e: gltf::Error) -> Error {
@@ -477,7 +538,7 @@ impl<'a> Importer<'a> {
             self.scene.cameras.push(cam);
         }
         if let Some(light) = node.light() {
-            self.light(&light, world, &name);
+            self.light(&light, world, &name)?;
         }
         path.push(node.index());
         for child in node.children() {
@@ -600,6 +661,9 @@ impl<'a> Importer<'a> {
         let check_range =
             |view: gltf::buffer::View, offset: usize, count: usize, elem: usize| -> Result<()> {
                 let stride = view.stride().unwrap_or(elem);
+                if count == 0 {
+                    return Ok(());
+                }
                 if stride < elem {
                     return Err(self.err(
                         &e,
@@ -662,6 +726,39 @@ impl<'a> Importer<'a> {
                 sparse.count(),
                 accessor.size(),
             )?;
+            // Each index names an element of the accessor, in increasing order
+            // (glTF-Validator: ACCESSOR_SPARSE_INDEX_OOB, ACCESSOR_SPARSE_INDICES_NON_INCREASING).
+            let view = indices.view();
+            let size = indices.index_type().size();
+            if view.stride().is_some_and(|s| s != size) {
+                return Err(self.err(&e, "sparse.indices' bufferView must not have a byteStride"));
+            }
+            let start = view.offset() + indices.offset();
+            let bytes = &self.buffers[view.buffer().index()][start..start + sparse.count() * size];
+            let mut previous: Option<usize> = None;
+            for (k, chunk) in bytes.chunks_exact(size).enumerate() {
+                let index = match size {
+                    1 => chunk[0] as usize,
+                    2 => u16::from_le_bytes([chunk[0], chunk[1]]) as usize,
+                    _ => u32::from_le_bytes([chunk[0], chunk[1], chunk[2], chunk[3]]) as usize,
+                };
+                if index >= accessor.count() {
+                    return Err(self.err(
+                        &e,
+                        format!(
+                            "sparse.indices[{k}] = {index} is past the accessor's {} elements",
+                            accessor.count()
+                        ),
+                    ));
+                }
+                if previous.is_some_and(|p| index <= p) {
+                    return Err(self.err(
+                        &e,
+                        format!("sparse.indices[{k}] = {index} does not increase"),
+                    ));
+                }
+                previous = Some(index);
+            }
         }
         Ok(())
     }
@@ -860,6 +957,36 @@ impl<'a> Importer<'a> {
             || !pbr.roughness_factor().is_finite()
         {
             return Err(self.err(element, "a factor is not finite"));
+        }
+        // Ranges of the specification's schema (glTF-Validator: VALUE_NOT_IN_RANGE, an error).
+        let unit = |x: f32| (0.0..=1.0).contains(&x);
+        for (key, ok) in [
+            (
+                "pbrMetallicRoughness.baseColorFactor",
+                base_color.to_array().into_iter().all(unit),
+            ),
+            (
+                "pbrMetallicRoughness.metallicFactor",
+                unit(pbr.metallic_factor()),
+            ),
+            (
+                "pbrMetallicRoughness.roughnessFactor",
+                unit(pbr.roughness_factor()),
+            ),
+            ("emissiveFactor", m.emissive_factor().into_iter().all(unit)),
+            ("alphaCutoff", m.alpha_cutoff().is_none_or(|c| c >= 0.0)),
+            (
+                "occlusionTexture.strength",
+                m.occlusion_texture().is_none_or(|t| unit(t.strength())),
+            ),
+            (
+                "KHR_materials_emissive_strength.emissiveStrength",
+                m.emissive_strength().is_none_or(|s| s >= 0.0),
+            ),
+        ] {
+            if !ok {
+                return Err(self.err(element, format!("{key} is outside its range (factors are in [0, 1], strengths and cutoffs not negative)")));
+            }
         }
         let model = self.bsdf_model(m, element)?;
         let base_color_texture = self.info_ref(pbr.base_color_texture())?;
@@ -1065,7 +1192,7 @@ impl<'a> Importer<'a> {
     }
 
     /// A factor in [0, 1] of extension `name`'s JSON `e` (default `default`); a number
-    /// outside the range is clamped with a warning.
+    /// outside the range is an error, as glTF-Validator classifies it (VALUE_NOT_IN_RANGE).
     fn unit_factor(
         &mut self,
         ext: &MaterialExtensions,
@@ -1076,12 +1203,9 @@ impl<'a> Importer<'a> {
     ) -> Result<f32> {
         let x = ext.number(self, name, e, key, default)?;
         if !(0.0..=1.0).contains(&x) {
-            self.warn(
-                ext.element,
-                format!("{name}.{key} = {x} is outside [0, 1]; clamped"),
-            );
+            return Err(self.err(ext.element, format!("{name}.{key} = {x} is outside [0, 1]")));
         }
-        Ok(x.clamp(0.0, 1.0))
+        Ok(x)
     }
 
     /// The texture slot of a textureInfo in an extension's JSON (`e[key]`), if present.
@@ -1298,7 +1422,19 @@ impl<'a> Importer<'a> {
                 if !(yfov > 0.0 && yfov < std::f32::consts::PI) {
                     return Err(self.err(&element, format!("yfov {yfov} must be in (0, π)")));
                 }
-                let aspect = p.aspect_ratio().filter(|a| a.is_finite() && *a > 0.0);
+                if let Some(a) = p.aspect_ratio().filter(|a| !(a.is_finite() && *a > 0.0)) {
+                    return Err(self.err(&element, format!("aspectRatio {a} must be positive")));
+                }
+                if !(p.znear() > 0.0 && p.znear().is_finite()) {
+                    return Err(self.err(&element, format!("znear {} must be positive", p.znear())));
+                }
+                if let Some(f) = p.zfar().filter(|f| !(*f > p.znear())) {
+                    return Err(self.err(
+                        &element,
+                        format!("zfar {f} must be greater than znear {}", p.znear()),
+                    ));
+                }
+                let aspect = p.aspect_ratio();
                 (
                     Projection::Perspective { yfov, aspect },
                     p.znear(),
@@ -1309,6 +1445,16 @@ impl<'a> Importer<'a> {
                 let (xmag, ymag) = (o.xmag().abs(), o.ymag().abs());
                 if !(xmag > 0.0 && ymag > 0.0 && xmag.is_finite() && ymag.is_finite()) {
                     return Err(self.err(&element, "xmag and ymag must be non-zero and finite"));
+                }
+                if !(o.znear() >= 0.0 && o.zfar() > o.znear()) {
+                    return Err(self.err(
+                        &element,
+                        format!(
+                            "znear {} must not be negative and zfar {} must be greater",
+                            o.znear(),
+                            o.zfar()
+                        ),
+                    ));
                 }
                 (
                     Projection::Orthographic { xmag, ymag },
@@ -1331,7 +1477,12 @@ impl<'a> Importer<'a> {
         })
     }
 
-    fn light(&mut self, light: &gltf::khr_lights_punctual::Light, world: DMat4, node_name: &str) {
+    fn light(
+        &mut self,
+        light: &gltf::khr_lights_punctual::Light,
+        world: DMat4,
+        node_name: &str,
+    ) -> Result<()> {
         let element = format!("KHR_lights_punctual.lights[{}]", light.index());
         let radiant = Vec3::from_array(light.color()) * light.intensity();
         if !radiant.is_finite() || radiant.min_element() < 0.0 {
@@ -1339,13 +1490,13 @@ impl<'a> Importer<'a> {
                 &element,
                 "colour × intensity is negative or not finite; light skipped",
             );
-            return;
+            return Ok(());
         }
         let position = world.transform_point3(DVec3::ZERO);
         let direction = world.transform_vector3(-DVec3::Z).normalize_or_zero();
         if direction == DVec3::ZERO {
             self.warn(&element, "node transform is degenerate; light skipped");
-            return;
+            return Ok(());
         }
         let kind = match light.kind() {
             gltf::khr_lights_punctual::Kind::Point => LightKind::Point {
@@ -1360,13 +1511,27 @@ impl<'a> Importer<'a> {
             gltf::khr_lights_punctual::Kind::Spot {
                 inner_cone_angle,
                 outer_cone_angle,
-            } => LightKind::Spot {
-                position,
-                direction,
-                intensity: radiant,
-                inner_cone: inner_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2),
-                outer_cone: outer_cone_angle.clamp(0.0, std::f32::consts::FRAC_PI_2),
-            },
+            } => {
+                // The extension's rule: 0 <= inner < outer <= π/2 (glTF-Validator: an error).
+                if !(inner_cone_angle >= 0.0
+                    && inner_cone_angle < outer_cone_angle
+                    && outer_cone_angle <= std::f32::consts::FRAC_PI_2)
+                {
+                    return Err(self.err(
+                        &element,
+                        format!(
+                            "spot.innerConeAngle {inner_cone_angle} and outerConeAngle {outer_cone_angle} must satisfy 0 <= inner < outer <= π/2"
+                        ),
+                    ));
+                }
+                LightKind::Spot {
+                    position,
+                    direction,
+                    intensity: radiant,
+                    inner_cone: inner_cone_angle,
+                    outer_cone: outer_cone_angle,
+                }
+            }
         };
         self.scene.lights.push(Light {
             name: light
@@ -1374,6 +1539,7 @@ impl<'a> Importer<'a> {
                 .map_or_else(|| node_name.to_string(), str::to_string),
             kind,
         });
+        Ok(())
     }
 }
 

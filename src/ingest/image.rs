@@ -15,16 +15,23 @@ pub struct DecodedImage {
 /// Largest image accepted, in pixels (a 16k × 16k texture).
 const MAX_PIXELS: u64 = 1 << 28;
 
-fn check_size(width: u32, height: u32) -> Result<(), String> {
+/// Checks an image's declared size before anything is decoded: at most [`MAX_PIXELS`], and
+/// its decoding peak (`bytes_per_pixel`: the decoder's buffer and lucerna's texels) within
+/// the memory limit ([`crate::memory::check_allocation`]).
+fn check_size(width: u32, height: u32, bytes_per_pixel: u64) -> Result<(), String> {
     if width == 0 || height == 0 {
         return Err("image has no pixels".into());
     }
-    if width as u64 * height as u64 > MAX_PIXELS {
+    let pixels = width as u64 * height as u64;
+    if pixels > MAX_PIXELS {
         return Err(format!(
             "image of {width}x{height} pixels is larger than the limit of {MAX_PIXELS} pixels"
         ));
     }
-    Ok(())
+    crate::memory::check_allocation(
+        pixels * bytes_per_pixel,
+        &format!("an image of {width}x{height} pixels"),
+    )
 }
 
 /// Decodes PNG or JPEG bytes (recognised by their signature).
@@ -46,8 +53,18 @@ fn decode_png(bytes: &[u8]) -> Result<DecodedImage, String> {
         .read_info()
         .map_err(|e| format!("invalid PNG: {e}"))?;
     let (width, height) = (reader.info().width, reader.info().height);
-    check_size(width, height)?;
     let size = reader.output_buffer_size().ok_or("PNG too large")?;
+    // The decoded buffer, then RGBA texels: 8-bit, or float for 16-bit samples.
+    let texel_bytes = if reader.info().bit_depth == png::BitDepth::Sixteen {
+        16
+    } else {
+        4
+    };
+    check_size(
+        width,
+        height,
+        (size as u64).div_ceil(width.max(1) as u64 * height.max(1) as u64) + texel_bytes,
+    )?;
     let mut buf = vec![0u8; size];
     let info = reader
         .next_frame(&mut buf)
@@ -94,12 +111,17 @@ fn decode_jpeg(bytes: &[u8]) -> Result<DecodedImage, String> {
         .set_max_width(1 << 16)
         .set_max_height(1 << 16);
     let mut decoder = zune_jpeg::JpegDecoder::new_with_options(Cursor::new(bytes), options);
+    decoder
+        .decode_headers()
+        .map_err(|e| format!("invalid JPEG: {e:?}"))?;
+    let info = decoder.info().ok_or("invalid JPEG: no header")?;
+    // The decoder's RGBA output, then as many bytes of texels.
+    check_size(info.width as u32, info.height as u32, 8)?;
     let pixels = decoder
         .decode()
         .map_err(|e| format!("invalid JPEG: {e:?}"))?;
     let info = decoder.info().ok_or("invalid JPEG: no header")?;
     let (width, height) = (info.width as u32, info.height as u32);
-    check_size(width, height)?;
     if pixels.len() < (width * height * 4) as usize {
         return Err("invalid JPEG: truncated pixel data".into());
     }
@@ -116,7 +138,7 @@ fn decode_jpeg(bytes: &[u8]) -> Result<DecodedImage, String> {
 
 /// Reads an image file for an environment map: OpenEXR (linear), or PNG/JPEG.
 pub fn read_file(path: &Path) -> Result<DecodedImage, String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read: {e}"))?;
+    let bytes = crate::files::read_input(path)?;
     if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
         return decode_exr(path);
     }
@@ -125,6 +147,20 @@ pub fn read_file(path: &Path) -> Result<DecodedImage, String> {
 
 fn decode_exr(path: &Path) -> Result<DecodedImage, String> {
     use exr::prelude::*;
+    // The header first: the data window decides what decoding allocates.
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| format!("invalid OpenEXR: {e}"))?;
+    for header in &meta.headers {
+        let size = header.layer_size;
+        let (w, h) = (size.width() as u64, size.height() as u64);
+        if w > u32::MAX as u64 || h > u32::MAX as u64 {
+            return Err(format!(
+                "OpenEXR data window of {w}x{h} pixels is too large"
+            ));
+        }
+        // Float RGBA texels, and the decoder's lines of up to 4 float channels.
+        check_size(w as u32, h as u32, 32)?;
+    }
     let image = read_first_rgba_layer_from_file(
         path,
         |resolution, _| {
@@ -138,7 +174,6 @@ fn decode_exr(path: &Path) -> Result<DecodedImage, String> {
     .map_err(|e| format!("invalid OpenEXR: {e}"))?;
     let size = image.layer_data.size;
     let (width, height) = (size.width() as u32, size.height() as u32);
-    check_size(width, height)?;
     let texels = image.layer_data.channel_data.pixels.1;
     Ok(DecodedImage {
         width,

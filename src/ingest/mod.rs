@@ -37,7 +37,13 @@ pub struct LoadOptions {
     pub fps: f64,
     /// Run usd-core's validators and stop on their errors (USD stages).
     pub validate: bool,
+    /// How long the USD plugin may take to convert a stage before it is stopped.
+    pub plugin_timeout: std::time::Duration,
 }
+
+/// Default of [`LoadOptions::plugin_timeout`]: generous for the largest stages, finite for
+/// a plugin that hangs.
+pub const DEFAULT_PLUGIN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(1800);
 
 impl Default for LoadOptions {
     fn default() -> Self {
@@ -45,6 +51,7 @@ impl Default for LoadOptions {
             frame: None,
             fps: DEFAULT_FPS,
             validate: true,
+            plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }
 }
@@ -113,4 +120,35 @@ pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Resul
         rotation: DMat4::IDENTITY,
     });
     Ok(())
+}
+
+/// How a checkpoint recognises its scene whatever path names it: the canonical path and a
+/// fingerprint of the file's bytes (64-bit FNV-1a over 8-byte words, and the length), as
+/// hex. `None` for the embedded scene or a file that cannot be read.
+pub fn scene_identity(path: Option<&Path>) -> Option<(String, String)> {
+    let path = path?;
+    let canonical = std::fs::canonicalize(path).ok()?;
+    let mut file = std::fs::File::open(&canonical).ok()?;
+    let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut length: u64 = 0;
+    let mut buffer = vec![0u8; 1 << 20];
+    loop {
+        use std::io::Read;
+        let n = match file.read(&mut buffer) {
+            Ok(0) => break,
+            Ok(n) => n,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(_) => return None,
+        };
+        length += n as u64;
+        for word in buffer[..n].chunks(8) {
+            let mut bytes = [0u8; 8];
+            bytes[..word.len()].copy_from_slice(word);
+            hash = (hash ^ u64::from_le_bytes(bytes)).wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    Some((
+        canonical.to_string_lossy().into_owned(),
+        format!("{hash:016x}-{length}"),
+    ))
 }

@@ -1,6 +1,7 @@
 //! Resolution of URIs found in scene files. A scene may only read files inside its own
 //! directory tree: absolute paths, `..` segments and URI schemes other than `data:` are
-//! refused, so a downloaded scene cannot read arbitrary files or reach the network.
+//! refused, so a downloaded scene cannot read arbitrary files or reach the network. A
+//! symbolic link that leads out of the scene's directory is refused like `..`.
 
 use base64::Engine;
 use std::path::{Path, PathBuf};
@@ -89,7 +90,10 @@ pub fn read(uri: &str, base: Option<&Path>) -> Result<Vec<u8>, String> {
     match resolve(uri, base)? {
         Resolved::Data(bytes) => Ok(bytes),
         Resolved::File(path) => {
-            std::fs::read(&path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+            if let Some(base) = base {
+                crate::files::check_inside(&path, base)?;
+            }
+            crate::files::read_input(&path).map_err(|e| format!("{}: {e}", path.display()))
         }
     }
 }

@@ -6,15 +6,22 @@
 //! [--no-validate]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
 //! the repository's `.venv` (where `tools/test.sh` installs the plugin's requirements), else
 //! `python3`; the plugin folder is `$LUCERNA_USD_PLUGIN`, else `plugins/usd` of the source tree
-//! this binary was built from. Its exit status: 0 converted, 2 bad stage, 3 missing Python
+//! this binary was built from (put before any `PYTHONPATH` already set).
+//!
+//! The plugin writes into a scratch folder made by `tempfile` (a unique name, mode 0700)
+//! that is removed afterwards, also when a signal ends lucerna (src/interrupt.rs kills the
+//! plugin first). A plugin still running after [`LoadOptions::plugin_timeout`] is killed
+//! and the load fails (exit 1) saying so. Images the plugin decodes are held to lucerna's
+//! memory limit (`--max-memory BYTES`). Its exit status: 0 converted, 2 bad stage, 3 missing Python
 //! package; its error lines read `lucerna-usd: error: FILE: ELEMENT: REASON`.
 
 use super::{LoadOptions, tangents};
 use crate::error::{Error, Result};
 use crate::scene::{self, Scene};
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 /// File extensions read through the plugin.
 pub const EXTENSIONS: [&str; 4] = ["usd", "usda", "usdc", "usdz"];
@@ -40,28 +47,6 @@ fn python() -> PathBuf {
     }
 }
 
-/// A scratch folder for the plugin's scene file, removed when dropped.
-struct Scratch(PathBuf);
-
-impl Scratch {
-    fn new() -> std::io::Result<Self> {
-        static COUNTER: AtomicU32 = AtomicU32::new(0);
-        let dir = std::env::temp_dir().join(format!(
-            "lucerna-usd-{}-{}",
-            std::process::id(),
-            COUNTER.fetch_add(1, Ordering::Relaxed)
-        ));
-        std::fs::create_dir_all(&dir)?;
-        Ok(Self(dir))
-    }
-}
-
-impl Drop for Scratch {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
 /// Converts the stage at `path` with the plugin and reads the result.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     if !path.is_file() {
@@ -74,9 +59,19 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         python.display(),
         plugin.join("requirements.txt").display()
     );
-    let scratch =
-        Scratch::new().map_err(|e| Error::other(path, "temporary folder", e.to_string()))?;
-    let output = scratch.0.join(format!("scene.{}", scene::file::EXTENSION));
+    let scratch = tempfile::Builder::new()
+        .prefix("lucerna-usd-")
+        .tempdir()
+        .map_err(|e| Error::other(path, "temporary folder", e.to_string()))?;
+    let _removed_on_signal = crate::interrupt::watch_scratch(scratch.path().to_path_buf());
+    let output = scratch
+        .path()
+        .join(format!("scene.{}", scene::file::EXTENSION));
+    let mut python_path = std::ffi::OsString::from(plugin.as_os_str());
+    if let Some(existing) = std::env::var_os("PYTHONPATH").filter(|p| !p.is_empty()) {
+        python_path.push(":");
+        python_path.push(existing);
+    }
     let mut command = Command::new(&python);
     command
         .arg("-m")
@@ -85,14 +80,20 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         .arg(path)
         .arg("-o")
         .arg(&output)
-        .env("PYTHONPATH", &plugin);
+        .env("PYTHONPATH", python_path)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
     if let Some(frame) = options.frame {
         command.arg("--frame").arg(frame.to_string());
     }
     if !options.validate {
         command.arg("--no-validate");
     }
-    let result = command.output().map_err(|e| {
+    if let Some(limit) = crate::memory::process_limit() {
+        command.arg("--max-memory").arg(limit.to_string());
+    }
+    let cannot_run = |e: std::io::Error| {
         Error::other(
             path,
             "usd plugin",
@@ -102,7 +103,40 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
                 python.display()
             ),
         )
-    })?;
+    };
+    let mut child = command.spawn().map_err(cannot_run)?;
+    let _killed_on_signal = crate::interrupt::watch_child(child.id());
+    let mut pipe = child.stderr.take().expect("stderr is piped");
+    let reader = std::thread::spawn(move || {
+        let mut bytes = Vec::new();
+        let _ = pipe.read_to_end(&mut bytes);
+        bytes
+    });
+    let start = Instant::now();
+    let status = loop {
+        match child.try_wait().map_err(cannot_run)? {
+            Some(status) => break status,
+            None if start.elapsed() > options.plugin_timeout => {
+                let _ = child.kill();
+                let _ = child.wait();
+                return Err(Error::other(
+                    path,
+                    "usd plugin",
+                    format!(
+                        "still converting after {} s: stopped (raise the limit with --usd-timeout)",
+                        options.plugin_timeout.as_secs()
+                    ),
+                ));
+            }
+            None => std::thread::sleep(Duration::from_millis(20)),
+        }
+    };
+    let stderr_bytes = reader.join().unwrap_or_default();
+    let result = std::process::Output {
+        status,
+        stdout: Vec::new(),
+        stderr: stderr_bytes,
+    };
     let stderr = String::from_utf8_lossy(&result.stderr);
     let mut first_error = None;
     for line in stderr.lines() {

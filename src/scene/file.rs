@@ -19,7 +19,7 @@ use crate::error::{Error, Result};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Arc;
 
 /// The manifest's `format` value.
@@ -133,15 +133,11 @@ fn buffer_name(manifest: &Path) -> String {
 /// Writes `bytes` to `path` through a temporary file and a rename, so a reader never sees
 /// a half-written file.
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".tmp");
-    let tmp = PathBuf::from(tmp);
-    std::fs::write(&tmp, bytes)
-        .and_then(|_| std::fs::rename(&tmp, path))
-        .map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            Error::other(path, "write", e.to_string())
-        })
+    crate::film::write_atomically(path, |w| {
+        use std::io::Write;
+        w.write_all(bytes)
+            .map_err(|e| Error::other(path, "write", e.to_string()))
+    })
 }
 
 /// Writes `scene` as the manifest `path` (conventionally `*.lucerna`) and its buffer beside
@@ -221,8 +217,10 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
 /// Reads a scene file written by [`write`] (or by any program following the format),
 /// rejecting anything malformed with an error naming the element.
 pub fn read(path: &Path) -> Result<Scene> {
-    let text = std::fs::read(path).map_err(|e| Error::bad_input(path, "file", e.to_string()))?;
-    parse(path, &text, |buffer| std::fs::read(buffer))
+    let text = crate::files::read_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
+    parse(path, &text, |buffer| {
+        crate::files::read_input(buffer).map_err(std::io::Error::other)
+    })
 }
 
 /// Decodes the manifest bytes `text` of the scene file at `path`, reading its buffer with

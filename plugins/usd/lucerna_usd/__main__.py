@@ -170,6 +170,8 @@ def main(argv=None):
     c.add_argument("--frame", type=float)
     c.add_argument("--no-validate", action="store_true")
     c.add_argument("--quiet", action="store_true")
+    c.add_argument("--max-memory", type=int, metavar="BYTES",
+                   help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
     v = commands.add_parser("validate", help="print the validators' findings")
     v.add_argument("stage")
     args = parser.parse_args(argv)
@@ -193,6 +195,10 @@ def main(argv=None):
         for f in findings:
             print(f"{f.severity}: {f}")
         return EXIT_BAD_INPUT if any(f.severity == "error" for f in findings) else 0
+    if getattr(args, "max_memory", None):
+        from . import images
+
+        images.MAX_BYTES = args.max_memory
     try:
         return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request

@@ -10,6 +10,10 @@ import OpenImageIO as oiio
 from pxr import Ar
 
 
+#: Most bytes decoding one image may take (lucerna passes its --max-memory); None: no limit.
+MAX_BYTES = None
+
+
 class Image:
     """A decoded image: `pixels` (H, W, 4) float32, with RGB replicated from a grey image
     and alpha 1 where the file has none; `eight_bit` tells whether the file stored 8-bit
@@ -46,7 +50,15 @@ def _read_file(path):
     buf = oiio.ImageBuf(path)
     if buf.has_error:
         raise OSError(buf.geterror().strip() or "cannot read the image")
-    spec = buf.spec()
+    spec = buf.spec()  # the header only: ImageBuf reads pixels on demand
+    if buf.has_error:
+        raise OSError(buf.geterror().strip() or "cannot read the image")
+    # Float pixels, RGBA floats, and the 8-bit copy: what decoding holds at its peak.
+    need = spec.width * spec.height * (spec.nchannels * 4 + 16 + 4 + spec.nchannels)
+    if MAX_BYTES is not None and need > MAX_BYTES:
+        raise OSError(f"an image of {spec.width}x{spec.height} pixels would need "
+                      f"{need / 2**20:.0f} MiB to decode, more than the limit of "
+                      f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
     eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
     pixels = buf.get_pixels(oiio.FLOAT)
     if pixels is None or buf.has_error:

@@ -220,3 +220,18 @@ def test_unknown_shader_is_a_warning_with_the_defaults(stage_file, converted):
     s = converted(stage_file(text), no_validate=True)
     assert s.warnings_about("unknown shader 'MySurface'")
     assert material(s)["base_color"] == pytest.approx([0.18, 0.18, 0.18, 1])
+
+
+def test_an_image_beyond_the_memory_limit_is_not_decoded(stage_file, converted, tmp_path,
+                                                          monkeypatch):
+    """lucerna passes --max-memory: an image whose header needs more is refused unread
+    (OpenImageIO already refuses headers far larger than their file)."""
+    from lucerna_usd import images
+
+    write_image(tmp_path / "huge.png", np.zeros((512, 512, 4)))
+    monkeypatch.setattr(images, "MAX_BYTES", 1 << 20)
+    s = converted(stage_file(stage(
+        "color3f inputs:diffuseColor.connect = </World/M/T.outputs:rgb>",
+        texture("T", "huge.png", "float3 outputs:rgb"))))
+    assert s.warnings_about("--max-memory"), s["warnings"]
+    assert material(s)["base_color_texture"] is None

@@ -1,0 +1,137 @@
+//! What lucerna agrees to read and to replace.
+//!
+//! Inputs (scenes, buffers, textures, settings, checkpoints, merge parts) must be regular
+//! files: reading a FIFO or a device blocks or never ends. Outputs are checked before a
+//! render starts, so an hour of rendering is not lost to a name that cannot be written: an
+//! existing output must be a regular file (a device node, FIFO or directory is never
+//! replaced: renaming over `/dev/null` as root would replace the device), and its directory
+//! must accept a new file (a probe file is created and removed).
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// What kind of file system object `meta` is, for messages.
+fn kind(meta: &std::fs::Metadata) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    let t = meta.file_type();
+    if t.is_dir() {
+        "a directory"
+    } else if t.is_fifo() {
+        "a FIFO"
+    } else if t.is_char_device() || t.is_block_device() {
+        "a device"
+    } else if t.is_socket() {
+        "a socket"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Checks that `path` (symbolic links followed) is a regular file; the reason otherwise.
+pub fn check_input(path: &Path) -> std::result::Result<(), String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
+    if meta.is_file() {
+        Ok(())
+    } else {
+        Err(format!("{} is {}, not a file", path.display(), kind(&meta)))
+    }
+}
+
+/// Reads the regular file `path`; the reason otherwise.
+pub fn read_input(path: &Path) -> std::result::Result<Vec<u8>, String> {
+    check_input(path)?;
+    std::fs::read(path).map_err(|e| format!("cannot read: {e}"))
+}
+
+/// Checks that `path` resolves (through any symbolic links) to a place inside `base`, as
+/// a relative path without `..` promises; the reason otherwise. A link out of the scene's
+/// directory is refused like `..` is.
+pub fn check_inside(path: &Path, base: &Path) -> std::result::Result<(), String> {
+    let (Ok(real), Ok(real_base)) = (std::fs::canonicalize(path), std::fs::canonicalize(base))
+    else {
+        return Ok(()); // missing: reading it reports that
+    };
+    if real.starts_with(&real_base) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{} leaves the scene's directory through a symbolic link (to {})",
+            path.display(),
+            real.display()
+        ))
+    }
+}
+
+/// Checks, before rendering, that `path` can be written: an existing `path` is a regular
+/// file, and its directory (created if missing) takes a new file.
+pub fn check_output(path: &Path, element: &str) -> Result<()> {
+    if path.file_name().is_none() {
+        return Err(Error::bad_input(path, element, "names no file"));
+    }
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(Error::bad_input(
+            path,
+            element,
+            format!(
+                "is {}: an output must be a file, and this is never replaced",
+                kind(&meta)
+            ),
+        ));
+    }
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Error::other(dir, element, format!("cannot create the directory: {e}")))?;
+    tempfile::Builder::new()
+        .prefix(".lucerna-probe-")
+        .tempfile_in(dir)
+        .map_err(|e| Error::other(dir, element, format!("cannot write here: {e}")))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn outputs_that_are_not_files_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(check_output(&dir.path().join("a/b/out.exr"), "output").is_ok());
+        let e = check_output(dir.path(), "output").unwrap_err();
+        assert!(e.reason.contains("directory"), "{e}");
+        let e = check_output(Path::new("/dev/null"), "output").unwrap_err();
+        assert!(e.reason.contains("device"), "{e}");
+        let fifo = dir.path().join("fifo");
+        let c = std::ffi::CString::new(fifo.to_str().unwrap()).unwrap();
+        // SAFETY: mkfifo(3) with a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0);
+        assert!(
+            check_output(&fifo, "output")
+                .unwrap_err()
+                .reason
+                .contains("FIFO")
+        );
+        assert!(read_input(&fifo).unwrap_err().contains("FIFO"));
+        assert!(
+            read_input(Path::new("/dev/zero"))
+                .unwrap_err()
+                .contains("device")
+        );
+    }
+
+    #[test]
+    fn links_out_of_the_base_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene = dir.path().join("scene");
+        std::fs::create_dir(&scene).unwrap();
+        std::fs::write(dir.path().join("secret"), b"x").unwrap();
+        std::fs::write(scene.join("tex.png"), b"x").unwrap();
+        std::os::unix::fs::symlink(dir.path().join("secret"), scene.join("link.png")).unwrap();
+        assert!(check_inside(&scene.join("tex.png"), &scene).is_ok());
+        assert!(check_inside(&scene.join("link.png"), &scene).is_err());
+    }
+}
