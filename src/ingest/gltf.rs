@@ -149,6 +149,16 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
             }
         }
     }
+    // An image is a URI or a buffer view with a MIME type (the gltf crate unwraps both).
+    for (i, image) in root.images.iter().enumerate() {
+        let reason = match (&image.uri, &image.buffer_view, &image.mime_type) {
+            (Some(_), None, _) | (None, Some(_), Some(_)) => continue,
+            (None, None, _) => "has neither uri nor bufferView",
+            (Some(_), Some(_), _) => "has both uri and bufferView",
+            (None, Some(_), None) => "has a bufferView but no mimeType",
+        };
+        return Err(Error::bad_input(source, format!("images[{i}]"), reason));
+    }
     // Nor does it check an animation channel's target node (the gltf crate then panics).
     for (a, animation) in root.animations.iter().enumerate() {
         for (c, channel) in animation.channels.iter().enumerate() {
@@ -194,8 +204,8 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
 }
 
 /// `asset.version` (and `minVersion`) must name glTF 2.x, as the specification requires;
-/// glTF-Validator calls another major version an error and a later minor one a warning,
-/// which lucerna prints while loading (the file then may hold what it cannot read).
+/// glTF-Validator calls another major version an error and a later minor one a warning
+/// (the file then may hold what lucerna cannot read), which [`Importer::run`] gives.
 fn check_version(root: &gltf::json::Root, source: &str) -> Result<()> {
     let parse = |v: &str| -> Option<(u32, u32)> {
         let (major, minor) = v.split_once('.')?;
@@ -204,9 +214,7 @@ fn check_version(root: &gltf::json::Root, source: &str) -> Result<()> {
     let version = &root.asset.version;
     match parse(version) {
         Some((2, 0)) => {}
-        Some((2, minor)) => eprintln!(
-            "warning: {source}: asset.version: glTF 2.{minor} is newer than the 2.0 lucerna reads; content of 2.{minor} may be missed"
-        ),
+        Some((2, _)) => {} // a later minor version: warned about by the importer
         _ => {
             return Err(Error::bad_input(
                 source,
@@ -310,6 +318,17 @@ impl<'a> Importer<'a> {
     }
 
     fn run(&mut self, time: Option<f64>) -> Result<()> {
+        let version = &self.doc.as_json().asset.version;
+        if let Some(minor) = version
+            .strip_prefix("2.")
+            .and_then(|m| m.parse::<u32>().ok())
+            .filter(|&m| m > 0)
+        {
+            self.warn(
+                "asset.version",
+                format!("glTF 2.{minor} is newer than the 2.0 lucerna reads; its additions are not rendered"),
+            );
+        }
         self.load_buffers()?;
         match time {
             Some(t) => self.pose_at(t)?,

@@ -574,7 +574,8 @@ def moved_glass(scale, offset):
             if mat.get("volume"):
                 mat["volume"]["absorption"] = [a / scale for a in mat["volume"]["absorption"]]
         return s.against_twin(scene.write(s.work / f"glass-{scale:g}-{offset:g}.lucerna"), s.glass_path)
-    case.__doc__ = (f"The glass box (refracting ball, rough slab, thin pane) {offset:g} units from the origin "
+    where = f"{offset:g} units from the origin" if offset else f"scaled by {scale:g}"
+    case.__doc__ = (f"The glass box (refracting ball, rough slab, thin pane) {where} "
                     "renders like the original (paths through glass diverge with rounding, so only within the "
                     "noise)")
     return case
