@@ -87,9 +87,13 @@ struct LoadArgs {
     /// Frames per second of glTF animations.
     #[arg(long, default_value_t = ingest::DEFAULT_FPS, value_parser = parse_fps)]
     fps: f64,
-    /// Convert a USD stage even if usd-core's validators report errors.
-    #[arg(long)]
+    /// Skip usd-core's validators (USD stages; faster on large stages).
+    #[arg(long, conflicts_with = "strict")]
     no_validate: bool,
+    /// Refuse a USD stage on any validator error (default: findings are warnings, as in
+    /// husk and usdview).
+    #[arg(long)]
+    strict: bool,
     /// Seconds the USD plugin may take to convert a stage before it is stopped.
     #[arg(long, default_value_t = ingest::DEFAULT_PLUGIN_TIMEOUT.as_secs_f64(), value_parser = parse_timeout)]
     usd_timeout: f64,
@@ -101,6 +105,7 @@ impl LoadArgs {
             frame: self.frame,
             fps: self.fps,
             validate: !self.no_validate,
+            strict: self.strict,
             plugin_timeout: std::time::Duration::from_secs_f64(self.usd_timeout),
         }
     }

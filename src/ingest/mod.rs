@@ -35,8 +35,10 @@ pub struct LoadOptions {
     pub frame: Option<f64>,
     /// Frames per second of glTF animations.
     pub fps: f64,
-    /// Run usd-core's validators and stop on their errors (USD stages).
+    /// Run usd-core's validators (USD stages); their findings are warnings...
     pub validate: bool,
+    /// ...unless strict: then an error refuses the stage.
+    pub strict: bool,
     /// How long the USD plugin may take to convert a stage before it is stopped.
     pub plugin_timeout: std::time::Duration,
 }
@@ -51,6 +53,7 @@ impl Default for LoadOptions {
             frame: None,
             fps: DEFAULT_FPS,
             validate: true,
+            strict: false,
             plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }

@@ -3,7 +3,7 @@
 //! like any other (and validated again: the plugin's output is untrusted input too).
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
-//! [--no-validate]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
+//! [--no-validate | --strict] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
 //! the repository's `.venv` (where `tools/test.sh` installs the plugin's requirements), else
 //! `python3`; the plugin folder is `$LUCERNA_USD_PLUGIN`, else `plugins/usd` of the source tree
 //! this binary was built from (put before any `PYTHONPATH` already set).
@@ -89,6 +89,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     }
     if !options.validate {
         command.arg("--no-validate");
+    }
+    if options.strict {
+        command.arg("--strict");
     }
     if let Some(limit) = crate::memory::process_limit() {
         command.arg("--max-memory").arg(limit.to_string());

@@ -1,14 +1,18 @@
 """Command line of the USD plugin, the protocol lucerna's renderer speaks:
 
-    python -m lucerna_usd convert STAGE -o OUT.lucerna [--frame F] [--no-validate]
+    python -m lucerna_usd convert STAGE -o OUT.lucerna [--frame F] [--no-validate | --strict]
     python -m lucerna_usd validate STAGE
 
 `convert` opens STAGE (.usd, .usda, .usdc, .usdz), validates it with every registered
 `pxr.UsdValidation` validator, converts the composed stage at time code F (default: the
 stage's start time code if it has one, else the earliest time sample) and writes the scene
-file OUT.lucerna and its buffer OUT.lucerna.bin. Validation errors stop the conversion unless
---no-validate; validation warnings and conversion warnings go into the scene file's
-`warnings`, which the renderer prints. Problems are printed on stderr, one per line, as
+file OUT.lucerna and its buffer OUT.lucerna.bin. As husk and usdview do, it renders what
+composes: validator findings (errors included) are warnings naming the prim and the
+validator, missing stage metadata takes USD's fallbacks (Y up, centimetres, no default
+prim), and a prim whose data cannot be converted is skipped with a warning naming it.
+--strict stops on any validator error instead; --no-validate skips the validators. All
+warnings go into the scene file's `warnings`, which the renderer prints. A stage is refused
+only when it cannot be opened or nothing renderable remains. Problems are printed on stderr, one per line, as
 `lucerna-usd: error: FILE: ELEMENT: REASON`.
 
 Exit status: 0 converted; 2 the stage is bad (unreadable, failed validation, nothing to
@@ -77,33 +81,31 @@ def _time(stage, frame):
     return Usd.TimeCode.EarliestTime()
 
 
-def _validate(stage, path, no_validate, warnings):
-    """Runs the validators; returns False (after printing the errors) if conversion must
-    stop."""
+def _validate(stage, path, strict, warnings):
+    """Runs the validators; their findings become warnings. Returns False (after printing
+    the errors) if `strict` and a validator reported an error."""
     from .validate import validate
 
     captured = []
     with _captured_stderr(captured):
         findings = validate(stage)
     errors = [f for f in findings if f.severity == "error"]
-    for f in findings:
-        if f.severity != "error" or no_validate:
-            warnings.append(f"validation {f.severity}: {f}")
-    if errors and not no_validate:
+    if errors and strict:
         for f in errors:
             _error(path, ", ".join(f.sites) or "stage", f"{f.message} [{f.validator}]")
-        print(f"lucerna-usd: {len(errors)} validation error(s); --no-validate renders the "
-              "stage anyway", file=sys.stderr)
+        print(f"lucerna-usd: {len(errors)} validation error(s) (--strict)", file=sys.stderr)
         return False
+    for f in findings:
+        warnings.append(f"validation {f.severity}: {f}")
     return True
 
 
-def convert(path, output, frame=None, no_validate=False, quiet=False):
+def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False):
     """Converts `path` to the scene file `output`; returns the exit status."""
     from pxr import Tf
 
     try:
-        return _convert(path, output, frame, no_validate, quiet)
+        return _convert(path, output, frame, no_validate, quiet, strict)
     except Tf.ErrorException as e:
         # usd-core raises on layers it cannot parse when composition reaches them.
         _error(path, "stage", _tf_reason(e))
@@ -116,7 +118,7 @@ def _tf_reason(error):
     return detail.strip("'")
 
 
-def _convert(path, output, frame, no_validate, quiet):
+def _convert(path, output, frame, no_validate, quiet, strict):
     from . import StageError
     from .convert import Converter
 
@@ -126,7 +128,7 @@ def _convert(path, output, frame, no_validate, quiet):
         _error(path, "stage", reason)
         return EXIT_BAD_INPUT
     warnings = []
-    if not _validate(stage, path, no_validate, warnings):
+    if not no_validate and not _validate(stage, path, strict, warnings):
         return EXIT_BAD_INPUT
     if no_validate:
         for e in stage.GetCompositionErrors():
@@ -147,6 +149,9 @@ def _convert(path, output, frame, no_validate, quiet):
                 writer.warnings.append(f"usd-core: {line.strip()}")
     if not (writer.instances or writer.spheres or writer.disks or writer.cylinders or writer.lights
             or writer.environment is not None):
+        # What explains it (validator findings, skipped prims) comes first.
+        for text in writer.warnings[:20]:
+            print(f"lucerna-usd: warning: {text}", file=sys.stderr)
         _error(path, "stage", "nothing to render (no meshes, spheres or lights)")
         return EXIT_BAD_INPUT
     writer.write(output)
@@ -168,7 +173,9 @@ def main(argv=None):
     c.add_argument("stage")
     c.add_argument("-o", "--output", required=True)
     c.add_argument("--frame", type=float)
-    c.add_argument("--no-validate", action="store_true")
+    c.add_argument("--no-validate", action="store_true", help="skip the validators")
+    c.add_argument("--strict", action="store_true",
+                   help="stop on any validator error (default: findings are warnings)")
     c.add_argument("--quiet", action="store_true")
     c.add_argument("--max-memory", type=int, metavar="BYTES",
                    help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
@@ -200,7 +207,8 @@ def main(argv=None):
 
         images.MAX_BYTES = args.max_memory
     try:
-        return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet)
+        return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet,
+                       args.strict)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request
         if os.environ.get("LUCERNA_USD_DEBUG"):
             raise

@@ -102,10 +102,10 @@ class Converter:
                         "radius": radius * scale, "material": material})
             elif g.kind == "camera":
                 for m in world:
-                    self._camera(g.payload, m)
+                    self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
             elif g.kind == "light":
-                lights.convert(self.writer, g.payload, list(world_usd), self.to_lucerna,
-                               self.time, self.warn)
+                self._isolated(g.payload.GetPath(), lights.convert, self.writer, g.payload,
+                               list(world_usd), self.to_lucerna, self.time, self.warn)
         if not (self.writer.instances or self.writer.spheres or self.writer.disks or self.writer.cylinders):
             self.warn("stage", "no renderable geometry")
         return self.writer
@@ -124,8 +124,23 @@ class Converter:
     def _flatten(self, prim, inherited):
         key = (str(prim.GetPath()), inherited)
         if key not in self._flat:
-            self._flat[key] = self._convert_prim(prim, inherited)
+            self._flat[key] = self._isolated(prim.GetPath(), self._convert_prim, prim, inherited) or []
         return self._flat[key]
+
+    def _isolated(self, path, convert, *args):
+        """`convert(*args)`, or None after a warning naming `path` if its data cannot be
+        converted (a malformed attribute, an unexpected type): one bad prim costs that prim,
+        not the stage, as in husk and usdview."""
+        from pxr import Tf
+
+        try:
+            return convert(*args)
+        except (ValueError, TypeError, IndexError, KeyError, AttributeError, ZeroDivisionError,
+                FloatingPointError, OverflowError, Tf.ErrorException) as e:
+            reason = " ".join(str(e).split())[:300]
+            self.warn(str(path), f"skipped: its data cannot be converted "
+                                 f"({type(e).__name__}: {reason})")
+            return None
 
     def _convert_prim(self, prim, inherited):
         path = str(prim.GetPath())

@@ -112,12 +112,12 @@ def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
     assert (texture["width"], texture["height"], texture["encoding"]) == (2, 2, "rgba8")
 
 
-def test_missing_texture_is_a_validation_error_and_a_warning_without_validation(stage_file, converted, tmp_path):
+def test_missing_texture_is_a_validation_finding_and_the_fallback_renders(stage_file, converted, tmp_path):
     text = world(QUAD.format(extra='rel material:binding = </World/Tex>')
                  + diffuse_texture_material("missing.png", "float4 inputs:fallback = (0.5, 0.25, 0.125, 1)"))
     path = stage_file(text)
-    assert convert(str(path), str(tmp_path / "x.lucerna"), quiet=True) == 2
-    s = converted(path, no_validate=True)
+    assert convert(str(path), str(tmp_path / "x.lucerna"), quiet=True, strict=True) == 2
+    s = converted(path)
     assert s.warnings_about("unresolvable external dependency 'missing.png'")
     assert s.warnings_about("texture 'missing.png' unreadable")
     material = s["materials"][s.mesh("/World/Quad")["material"]]
