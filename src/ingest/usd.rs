@@ -49,9 +49,7 @@ fn python() -> PathBuf {
 
 /// Converts the stage at `path` with the plugin and reads the result.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
-    if !path.is_file() {
-        return Err(Error::bad_input(path, "file", "no such file"));
-    }
+    crate::files::check_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     let plugin = plugin_dir();
     let python = python();
     let install = format!(

@@ -52,6 +52,22 @@ def _np(m):
     return np.array(m, dtype=np.float64).reshape(4, 4)
 
 
+def _polygon_area(mesh, time):
+    """Total area of a mesh's polygons in stage units (Newell's formula per face)."""
+    points = np.asarray(mesh.GetPointsAttr().Get(time) or [], dtype=float)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], dtype=np.int64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], dtype=np.int64)
+    if len(points) == 0 or counts.sum() != len(indices) or (indices >= len(points)).any():
+        return 0.0
+    area, start = 0.0, 0
+    for n in counts:
+        p = points[indices[start:start + n]]
+        start += n
+        if n >= 3:
+            area += 0.5 * float(np.linalg.norm(np.cross(p, np.roll(p, -1, axis=0)).sum(axis=0)))
+    return area
+
+
 def stage_to_lucerna(stage):
     """Row-vector matrix from stage space to lucerna's world (Y up, metres)."""
     m = np.identity(4)
@@ -106,6 +122,7 @@ class Converter:
             elif g.kind == "light":
                 self._isolated(g.payload.GetPath(), lights.convert, self.writer, g.payload,
                                list(world_usd), self.to_lucerna, self.time, self.warn)
+        lights.finish_domes(self.writer, self.warn)
         if not (self.writer.instances or self.writer.spheres or self.writer.disks or self.writer.cylinders):
             self.warn("stage", "no renderable geometry")
         return self.writer
@@ -152,9 +169,10 @@ class Converter:
                 return []
         groups = []
         if prim.IsA(UsdGeom.Mesh):
-            if prim.HasAPI(UsdLux.MeshLightAPI):
-                self.warn(path, "MeshLightAPI is not supported: use an emissive material")
-            groups += self._mesh(prim, inherited)
+            meshes = self._mesh(prim, inherited)
+            if prim.HasAPI(UsdLux.MeshLightAPI) or prim.HasAPI(UsdLux.LightAPI):
+                self._mesh_light(prim, meshes)
+            groups += meshes
         elif prim.IsA(UsdGeom.Sphere) or prim.IsA(UsdGeom.Cube):
             groups += self._implicit(prim, inherited)
         elif prim.IsA(UsdGeom.PointInstancer):
@@ -170,6 +188,28 @@ class Converter:
             bound = self._bound_material(prim) or inherited
             return groups + self._children(proto.GetFilteredChildren(Usd.PrimDefaultPredicate), bound)
         return groups + self._children(prim.GetFilteredChildren(Usd.PrimDefaultPredicate), inherited)
+
+    def _mesh_light(self, prim, groups):
+        """MeshLightAPI: the mesh's surfaces emit the light's radiance (intensity, exposure,
+        colour, temperature; normalize divides by the mesh's area in stage units), over
+        what their material reflects. The material's own emission is replaced, not tinted
+        (materialSyncMode is not read)."""
+        path = str(prim.GetPath())
+        radiance = lights.emission(prim, self.time)
+        if lights.value(prim, "normalize", self.time, False):
+            area = _polygon_area(UsdGeom.Mesh(prim), self.time)
+            if area > 0:
+                radiance = radiance / area
+        for g in groups:
+            mesh = self.writer.meshes[g.payload[0]]
+            material = dict(self.writer.materials[mesh["material"]])
+            material["name"] = f"{material.get('name', path)} (mesh light)"
+            material["emissive"] = [float(c) for c in radiance]
+            mesh["material"] = self.writer.add_material(material)
+        sync = prim.GetAttribute("light:materialSyncMode")
+        if sync and sync.HasAuthoredValue():
+            self.warn(path, f"light:materialSyncMode {sync.Get()!r} is not read: the mesh emits "
+                      "the light's radiance over its material")
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

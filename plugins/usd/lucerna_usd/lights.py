@@ -17,7 +17,20 @@ surface facing it. Lights are visible to the camera, as in Karma and RenderMan.
 - DistantLight: a directional light with its angular diameter (a cone of uniform radiance
   in the renderer; 0 is a parallel light) and the cone's irradiance.
 - DomeLight, DomeLight_1: the environment, constant or a lat-long map (OpenEXR's
-  convention: +Y pole, longitude 0 along +Z).
+  convention: +Y pole, longitude 0 along +Z). Several domes add up: constants sum, a
+  constant adds to a map's texels, maps of one orientation sum texel by texel (resampled
+  to the first map's size); a map turned otherwise than the first is left out with a
+  warning.
+
+As written in the wild: an attribute authored without the `inputs:` prefix (UsdLux before
+21.05, many DCC exporters) is read where `inputs:NAME` is not authored, as UsdLux's own
+compatibility does. ShapingAPI: on a point-like light (a SphereLight with treatAsPoint, or
+any SphereLight, whose size is then dropped with a warning) a cone of half-angle
+`shaping:cone:angle` up to 90 degrees makes a spot light that fades from
+angle x (1 - softness) to the angle (glTF's spot falloff: an approximation of UsdLux's
+smoothstep); focus, IES profiles and cones on area lights are warned about and ignored.
+Light linking (lightLink/shadowLink collections that exclude something) is not honoured:
+a warning names the light.
 """
 
 import math
@@ -31,22 +44,82 @@ from .scene_file import default_material, matrix, mean_scale
 SEGMENTS = 64
 
 
+def value(prim, name, time, fallback=None):
+    """Light attribute `name`: `inputs:NAME` where authored, else `NAME` where authored
+    (UsdLux before the inputs: prefix, as UsdLux's compatibility reads it), else the
+    schema's fallback (that of `inputs:NAME`), else `fallback`."""
+    new = prim.GetAttribute(f"inputs:{name}")
+    if new and new.HasAuthoredValue():
+        return new.Get(time)
+    old = prim.GetAttribute(name)
+    if old and old.HasAuthoredValue():
+        return old.Get(time)
+    if new:
+        v = new.Get(time)
+        if v is not None:
+            return v
+    return fallback
+
+
 def emission(prim, time):
     """The light's scalar-times-colour emission before normalisation (RGB)."""
-    light = UsdLux.LightAPI(prim)
-    intensity = light.GetIntensityAttr().Get(time)
-    exposure = light.GetExposureAttr().Get(time)
-    color = np.asarray(light.GetColorAttr().Get(time), dtype=float)
-    value = float(intensity) * 2.0 ** float(exposure) * color
-    if light.GetEnableColorTemperatureAttr().Get(time):
-        kelvin = float(light.GetColorTemperatureAttr().Get(time))
+    intensity = value(prim, "intensity", time, 1.0)
+    exposure = value(prim, "exposure", time, 0.0)
+    color = np.asarray(value(prim, "color", time, (1.0, 1.0, 1.0)), dtype=float)
+    result = float(intensity) * 2.0 ** float(exposure) * color
+    if value(prim, "enableColorTemperature", time, False):
+        kelvin = float(value(prim, "colorTemperature", time, 6500.0))
         rgb = np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), dtype=float)
-        value = value * rgb / np.asarray(UsdLux.BlackbodyTemperatureAsRgb(6500.0), dtype=float)
-    return value
+        result = result * rgb / np.asarray(UsdLux.BlackbodyTemperatureAsRgb(6500.0), dtype=float)
+    return result
 
 
 def _normalize(prim, time):
-    return bool(UsdLux.LightAPI(prim).GetNormalizeAttr().Get(time))
+    return bool(value(prim, "normalize", time, False))
+
+
+def _links_something_out(prim):
+    """Whether the light's lightLink or shadowLink collection excludes anything (UsdLux's
+    default includes everything)."""
+    from pxr import Usd
+
+    for name in ("lightLink", "shadowLink"):
+        collection = Usd.CollectionAPI(prim, name)
+        root = prim.GetAttribute(f"collection:{name}:includeRoot")
+        if root and root.HasAuthoredValue() and not root.Get():
+            return True
+        if collection.GetExcludesRel() and collection.GetExcludesRel().GetTargets():
+            return True
+        includes = collection.GetIncludesRel()
+        if includes and includes.GetTargets() and not (root and root.Get()):
+            return True
+    return False
+
+
+def _spot_cone(prim, time, warn, path, point_like):
+    """(inner, outer) half-angles in radians of the ShapingAPI cone, or None (no cone)."""
+    angle = value(prim, "shaping:cone:angle", time, 90.0)
+    softness = value(prim, "shaping:cone:softness", time, 0.0)
+    focus = value(prim, "shaping:focus", time, 0.0)
+    ies = value(prim, "shaping:ies:file", time, None)
+    if focus and float(focus) != 0.0:
+        warn(path, f"shaping:focus {focus} is not supported and is ignored")
+    if ies is not None and getattr(ies, "path", ""):
+        warn(path, f"IES profile {ies.path!r} is not supported and is ignored")
+    angle = float(angle) if angle is not None else 90.0
+    if angle >= 180.0:
+        return None
+    if not point_like:
+        warn(path, f"shaping:cone:angle on a {prim.GetTypeName()} is not supported: it emits "
+             "over its whole hemisphere")
+        return None
+    if angle > 90.0:
+        warn(path, f"shaping:cone:angle {angle} wider than 90 degrees is not supported: "
+             "unshaped point light")
+        return None
+    outer = math.radians(max(angle, 0.0))
+    softness = min(max(float(softness or 0.0), 0.0), 1.0)
+    return outer * (1.0 - softness), outer
 
 
 def _emitter(writer, name, radiance):
@@ -164,8 +237,12 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
     path = str(prim.GetPath())
     radiance = emission(prim, time)
     normalize = _normalize(prim, time)
-    if prim.HasAPI(UsdLux.ShapingAPI):
-        warn(path, "ShapingAPI (cone, focus, IES) is not supported and is ignored")
+    shaped = prim.HasAPI(UsdLux.ShapingAPI) or any(
+        prim.GetAttribute(n).HasAuthoredValue() for n in (
+            "inputs:shaping:cone:angle", "shaping:cone:angle", "inputs:shaping:focus"))
+    if _links_something_out(prim):
+        warn(path, "light linking (lightLink/shadowLink) is not honoured: the light "
+             "illuminates and shadows everything")
     group = _light_group(prim, time, warn)
     for k, usd_world in enumerate(usd_worlds):
         name = path if len(usd_worlds) == 1 else f"{path}[{k}]"
@@ -174,20 +251,23 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
         world = usd_world @ to_lucerna
         if prim.IsA(UsdLux.RectLight) or prim.IsA(UsdLux.DiskLight) or prim.IsA(UsdLux.CylinderLight):
             analytic = None
+            if shaped:
+                _spot_cone(prim, time, warn, path, point_like=False)
             if prim.IsA(UsdLux.RectLight):
-                light = UsdLux.RectLight(prim)
-                shape = _rect(light.GetWidthAttr().Get(time), light.GetHeightAttr().Get(time))
-                if light.GetTextureFileAttr().Get(time):
+                shape = _rect(float(value(prim, "width", time, 1.0)),
+                              float(value(prim, "height", time, 1.0)))
+                texture = value(prim, "texture:file", time, None)
+                if texture is not None and getattr(texture, "path", ""):
                     warn(path, "texture:file on a RectLight is not supported: uniform emission")
             elif prim.IsA(UsdLux.DiskLight):
-                radius = float(UsdLux.DiskLight(prim).GetRadiusAttr().Get(time))
+                radius = float(value(prim, "radius", time, 0.5))
                 shape = _disk(radius)
                 analytic = (_analytic_disk, (radius,))
             else:
-                light = UsdLux.CylinderLight(prim)
-                if light.GetTreatAsLineAttr().Get(time):
+                if value(prim, "treatAsLine", time, False):
                     warn(path, "treatAsLine is ignored: the cylinder is rendered")
-                radius, length = float(light.GetRadiusAttr().Get(time)), float(light.GetLengthAttr().Get(time))
+                radius = float(value(prim, "radius", time, 0.5))
+                length = float(value(prim, "length", time, 1.0))
                 shape = _cylinder(radius, length)
                 analytic = (_analytic_cylinder, (radius, length))
             positions, triangles, outward = shape
@@ -209,8 +289,7 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
             mesh = writer.add_mesh(name, material, positions, triangles)
             writer.add_instances(name, mesh, world[None])
         elif prim.IsA(UsdLux.SphereLight):
-            light = UsdLux.SphereLight(prim)
-            radius = float(light.GetRadiusAttr().Get(time))
+            radius = float(value(prim, "radius", time, 0.5))
             scale, uniform = mean_scale(world[:3, :3])
             if not uniform:
                 warn(name, "non-uniform scale on a SphereLight: the mean scale is used")
@@ -220,15 +299,28 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
             L = radiance
             if normalize and radius > 0:
                 L = radiance / (4 * math.pi * (radius * usd_scale) ** 2)
-            if light.GetTreatAsPointAttr().Get(time) or radius <= 0.0:
+            point = bool(value(prim, "treatAsPoint", time, False)) or radius <= 0.0
+            cone = _spot_cone(prim, time, warn, path, point_like=True) if shaped else None
+            if cone is not None and not point:
+                warn(name, "a shaped SphereLight is rendered as a spot light at its centre "
+                     "(its size, and so the softness of its shadows, is dropped)")
+            if point or cone is not None:
                 intensity = L * math.pi * r_world ** 2 if radius > 0 else L
-                writer.lights.append({"name": name, "kind": {"point": {
-                    "position": centre, "intensity": [float(c) for c in intensity]}}})
+                if cone is None:
+                    writer.lights.append({"name": name, "kind": {"point": {
+                        "position": centre, "intensity": [float(c) for c in intensity]}}})
+                else:
+                    axis = np.array([0.0, 0.0, -1.0]) @ world[:3, :3]
+                    axis /= np.linalg.norm(axis)
+                    writer.lights.append({"name": name, "kind": {"spot": {
+                        "position": centre, "direction": [float(x) for x in axis],
+                        "intensity": [float(c) for c in intensity],
+                        "inner_cone": float(cone[0]), "outer_cone": float(cone[1])}}})
             else:
                 writer.spheres.append({"name": name, "centre": centre, "radius": r_world,
                                        "material": _emitter(writer, name, L)})
         elif prim.IsA(UsdLux.DistantLight):
-            angle = math.radians(min(max(float(UsdLux.DistantLight(prim).GetAngleAttr().Get(time)), 0.0), 180.0))
+            angle = math.radians(min(max(float(value(prim, "angle", time, 0.53)), 0.0), 180.0))
             if normalize or angle == 0.0:
                 irradiance = radiance
             else:
@@ -245,30 +337,26 @@ def convert(writer, prim, usd_worlds, to_lucerna, time, warn):
 
 
 def _dome(writer, prim, world, radiance, time, warn, name):
-    if writer.environment is not None:
-        warn(name, "a second dome light is ignored (one environment per scene)")
-        return
+    """Records the dome for [`finish_domes`]: its scale and, if it has a readable lat-long
+    map, the map's linear texels and orientation."""
     dome = UsdLux.DomeLight_1(prim) if prim.IsA(UsdLux.DomeLight_1) else UsdLux.DomeLight(prim)
-    fmt = dome.GetTextureFormatAttr().Get(time)
-    asset = dome.GetTextureFileAttr().Get(time)
-    scale = [float(c) for c in radiance]
-    if not asset or not asset.path:
-        writer.environment = {"constant": scale}
+    fmt = value(prim, "texture:format", time, "automatic")
+    asset = value(prim, "texture:file", time, None)
+    entry = {"name": name, "scale": np.asarray(radiance, dtype=float), "pixels": None}
+    writer.domes.append(entry)
+    if asset is None or not asset.path:
         return
     if fmt not in ("automatic", "latlong"):
         warn(name, f"texture:format {fmt!r} is not supported (latlong is): constant dome")
-        writer.environment = {"constant": scale}
         return
     try:
         image = images.read(asset)
     except OSError as e:
         warn(name, f"dome texture {asset.path!r} unreadable ({e}): constant dome")
-        writer.environment = {"constant": scale}
         return
     pixels = image.pixels.copy()
     if image.eight_bit:
         pixels[..., :3] = images.srgb_to_linear(pixels[..., :3])
-    texture = writer.add_texture(name, pixels, ("repeat", "clamp_to_edge"))
     rotation = np.asarray(world, dtype=float)[:3, :3].copy()
     rotation /= np.linalg.norm(rotation, axis=1, keepdims=True)
     pole_z = prim.IsA(UsdLux.DomeLight_1) and (
@@ -281,6 +369,33 @@ def _dome(writer, prim, world, radiance, time, warn, name):
     # lucerna's lat-long map looks along -Z at its centre, OpenEXR's along +Z: a half turn
     # about the pole.
     rotation = np.diag([-1.0, 1.0, -1.0]) @ rotation
+    entry["pixels"] = pixels
+    entry["rotation"] = rotation
+
+
+def finish_domes(writer, warn):
+    """The environment of every dome met: the sum of their light (see the module doc)."""
+    domes = writer.domes
+    if not domes:
+        return
+    maps = [d for d in domes if d["pixels"] is not None]
+    constant = sum((d["scale"] for d in domes if d["pixels"] is None), np.zeros(3))
+    if not maps:
+        writer.environment = {"constant": [float(c) for c in constant]}
+        return
+    first = maps[0]
+    h, w = first["pixels"].shape[:2]
+    texels = first["pixels"][..., :3] * first["scale"]
+    for d in maps[1:]:
+        if not np.allclose(d["rotation"], first["rotation"], atol=1e-6):
+            warn(d["name"], f"a dome turned otherwise than {first['name']} is not added "
+                 "(one environment map per scene; domes of one orientation add up)")
+            continue
+        texels = texels + images.resample(d["pixels"], (h, w))[..., :3] * d["scale"]
+    texels = texels + constant
+    rgba = np.concatenate([texels, np.ones((h, w, 1))], axis=2).astype(np.float32)
+    texture = writer.add_texture(first["name"], rgba, ("repeat", "clamp_to_edge"))
     m = np.identity(4)
-    m[:3, :3] = rotation
-    writer.environment = {"lat_long": {"texture": texture, "scale": scale, "rotation": matrix(m)}}
+    m[:3, :3] = first["rotation"]
+    writer.environment = {"lat_long": {"texture": texture, "scale": [1.0, 1.0, 1.0],
+                                       "rotation": matrix(m)}}

@@ -70,6 +70,8 @@ class SceneWriter:
         self.lights = []
         self.cameras = []
         self.environment = None
+        # Dome lights met so far (lights.finish_domes makes the environment of them).
+        self.domes = []
         self.light_groups = []
         self.warnings = []
 

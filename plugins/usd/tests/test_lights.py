@@ -235,3 +235,76 @@ def test_light_group_attribute_puts_lights_in_groups(stage_file, converted):
     ''')))
     assert s["light_groups"] == [{"name": "warm", "members": ["/World/Key", "/World/Fill"]}]
     assert any("lucerna:lightGroup" in w and "/World/Sun" in w for w in s["warnings"])
+
+
+def test_attributes_without_the_inputs_prefix_are_read(stage_file, converted):
+    """UsdLux before 21.05 (and many exporters) wrote `intensity`, not `inputs:intensity`;
+    where both are authored the prefixed one wins."""
+    s = converted(stage_file(world(
+        'def DistantLight "Old" {\n float intensity = 3\n color3f color = (1, 0.5, 0.25)\n'
+        ' float exposure = 1\n float angle = 0\n}\n'
+        'def DistantLight "Both" {\n float intensity = 100\n float inputs:intensity = 2\n'
+        ' float inputs:angle = 0\n}')), no_validate=True)
+    old, both = (l["kind"]["directional"] for l in s["lights"])
+    assert old["irradiance"] == pytest.approx([6, 3, 1.5])
+    assert both["irradiance"] == pytest.approx([2, 2, 2])
+
+
+def test_a_shaped_point_light_is_a_spot_light(stage_file, converted):
+    s = converted(stage_file(world(
+        'def SphereLight "Spot" (prepend apiSchemas = ["ShapingAPI"]) {\n'
+        ' float inputs:intensity = 10\n float inputs:radius = 0.1\n bool treatAsPoint = 1\n'
+        ' float inputs:shaping:cone:angle = 30\n float inputs:shaping:cone:softness = 0.5\n'
+        ' float inputs:shaping:focus = 2\n}\n'
+        'def RectLight "Panel" (prepend apiSchemas = ["ShapingAPI"]) {\n'
+        ' float inputs:shaping:cone:angle = 20\n}')))
+    spot = s["lights"][0]["kind"]["spot"]
+    assert spot["outer_cone"] == pytest.approx(math.radians(30))
+    assert spot["inner_cone"] == pytest.approx(math.radians(15))
+    assert spot["direction"] == pytest.approx([0, 0, -1])
+    assert spot["intensity"] == pytest.approx([10 * math.pi * 0.01] * 3)
+    assert s.warnings_about("/World/Spot: shaping:focus 2.0 is not supported")
+    assert s.warnings_about("/World/Panel: shaping:cone:angle on a RectLight is not supported")
+
+
+def test_domes_add_up(stage_file, converted, tmp_path):
+    s = converted(stage_file(world(
+        'def DomeLight "A" {\n float inputs:intensity = 0.5\n}\n'
+        'def DomeLight "B" {\n color3f inputs:color = (0.25, 0.5, 1)\n}')))
+    assert s["environment"] == {"constant": pytest.approx([0.75, 1.0, 1.5])}
+    pixels = np.zeros((8, 16, 3), np.float32)
+    pixels[2:6, 4:8] = 2.0
+    out = oiio.ImageOutput.create(str(tmp_path / "sky.exr"))
+    out.open(str(tmp_path / "sky.exr"), oiio.ImageSpec(16, 8, 3, oiio.FLOAT))
+    out.write_image(pixels)
+    out.close()
+    s = converted(stage_file(world(
+        'def DomeLight "Map" {\n asset inputs:texture:file = @./sky.exr@\n float inputs:intensity = 2\n}\n'
+        'def DomeLight "Map2" {\n asset inputs:texture:file = @./sky.exr@\n}\n'
+        'def DomeLight "Fill" {\n float inputs:intensity = 0.1\n}'), name="maps.usda"))
+    env = s["environment"]["lat_long"]
+    assert env["scale"] == [1.0, 1.0, 1.0]
+    t = s["textures"][env["texture"]]
+    texels = s.array(t["texels"], "<f4", 4).reshape(t["height"], t["width"], 4)
+    assert texels[3, 5, :3] == pytest.approx([2 * 2 + 2 + 0.1] * 3)
+    assert texels[0, 0, :3] == pytest.approx([0.1] * 3)
+    assert not s.warnings_about("dome")
+
+
+def test_light_linking_is_warned_about(stage_file, converted):
+    s = converted(stage_file(world(
+        'def SphereLight "Key" (prepend apiSchemas = ["CollectionAPI:lightLink"]) {\n'
+        ' uniform bool collection:lightLink:includeRoot = 0\n'
+        ' rel collection:lightLink:includes = </World/Ball>\n}\n'
+        'def Sphere "Ball" {\n}')))
+    assert s.warnings_about("/World/Key: light linking (lightLink/shadowLink) is not honoured")
+
+
+def test_a_mesh_light_emits_its_radiance(stage_file, converted):
+    s = converted(stage_file(world(
+        'def Mesh "Panel" (prepend apiSchemas = ["MeshLightAPI"]) {\n'
+        ' int[] faceVertexCounts = [4]\n int[] faceVertexIndices = [0, 1, 2, 3]\n'
+        ' point3f[] points = [(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)]\n'
+        ' float inputs:intensity = 8\n bool inputs:normalize = 1\n}')))
+    material = s["materials"][s.mesh("/World/Panel")["material"]]
+    assert material["emissive"] == pytest.approx([2, 2, 2])  # 8 over 4 square units
