@@ -94,6 +94,17 @@ struct LoadArgs {
     /// husk and usdview).
     #[arg(long)]
     strict: bool,
+    /// Select variant NAME of variant set SET in every prim that has it
+    /// (`/PRIM:SET=NAME`: in that prim); repeatable. USD stages.
+    #[arg(long = "variant", value_name = "SET=NAME")]
+    variants: Vec<String>,
+    /// Purposes rendered besides `default`, comma-separated: render, proxy, guide. USD
+    /// stages.
+    #[arg(long, default_value = "render")]
+    purpose: String,
+    /// Do not load a USD stage's payloads.
+    #[arg(long)]
+    no_payloads: bool,
     /// Seconds the USD plugin may take to convert a stage before it is stopped.
     #[arg(long, default_value_t = ingest::DEFAULT_PLUGIN_TIMEOUT.as_secs_f64(), value_parser = parse_timeout)]
     usd_timeout: f64,
@@ -106,6 +117,9 @@ impl LoadArgs {
             fps: self.fps,
             validate: !self.no_validate,
             strict: self.strict,
+            variants: self.variants.clone(),
+            purpose: self.purpose.clone(),
+            payloads: !self.no_payloads,
             plugin_timeout: std::time::Duration::from_secs_f64(self.usd_timeout),
         }
     }

@@ -39,6 +39,12 @@ pub struct LoadOptions {
     pub validate: bool,
     /// ...unless strict: then an error refuses the stage.
     pub strict: bool,
+    /// USD variant selections, `SET=NAME` or `/PRIM:SET=NAME`.
+    pub variants: Vec<String>,
+    /// USD purposes rendered besides default (comma-separated).
+    pub purpose: String,
+    /// Load USD payloads.
+    pub payloads: bool,
     /// How long the USD plugin may take to convert a stage before it is stopped.
     pub plugin_timeout: std::time::Duration,
 }
@@ -54,6 +60,9 @@ impl Default for LoadOptions {
             fps: DEFAULT_FPS,
             validate: true,
             strict: false,
+            variants: Vec::new(),
+            purpose: "render".into(),
+            payloads: true,
             plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }

@@ -3,7 +3,8 @@
 //! like any other (and validated again: the plugin's output is untrusted input too).
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
-//! [--no-validate | --strict] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
+//! [--no-validate | --strict] [--variant SET=NAME]... [--purpose LIST] [--no-payloads]
+//! [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
 //! the repository's `.venv` (where `tools/test.sh` installs the plugin's requirements), else
 //! `python3`; the plugin folder is `$LUCERNA_USD_PLUGIN`, else `plugins/usd` of the source tree
 //! this binary was built from (put before any `PYTHONPATH` already set).
@@ -90,6 +91,13 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     }
     if options.strict {
         command.arg("--strict");
+    }
+    for variant in &options.variants {
+        command.arg("--variant").arg(variant);
+    }
+    command.arg("--purpose").arg(&options.purpose);
+    if !options.payloads {
+        command.arg("--no-payloads");
     }
     if let Some(limit) = crate::memory::process_limit() {
         command.arg("--max-memory").arg(limit.to_string());

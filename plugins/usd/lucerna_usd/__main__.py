@@ -55,7 +55,7 @@ def _captured_stderr(sink):
             sink.append(tmp.read().decode(errors="replace"))
 
 
-def _open(path):
+def _open(path, payloads=True):
     from pxr import Tf, Usd
 
     if not os.path.isfile(path):
@@ -63,12 +63,57 @@ def _open(path):
     captured = []
     try:
         with _captured_stderr(captured):
-            stage = Usd.Stage.Open(path, Usd.Stage.LoadAll)
+            stage = Usd.Stage.Open(path, Usd.Stage.LoadAll if payloads else Usd.Stage.LoadNone)
     except Tf.ErrorException as e:
         return None, _tf_reason(e)
     if stage is None:
         return None, "usd-core cannot open the file"
     return stage, None
+
+
+def select_variants(stage, selections, warn):
+    """Applies `selections` ("SET=NAME": in every prim that has variant set SET, or
+    "/Prim/Path:SET=NAME": in that prim) on the stage's session layer, so the files are
+    unchanged; selections that bring in further variant sets are applied to those too."""
+    from pxr import Sdf, Usd
+
+    parsed = []
+    for text in selections:
+        where, _, choice = text.rpartition(":") if text.startswith("/") else ("", "", text)
+        vset, sep, name = choice.partition("=")
+        if not sep or not vset or not name:
+            raise ValueError(f"--variant {text!r}: expected SET=NAME or /PRIM:SET=NAME")
+        parsed.append((where, vset, name))
+    applied = set()
+    with Usd.EditContext(stage, stage.GetSessionLayer()):
+        for _ in range(8):  # a selection may reveal prims with further variant sets
+            changed = False
+            for where, vset, name in parsed:
+                prims = ([stage.GetPrimAtPath(Sdf.Path(where))] if where
+                         else stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)))
+                for prim in prims:
+                    if not prim or not prim.IsValid():
+                        continue
+                    sets = prim.GetVariantSets()
+                    if not sets.HasVariantSet(vset):
+                        continue
+                    variant_set = sets.GetVariantSet(vset)
+                    key = (str(prim.GetPath()), vset)
+                    if name not in variant_set.GetVariantNames():
+                        if key not in applied:
+                            warn(str(prim.GetPath()), f"--variant {vset}={name}: no such variant "
+                                 f"(it has {', '.join(variant_set.GetVariantNames())})")
+                            applied.add(key)
+                        continue
+                    if variant_set.GetVariantSelection() != name:
+                        variant_set.SetVariantSelection(name)
+                        changed = True
+                    applied.add(key)
+            if not changed:
+                break
+    for where, vset, name in parsed:
+        if not any(k[1] == vset and (not where or k[0] == where) for k in applied):
+            warn(where or "stage", f"--variant {vset}={name}: no prim has the variant set {vset!r}")
 
 
 def _time(stage, frame):
@@ -100,12 +145,14 @@ def _validate(stage, path, strict, warnings):
     return True
 
 
-def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False):
+def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False,
+            variants=(), purposes=("render",), payloads=True):
     """Converts `path` to the scene file `output`; returns the exit status."""
     from pxr import Tf
 
     try:
-        return _convert(path, output, frame, no_validate, quiet, strict)
+        return _convert(path, output, frame, no_validate, quiet, strict, variants, purposes,
+                        payloads)
     except Tf.ErrorException as e:
         # usd-core raises on layers it cannot parse when composition reaches them.
         _error(path, "stage", _tf_reason(e))
@@ -118,16 +165,25 @@ def _tf_reason(error):
     return detail.strip("'")
 
 
-def _convert(path, output, frame, no_validate, quiet, strict):
+def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purposes=("render",),
+             payloads=True):
     from . import StageError
     from .convert import Converter
 
     started = clock.monotonic()
-    stage, reason = _open(path)
+    stage, reason = _open(path, payloads)
     if stage is None:
         _error(path, "stage", reason)
         return EXIT_BAD_INPUT
     warnings = []
+    if variants:
+        try:
+            select_variants(stage, variants, lambda element, text: warnings.append(f"{element}: {text}"))
+        except ValueError as e:
+            _error(path, "--variant", str(e))
+            return EXIT_BAD_INPUT
+    if not payloads:
+        warnings.append("stage: payloads not loaded (--no-payloads)")
     if not no_validate and not _validate(stage, path, strict, warnings):
         return EXIT_BAD_INPUT
     if no_validate:
@@ -137,7 +193,7 @@ def _convert(path, output, frame, no_validate, quiet, strict):
     captured = []
     try:
         with _captured_stderr(captured):
-            converter = Converter(stage, path, _time(stage, frame))
+            converter = Converter(stage, path, _time(stage, frame), purposes)
             writer = converter.run()
     except StageError as e:
         _error(path, e.element, e.reason)
@@ -177,6 +233,12 @@ def main(argv=None):
     c.add_argument("--strict", action="store_true",
                    help="stop on any validator error (default: findings are warnings)")
     c.add_argument("--quiet", action="store_true")
+    c.add_argument("--variant", action="append", default=[], metavar="SET=NAME",
+                   help="select variant NAME of set SET (in every prim that has it; "
+                        "/PRIM:SET=NAME for one prim); repeatable")
+    c.add_argument("--purpose", default="render",
+                   help="purposes rendered besides default, comma-separated (render, proxy, guide)")
+    c.add_argument("--no-payloads", action="store_true", help="do not load payloads")
     c.add_argument("--max-memory", type=int, metavar="BYTES",
                    help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
     v = commands.add_parser("validate", help="print the validators' findings")
@@ -207,8 +269,13 @@ def main(argv=None):
 
         images.MAX_BYTES = args.max_memory
     try:
+        purposes = tuple(p.strip() for p in args.purpose.split(",") if p.strip())
+        unknown = [p for p in purposes if p not in ("render", "proxy", "guide")]
+        if unknown:
+            _error(args.stage, "--purpose", f"unknown purpose {unknown[0]!r} (render, proxy, guide)")
+            return EXIT_BAD_INPUT
         return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet,
-                       args.strict)
+                       args.strict, args.variant, purposes, not args.no_payloads)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request
         if os.environ.get("LUCERNA_USD_DEBUG"):
             raise

@@ -1,8 +1,8 @@
 """The composed stage to lucerna's scene.
 
 Traversal: active, loaded, defined prims (usd-core's default predicate); `visibility`
-invisible prunes a subtree, `purpose` proxy and guide are skipped (default and render are
-rendered). Every prim yields *groups*: what it contains (meshes, spheres, lights, cameras)
+invisible prunes a subtree; `purpose` default is rendered, and of render, proxy and guide
+those asked for (render by default; `--purpose`). Every prim yields *groups*: what it contains (meshes, spheres, lights, cameras)
 with one transform per placement, relative to the prim. A parent applies its children's
 local transforms (time-sampled, at the frame) to their groups, so a prototype (a
 scene-graph instance's, or a PointInstancer's) is converted once and placed many times:
@@ -81,9 +81,11 @@ class Converter:
     """Converts one stage at one time code; `warnings` collects what was repaired,
     approximated or skipped, each naming its prim."""
 
-    def __init__(self, stage, source, time):
+    def __init__(self, stage, source, time, purposes=("render",)):
         self.stage = stage
         self.time = time
+        # Purposes rendered besides "default" (UsdGeom's render, proxy, guide).
+        self.purposes = set(purposes)
         self.writer = SceneWriter(source)
         self.materials = MaterialConverter(self.writer, time, self.warn)
         self.to_lucerna = stage_to_lucerna(stage)
@@ -165,7 +167,8 @@ class Converter:
             imageable = UsdGeom.Imageable(prim)
             if imageable.GetVisibilityAttr().Get(self.time) == UsdGeom.Tokens.invisible:
                 return []
-            if imageable.GetPurposeAttr().Get() in (UsdGeom.Tokens.proxy, UsdGeom.Tokens.guide):
+            purpose = imageable.GetPurposeAttr().Get()
+            if purpose != UsdGeom.Tokens.default_ and purpose not in self.purposes:
                 return []
         groups = []
         if prim.IsA(UsdGeom.Mesh):
