@@ -98,6 +98,11 @@ def srgb_to_linear(x):
     return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4).astype(np.float32)
 
 
+#: srgb_to_linear of the 256 8-bit values: decoding an 8-bit image by table lookup is an
+#: order of magnitude faster than the power function over every texel.
+SRGB_TO_LINEAR_8 = srgb_to_linear(np.arange(256, dtype=np.float32) / np.float32(255.0))
+
+
 def resample(pixels, shape):
     """Nearest-texel resampling of (H, W, C) to `shape` (H', W'), for combining channels
     of images of different sizes into one texture."""

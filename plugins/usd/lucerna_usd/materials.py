@@ -80,7 +80,12 @@ class TextureSource:
         """The texture's linear RGBA values after scale and bias, (H, W, 4) float32."""
         px = self.image.pixels
         if self.srgb:
-            px = np.concatenate([images.srgb_to_linear(px[..., :3]), px[..., 3:]], 2)
+            raw8 = self.image.raw8
+            rgb = (images.SRGB_TO_LINEAR_8[raw8[..., :3]] if raw8 is not None
+                   else images.srgb_to_linear(px[..., :3]))
+            px = np.concatenate([rgb, px[..., 3:]], 2)
+        if self.plain:
+            return px
         return px * self.scale + self.bias
 
     def values(self, count):
