@@ -122,14 +122,17 @@ class MeshData:
         columns = [self.indices[:, None].astype(np.float64)]
         columns += [a for a in (normals, uvs, colors) if a is not None]
         key = np.ascontiguousarray(np.concatenate(columns, 1))
-        used = np.unique(tri)
-        rows = key[used]
-        unique, first, inverse = np.unique(
-            rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel(),
-            return_index=True, return_inverse=True)
-        remap = np.empty(len(key), np.int64)
-        remap[used] = inverse.ravel()
-        corners = used[first]
+        used = _sorted_unique(tri.ravel())
+        corners, remap = self._weld_by_point(used, key)
+        if corners is None:
+            # Some point has corners that differ (a UV seam, split normals): weld equal rows.
+            rows = key[used]
+            unique, first, inverse = np.unique(
+                rows.view(np.dtype((np.void, rows.dtype.itemsize * rows.shape[1]))).ravel(),
+                return_index=True, return_inverse=True)
+            remap = np.empty(len(key), np.int64)
+            remap[used] = inverse.ravel()
+            corners = used[first]
         triangles = remap[tri].astype(np.uint32)
         positions = self.points[self.indices[corners]]
         out_normals = None
@@ -150,6 +153,30 @@ class MeshData:
         return positions, triangles, out_normals, out_uvs, out_colors
 
 
+    def _weld_by_point(self, used, key):
+        """When every point's corners carry equal attributes (per-vertex data, or face-
+        varying data indexed like the points), one vertex per point: (representative corner
+        per vertex, corner -> vertex), found by integer sorts alone. (None, None) otherwise."""
+        points = self.indices[used]
+        first_corner = np.empty(len(self.points), np.int64)
+        first_corner[points[::-1]] = used[::-1]
+        if not np.array_equal(key[used], key[first_corner[points]]):
+            return None, None
+        unique_points = _sorted_unique(points)
+        vertex_of_point = np.empty(len(self.points), np.int64)
+        vertex_of_point[unique_points] = np.arange(len(unique_points))
+        remap = np.empty(len(key), np.int64)
+        remap[used] = vertex_of_point[points]
+        return first_corner[unique_points], remap
+
+
+def _sorted_unique(values):
+    """np.unique of integers by one sort (numpy's hashing unique is several times slower on
+    millions of indices)."""
+    s = np.sort(values)
+    return s[np.concatenate([[True], s[1:] != s[:-1]])] if len(s) else s
+
+
 def _check_manifold(path, counts, indices, warn):
     """Warns about edges shared by more than two faces (the renderer does not need a
     manifold, but such meshes are usually broken exports)."""
@@ -157,8 +184,9 @@ def _check_manifold(path, counts, indices, warn):
     nxt = np.arange(len(indices)) + 1
     ends = np.repeat(starts + counts, counts)
     nxt = np.where(nxt == ends, np.repeat(starts, counts), nxt)
-    edges = np.sort(np.stack([indices, indices[nxt]], 1), axis=1)
-    _, multiplicity = np.unique(edges, axis=0, return_counts=True)
-    over = int((multiplicity > 2).sum())
+    a, b = indices.astype(np.int64), indices[nxt].astype(np.int64)
+    # One integer per undirected edge; an edge in more than two faces repeats 3+ times.
+    edges = np.sort(np.minimum(a, b) * (int(indices.max(initial=0)) + 1) + np.maximum(a, b))
+    over = len(_sorted_unique(edges[2:][edges[2:] == edges[:-2]]))
     if over:
         warn(path, f"non-manifold: {over} edges are shared by more than two faces")
