@@ -125,7 +125,9 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
     }
     let base = job_path.parent().unwrap_or(Path::new(""));
     std::fs::create_dir_all(logs).map_err(|e| Error::other(logs, "logs", e.to_string()))?;
-    let mut tasks = Vec::new();
+    let mut tasks: Vec<Task> = Vec::new();
+    // Each output's file, as `normal_file` names it, and the task writing it.
+    let mut writers: std::collections::HashMap<PathBuf, usize> = Default::default();
     for (i, render) in job.render.iter().enumerate() {
         let element = |key: &str| format!("render[{i}].{key}");
         let bad = |key: &str, reason: String| Error::bad_input(job_path, element(key), reason);
@@ -204,7 +206,8 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
                 Some(f) => logs.join(format!("render{i}.frame{f}.{name}.log")),
                 None => logs.join(format!("render{i}.{name}.log")),
             };
-            if let Some(earlier) = tasks.iter().find(|t: &&Task| same_file(&t.output, &output)) {
+            if let Some(&k) = writers.get(&normal_file(&output)) {
+                let earlier = &tasks[k];
                 return Err(bad(
                     "output",
                     format!(
@@ -223,6 +226,7 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
                     ),
                 ));
             }
+            writers.insert(normal_file(&output), tasks.len());
             tasks.push(Task {
                 scene: scene.clone(),
                 frame,
@@ -237,30 +241,27 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
     Ok(tasks)
 }
 
-/// Whether two output paths name one file (absolute, `.` and `..` resolved lexically, and
-/// through their directories' links where those exist).
-fn same_file(a: &Path, b: &Path) -> bool {
-    let normal = |p: &Path| {
-        let mut absolute = PathBuf::new();
-        for part in std::path::absolute(p)
-            .unwrap_or_else(|_| p.to_path_buf())
-            .components()
-        {
-            match part {
-                std::path::Component::ParentDir => {
-                    absolute.pop();
-                }
-                std::path::Component::CurDir => {}
-                other => absolute.push(other),
+/// The file an output path names, one spelling per file: absolute, `.` and `..` resolved
+/// lexically, and its directory's links resolved where it exists.
+fn normal_file(p: &Path) -> PathBuf {
+    let mut absolute = PathBuf::new();
+    for part in std::path::absolute(p)
+        .unwrap_or_else(|_| p.to_path_buf())
+        .components()
+    {
+        match part {
+            std::path::Component::ParentDir => {
+                absolute.pop();
             }
+            std::path::Component::CurDir => {}
+            other => absolute.push(other),
         }
-        let dir = absolute
-            .parent()
-            .and_then(|d| std::fs::canonicalize(d).ok())
-            .unwrap_or_else(|| absolute.parent().unwrap_or(Path::new("")).to_path_buf());
-        dir.join(absolute.file_name().unwrap_or_default())
-    };
-    normal(a) == normal(b)
+    }
+    let dir = absolute
+        .parent()
+        .and_then(|d| std::fs::canonicalize(d).ok())
+        .unwrap_or_else(|| absolute.parent().unwrap_or(Path::new("")).to_path_buf());
+    dir.join(absolute.file_name().unwrap_or_default())
 }
 
 /// What an existing output is to the job.

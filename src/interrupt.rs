@@ -72,9 +72,12 @@ fn handle(signal: i32) {
         return;
     }
     clean_up();
-    eprintln!(
+    // Not eprintln!: a closed stderr must not keep this thread from ending the process.
+    use std::io::Write;
+    let _ = writeln!(
+        std::io::stderr(),
         "lucerna: interrupted (signal {signal}){}; nothing written",
-        if first { " before sampling began" } else { "" }
+        if first { " before any result" } else { "" }
     );
     std::process::exit(128 + signal);
 }
