@@ -5,8 +5,8 @@
 //!
 //! - While the scene is read, converted (the USD plugin) or prepared (BVH, lights), there is
 //!   nothing worth saving: a signal ends the process at once with 128 + signal. The USD
-//!   plugin's process is killed and scratch folders are removed first ([`ChildGuard`],
-//!   [`ScratchGuard`]).
+//!   plugin's process is killed and scratch folders are removed first ([`watch_child`],
+//!   [`watch_scratch`]).
 //! - While samples are taken ([`defer`]), a signal only sets the stop flag: the render stops
 //!   at its next tile and writes a checkpoint that `--resume` continues. A second signal ends
 //!   the process at once.
@@ -24,8 +24,8 @@ struct State {
     received: AtomicUsize,
     /// Number of live [`Deferred`] guards: while positive, the first signal only stops.
     deferred: AtomicUsize,
-    children: Mutex<Vec<u32>>,
-    scratch: Mutex<Vec<PathBuf>>,
+    /// What to undo before a signal ends the process, with the id of its guard.
+    cleanups: Mutex<Vec<(u64, Cleanup)>>,
 }
 
 static STATE: OnceLock<State> = OnceLock::new();
@@ -35,8 +35,7 @@ fn state() -> &'static State {
         stop: Arc::new(AtomicBool::new(false)),
         received: AtomicUsize::new(0),
         deferred: AtomicUsize::new(0),
-        children: Mutex::new(Vec::new()),
-        scratch: Mutex::new(Vec::new()),
+        cleanups: Mutex::new(Vec::new()),
     })
 }
 
@@ -82,18 +81,25 @@ fn handle(signal: i32) {
     std::process::exit(128 + signal);
 }
 
-/// Kills registered child processes and removes registered scratch folders.
+/// Kills registered child processes and removes registered scratch folders and files.
 fn clean_up() {
-    let s = state();
-    for &pid in s.children.lock().unwrap_or_else(|e| e.into_inner()).iter() {
-        // SAFETY: kill(2) with a pid this process started and has not reaped yet.
-        unsafe { libc::kill(pid as libc::pid_t, libc::SIGKILL) };
-    }
-    for path in s.scratch.lock().unwrap_or_else(|e| e.into_inner()).iter() {
-        if path.is_dir() {
-            let _ = std::fs::remove_dir_all(path);
-        } else {
-            let _ = std::fs::remove_file(path);
+    for (_, cleanup) in state()
+        .cleanups
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+    {
+        match cleanup {
+            // SAFETY: kill(2) with a pid this process started and has not reaped yet.
+            Cleanup::Child(pid) => unsafe {
+                libc::kill(*pid as libc::pid_t, libc::SIGKILL);
+            },
+            Cleanup::Path(path) if path.is_dir() => {
+                let _ = std::fs::remove_dir_all(path);
+            }
+            Cleanup::Path(path) => {
+                let _ = std::fs::remove_file(path);
+            }
         }
     }
 }
@@ -124,49 +130,45 @@ impl Drop for Deferred {
     }
 }
 
-/// A child process killed if a signal ends this process; unregistered when dropped.
-pub struct ChildGuard(u32);
-
-/// Registers child `pid` (call before waiting for it).
-pub fn watch_child(pid: u32) -> ChildGuard {
-    state()
-        .children
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push(pid);
-    ChildGuard(pid)
+/// Something a signal that ends the process must undo first.
+enum Cleanup {
+    /// A child process to kill (the USD plugin).
+    Child(u32),
+    /// A scratch folder or temporary file to remove.
+    Path(PathBuf),
 }
 
-impl Drop for ChildGuard {
+/// Keeps its cleanup registered while alive; dropped, the owner has finished with it (the
+/// child reaped, the folder removed or the file renamed).
+pub struct CleanupGuard(u64);
+
+fn register(cleanup: Cleanup) -> CleanupGuard {
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let id = NEXT.fetch_add(1, Ordering::Relaxed) as u64;
+    state()
+        .cleanups
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .push((id, cleanup));
+    CleanupGuard(id)
+}
+
+impl Drop for CleanupGuard {
     fn drop(&mut self) {
         state()
-            .children
+            .cleanups
             .lock()
             .unwrap_or_else(|e| e.into_inner())
-            .retain(|&p| p != self.0);
+            .retain(|(id, _)| *id != self.0);
     }
 }
 
-/// A scratch folder or temporary file removed if a signal ends this process; unregistered
-/// when dropped (its owner removes or renames it then).
-pub struct ScratchGuard(PathBuf);
-
-/// Registers scratch folder or temporary file `dir`.
-pub fn watch_scratch(dir: PathBuf) -> ScratchGuard {
-    state()
-        .scratch
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .push(dir.clone());
-    ScratchGuard(dir)
+/// Kills child `pid` if a signal ends this process (register before waiting for it).
+pub fn watch_child(pid: u32) -> CleanupGuard {
+    register(Cleanup::Child(pid))
 }
 
-impl Drop for ScratchGuard {
-    fn drop(&mut self) {
-        state()
-            .scratch
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .retain(|d| *d != self.0);
-    }
+/// Removes scratch folder or temporary file `path` if a signal ends this process.
+pub fn watch_scratch(path: PathBuf) -> CleanupGuard {
+    register(Cleanup::Path(path))
 }
