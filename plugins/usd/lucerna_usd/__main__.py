@@ -184,6 +184,12 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             return EXIT_BAD_INPUT
     if not payloads:
         warnings.append("stage: payloads not loaded (--no-payloads)")
+    from .mtlx import substitute_documents
+
+    captured = []
+    with _captured_stderr(captured):
+        # The in-memory layers of referenced .mtlx documents live as long as the stage.
+        stage_layers = substitute_documents(stage, lambda element, text: warnings.append(f"{element}: {text}"))
     if not no_validate and not _validate(stage, path, strict, warnings):
         return EXIT_BAD_INPUT
     if no_validate:
@@ -195,6 +201,7 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
         with _captured_stderr(captured):
             converter = Converter(stage, path, _time(stage, frame), purposes)
             writer = converter.run()
+        del stage_layers  # the stage is no longer read
     except StageError as e:
         _error(path, e.element, e.reason)
         return EXIT_BAD_INPUT

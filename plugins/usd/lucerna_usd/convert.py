@@ -344,9 +344,9 @@ class Converter:
         for subset in UsdShade.MaterialBindingAPI(prim).GetMaterialBindSubsets():
             faces = np.asarray(subset.GetIndicesAttr().Get(self.time) or [], dtype=np.int64)
             faces = faces[(faces >= 0) & (faces < data.face_count)]
-            mat = self._material(subset.GetPrim(), None, double_sided)
-            if mat is None:
+            if self._bound_material(subset.GetPrim()) is None:
                 continue
+            mat = self._material(subset.GetPrim(), None, double_sided)
             select = np.zeros(data.face_count, bool)
             select[faces] = True
             select &= ~taken

@@ -18,28 +18,38 @@ class Image:
     """A decoded image: `pixels` (H, W, 4) float32, with RGB replicated from a grey image
     and alpha 1 where the file has none; `eight_bit` tells whether the file stored 8-bit
     values (USD's `auto` colour space reads those as sRGB); `raw8` keeps the 8-bit values
-    as stored, for textures passed through unchanged."""
+    as stored, for textures passed through unchanged. An 8-bit image is decoded to bytes
+    only; its float `pixels` are made the first time something asks for them (most
+    8-bit textures are passed through or packed as bytes and never need them)."""
 
     def __init__(self, path, pixels, eight_bit, raw8):
         self.path = path
-        self.pixels = pixels
+        self._pixels = pixels
         self.eight_bit = eight_bit
         self.raw8 = raw8
 
     @property
+    def pixels(self):
+        if self._pixels is None:
+            self._pixels = self.raw8.astype(np.float32) * np.float32(1.0 / 255.0)
+        return self._pixels
+
+    @property
     def shape(self):
-        return self.pixels.shape[:2]
+        return (self.raw8 if self._pixels is None else self._pixels).shape[:2]
 
 
 def _rgba(pixels):
     h, w, c = pixels.shape
-    if c == 1:
-        return np.concatenate([pixels] * 3 + [np.ones((h, w, 1), pixels.dtype) * _one(pixels)], 2)
-    if c == 2:
-        return np.concatenate([pixels[..., :1]] * 3 + [pixels[..., 1:2]], 2)
-    if c == 3:
-        return np.concatenate([pixels, np.ones((h, w, 1), pixels.dtype) * _one(pixels)], 2)
-    return pixels[..., :4]
+    if c >= 4:
+        return np.ascontiguousarray(pixels[..., :4])
+    out = np.empty((h, w, 4), pixels.dtype)
+    if c >= 3:
+        out[..., :3] = pixels[..., :3]
+    else:
+        out[..., :3] = pixels[..., :1]
+    out[..., 3] = pixels[..., 1] if c == 2 else _one(pixels)
+    return out
 
 
 def _one(pixels):
@@ -60,6 +70,11 @@ def _read_file(path):
                       f"{need / 2**20:.0f} MiB to decode, more than the limit of "
                       f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
     eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
+    if eight_bit:
+        raw = buf.get_pixels(oiio.UINT8)
+        if raw is None or buf.has_error:
+            raise OSError(buf.geterror().strip() or "cannot decode the image")
+        return None, True, _rgba(np.asarray(raw, np.uint8).reshape(spec.height, spec.width, spec.nchannels))
     pixels = buf.get_pixels(oiio.FLOAT)
     if pixels is None or buf.has_error:
         raise OSError(buf.geterror().strip() or "cannot decode the image")
@@ -67,8 +82,7 @@ def _read_file(path):
     if not np.isfinite(pixels).all():
         bad = int((~np.isfinite(pixels)).sum())
         raise OSError(f"{bad} texel values are NaN or infinite")
-    raw8 = _rgba(np.asarray(buf.get_pixels(oiio.UINT8)).reshape(pixels.shape)) if eight_bit else None
-    return _rgba(pixels), eight_bit, raw8
+    return _rgba(pixels), False, None
 
 
 def read(asset_path):

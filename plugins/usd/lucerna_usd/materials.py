@@ -1,99 +1,62 @@
-"""UsdPreviewSurface networks to lucerna materials (glTF metallic-roughness).
+"""Bound USD materials to lucerna materials.
 
-Supported nodes: UsdPreviewSurface, UsdUVTexture (file, st, wrapS/T, scale, bias,
-sourceColorSpace, fallback, outputs r g b a rgb), UsdPrimvarReader_float2 (texture
-coordinates) and _float3 (vertex colours, e.g. displayColor), UsdTransform2d (texture
-transform). Texture channels are combined into lucerna's layout where the layouts differ:
-roughness in G and metallic in B of one texture, opacity in the base colour's alpha, normals
-stored as (n + 1) / 2; an 8-bit image used exactly as stored is passed through, anything
-scaled, biased, swizzled or decoded differently is baked to linear float texels.
+A material's surface is looked up in the render contexts lucerna understands, richest
+first: MaterialX (`outputs:mtlx:surface`), the universal one (UsdPreviewSurface), MDL
+(`outputs:mdl:surface`: Omniverse's OmniPBR, OmniGlass, OmniSurface) and RenderMan
+(`outputs:ri:surface`: PxrSurface, PxrDisney); the first context whose shader lucerna
+knows is used. `surfaces` reads the shader into lucerna's model, `networks` evaluates what
+feeds its inputs, and this module writes the material and packs textures into lucerna's
+slots: roughness in G and metallic in B of one texture, coverage in the base colour's
+alpha, normals stored as (n + 1) / 2, transmission in R. An 8-bit image used exactly as
+stored is passed through; anything scaled, biased, swizzled, combined or decoded
+differently is baked to linear float texels.
 
-clearcoat and clearcoatRoughness become the material's clear coat (ior 1.5, as both
-UsdPreviewSurface and the renderer fix it); useSpecularWorkflow makes specularColor the
-dielectric's reflectance at normal incidence (white at grazing), metallic unused; ior sets
-the dielectric's reflectance otherwise.
-
-opacity follows the specification's opacityMode: "transparent" (the default) makes
-opacity < 1 transmission, 1 - opacity of the dielectric base, untinted (UsdPreviewSurface has
-no transmission colour): a volume that refracts by `ior` (a thin wall when ior is 1);
-"presence" makes it coverage (stochastic blending); opacityThreshold > 0 makes it a cut-out
-in either mode. A gprim without a material shows displayColor, and displayOpacity as
-coverage."""
-
-import math
+A material whose surface shader lucerna does not know is warned about, naming the shader
+prim and its id, and the gprim shows its displayColor instead (as usdview's fallback
+does). A gprim without a material shows displayColor, and displayOpacity as coverage."""
 
 import numpy as np
-from pxr import Sdf, UsdShade
+from pxr import UsdShade
 
 from . import images
+from . import mtlx
+from .networks import Network, TextureSource
 from .scene_file import default_material
+from .surfaces import PREVIEW_DEFAULTS, Reader
 
-# UsdPreviewSurface's fallback values (its specification, version 2.x).
-PREVIEW_DEFAULTS = {
-    "diffuseColor": (0.18, 0.18, 0.18),
-    "emissiveColor": (0.0, 0.0, 0.0),
-    "useSpecularWorkflow": 0,
-    "specularColor": (0.0, 0.0, 0.0),
-    "metallic": 0.0,
-    "roughness": 0.5,
-    "clearcoat": 0.0,
-    "clearcoatRoughness": 0.01,
-    "opacity": 1.0,
-    "opacityThreshold": 0.0,
-    "ior": 1.5,
-    "normal": (0.0, 0.0, 1.0),
+__all__ = ["MaterialConverter", "PREVIEW_DEFAULTS", "TextureSource"]
+
+def _shared(pack):
+    """Packs a texture once per distinct set of sources: materials that read the same
+    images the same way share the packed texture (the name is the first material's)."""
+    def signature(x):
+        if isinstance(x, TextureSource):
+            return (id(x.image), tuple(x.channels), x.scale.tobytes(), x.bias.tobytes(),
+                    x.color_space, x.wrap)
+        return repr(x)
+
+    def wrapper(self, *args):
+        key = (pack.__name__, tuple(signature(a) for a in args[:-1]))
+        cache = self.__dict__.setdefault("_packed", {})
+        if key not in cache:
+            cache[key] = (pack(self, *args), args)  # the sources stay alive with the key
+        return cache[key][0]
+    return wrapper
+
+
+#: Render contexts in the order they are tried.
+_CONTEXTS = ("mtlx", "", "mdl", "ri")
+#: Surface readers by shader family.
+_READERS = {
+    "UsdPreviewSurface": "preview", "standard_surface": "standard_surface",
+    "open_pbr_surface": "open_pbr", "gltf_pbr": "gltf_pbr", "PxrSurface": "pxr_surface",
+    "PxrDisney": "pxr_disney",
 }
-
-_CHANNELS = {"r": [0], "g": [1], "b": [2], "a": [3], "rgb": [0, 1, 2], "rgba": [0, 1, 2, 3]}
-_WRAP = {"repeat": "repeat", "mirror": "mirrored_repeat", "clamp": "clamp_to_edge",
-         "useMetadata": "repeat", "black": "clamp_to_edge"}
-
-
-class TextureSource:
-    """A UsdUVTexture output feeding a surface input."""
-
-    def __init__(self, image, channels, scale, bias, color_space, wrap, st_name, transform,
-                 element):
-        self.image = image
-        self.channels = channels
-        self.scale = np.asarray(scale, dtype=np.float32)
-        self.bias = np.asarray(bias, dtype=np.float32)
-        self.color_space = color_space
-        self.wrap = wrap
-        self.st_name = st_name
-        self.transform = transform
-        self.element = element
-
-    @property
-    def srgb(self):
-        """Whether texel values are sRGB-encoded (USD's `auto`: 8-bit images are)."""
-        if self.color_space == "sRGB":
-            return True
-        return self.color_space == "auto" and self.image.eight_bit
-
-    @property
-    def plain(self):
-        """No scale and no bias: the values are used as decoded."""
-        return bool(np.all(self.scale == 1.0) and np.all(self.bias == 0.0))
-
-    def linear(self):
-        """The texture's linear RGBA values after scale and bias, (H, W, 4) float32."""
-        px = self.image.pixels
-        if self.srgb:
-            raw8 = self.image.raw8
-            rgb = (images.SRGB_TO_LINEAR_8[raw8[..., :3]] if raw8 is not None
-                   else images.srgb_to_linear(px[..., :3]))
-            px = np.concatenate([rgb, px[..., 3:]], 2)
-        if self.plain:
-            return px
-        return px * self.scale + self.bias
-
-    def values(self, count):
-        """The selected output channels, (H, W, count): one channel is replicated."""
-        lin = self.linear()[..., self.channels]
-        if lin.shape[2] < count:
-            lin = np.repeat(lin[..., :1], count, axis=2)
-        return lin[..., :count]
+#: MDL materials by module subIdentifier (or the module's file name).
+_MDL_READERS = {"OmniPBR": "omni_pbr", "OmniPBR_ClearCoat": "omni_pbr",
+                "OmniPBR_Opacity": "omni_pbr", "OmniGlass": "omni_glass",
+                "OmniGlass_Opacity": "omni_glass", "OmniSurface": "omni_surface",
+                "OmniSurfaceBase": "omni_surface", "OmniSurfaceLite": "omni_surface"}
 
 
 class MaterialConverter:
@@ -104,13 +67,13 @@ class MaterialConverter:
         self.time = time
         self.warn = warn
         self._cache = {}
-        self._images = {}
+        self.net = Network(time, warn)
 
     # ---- public -------------------------------------------------------------------
     def material(self, material, double_sided):
-        """The lucerna material for a bound `UsdShade.Material` (or None: the preview
-        surface's defaults). Returns (index, st primvar name or None, colour primvar name
-        or None)."""
+        """The lucerna material for a bound `UsdShade.Material`: (index, st primvar name or
+        None, colour primvar name or None), or None where lucerna knows none of its surface
+        shaders (the caller shows displayColor)."""
         key = (str(material.GetPath()) if material else None, double_sided)
         if key not in self._cache:
             self._cache[key] = self._convert(material, double_sided)
@@ -131,136 +94,68 @@ class MaterialConverter:
             self._cache[key] = (index, None, None)
         return self._cache[key]
 
-    # ---- network traversal ----------------------------------------------------------
+    # ---- surfaces -----------------------------------------------------------------------
     def _surface(self, material):
-        shader = material.ComputeSurfaceSource()[0] if material else None
-        if not shader or not shader.GetPrim().IsValid():
-            if material:
-                self.warn(str(material.GetPath()),
-                          "no surface shader: rendered with UsdPreviewSurface defaults")
+        """(reader method, shader, family) of the first render context lucerna knows, or
+        None after a warning."""
+        if not material:
             return None
-        shader_id = shader.GetIdAttr().Get()
-        if shader_id != "UsdPreviewSurface":
-            self.warn(str(shader.GetPath()),
-                      f"unknown shader {shader_id!r} (only UsdPreviewSurface is supported): "
-                      "rendered with UsdPreviewSurface defaults")
-            return None
-        return shader
-
-    def _source(self, shader, name):
-        """('value', v), ('texture', TextureSource) or ('primvar', name) for an input."""
-        inp = shader.GetInput(name)
-        default = PREVIEW_DEFAULTS[name]
-        if not inp:
-            return "value", default
-        attrs = inp.GetValueProducingAttributes()
-        if not attrs:
-            return "value", default
-        attr = attrs[0]
-        if not UsdShade.Output.IsOutput(attr):
-            value = attr.Get(self.time)
-            return "value", default if value is None else value
-        node = UsdShade.Shader(attr.GetPrim())
-        node_id = node.GetIdAttr().Get()
-        output = UsdShade.Output(attr).GetBaseName()
-        element = f"{shader.GetPath()}.inputs:{name}"
-        if node_id == "UsdUVTexture":
-            source = self._texture(node, output, element)
-            return ("texture", source) if source else ("value", self._fallback(node, output, default))
-        if node_id in ("UsdPrimvarReader_float3", "UsdPrimvarReader_float4") and name == "diffuseColor":
-            return "primvar", self._string_input(node, "varname") or "displayColor"
-        self.warn(str(node.GetPath()),
-                  f"unknown shader {node_id!r} feeding {name}: the input's fallback is used")
-        return "value", default
-
-    def _string_input(self, node, name):
-        value = self._value(node, name, None)
-        return str(value) if value else None
-
-    def _value(self, node, name, default):
-        """The value an input of `node` gets (through material interface connections), or
-        `default`."""
-        inp = node.GetInput(name)
-        attrs = inp.GetValueProducingAttributes() if inp else []
-        if attrs and not UsdShade.Output.IsOutput(attrs[0]):
-            value = attrs[0].Get(self.time)
-            if value is not None:
-                return value
-        return default
-
-    def _fallback(self, node, output, default):
-        fallback = self._value(node, "fallback", (0.0, 0.0, 0.0, 1.0))
-        chans = _CHANNELS.get(output, [0])
-        values = [float(fallback[c]) for c in chans]
-        return values[0] if len(values) == 1 else tuple(values)
-
-    def _texture(self, node, output, element):
-        path = str(node.GetPath())
-        if output not in _CHANNELS:
-            self.warn(path, f"unknown UsdUVTexture output {output!r}: fallback used")
-            return None
-        asset = self._value(node, "file", None)
-        if not isinstance(asset, Sdf.AssetPath) or not asset.path:
-            self.warn(path, "no texture file: fallback used")
-            return None
-        key = asset.resolvedPath or asset.path
-        if key not in self._images:
-            try:
-                self._images[key] = images.read(asset)
-            except OSError as e:
-                self.warn(path, f"texture {asset.path!r} unreadable ({e}): fallback used")
-                self._images[key] = None
-        image = self._images[key]
-        if image is None:
-            return None
-        wrap = []
-        for axis in ("wrapS", "wrapT"):
-            mode = str(self._value(node, axis, "useMetadata"))
-            if mode == "black":
-                self.warn(path, f"{axis} 'black' is not supported: clamped to the edge")
-            wrap.append(_WRAP.get(mode, "repeat"))
-        st_name, transform = self._st(node)
-        return TextureSource(
-            image, _CHANNELS[output],
-            self._value(node, "scale", (1.0, 1.0, 1.0, 1.0)),
-            self._value(node, "bias", (0.0, 0.0, 0.0, 0.0)),
-            str(self._value(node, "sourceColorSpace", "auto")),
-            tuple(wrap), st_name, transform, element)
-
-    def _st(self, node):
-        """The texture-coordinate primvar feeding a texture and its UsdTransform2d."""
-        inp = node.GetInput("st")
-        attrs = inp.GetValueProducingAttributes() if inp else []
-        transform = None
-        while attrs and UsdShade.Output.IsOutput(attrs[0]):
-            upstream = UsdShade.Shader(attrs[0].GetPrim())
-            node_id = upstream.GetIdAttr().Get()
-            if node_id == "UsdTransform2d":
-                transform = _uv_transform(
-                    self._value(upstream, "scale", (1.0, 1.0)),
-                    float(self._value(upstream, "rotation", 0.0)),
-                    self._value(upstream, "translation", (0.0, 0.0)))
-                src = upstream.GetInput("in")
-                attrs = src.GetValueProducingAttributes() if src else []
+        seen = []
+        for context in _CONTEXTS:
+            output = material.GetSurfaceOutput(context)
+            if not output:
                 continue
-            if node_id == "UsdPrimvarReader_float2":
-                return self._string_input(upstream, "varname") or "st", transform
-            self.warn(str(upstream.GetPath()),
-                      f"unknown shader {node_id!r} feeding texture coordinates: 'st' used")
-            break
-        return "st", transform
+            sources = output.GetValueProducingAttributes()
+            if not sources or not UsdShade.Output.IsOutput(sources[0]):
+                continue
+            shader = UsdShade.Shader(sources[0].GetPrim())
+            if not shader:
+                continue
+            family, method = self._family(shader)
+            if method is not None:
+                return method, shader, family
+            seen.append((shader, family))
+        path = str(material.GetPath())
+        if not seen:
+            self.warn(path, "no surface shader: the gprim's displayColor is shown")
+        else:
+            shader, family = seen[0]
+            self.warn(str(shader.GetPath()), f"unknown surface shader {family!r}: the gprim's "
+                      "displayColor is shown")
+        return None
+
+    def _family(self, shader):
+        """(family name, reader method or None) of a surface shader."""
+        node_id = shader.GetIdAttr().Get()
+        if node_id:
+            family = mtlx.node_family(node_id) or str(node_id)
+            return family, _READERS.get(family)
+        source = shader.GetImplementationSource()
+        if source == "sourceAsset":
+            asset = shader.GetSourceAsset("mdl")
+            sub = shader.GetSourceAssetSubIdentifier("mdl")
+            name = sub or (asset.path.rsplit("/", 1)[-1].rsplit(".", 1)[0] if asset else "")
+            module = asset.path if asset else "?"
+            return f"{name} (MDL {module})", _MDL_READERS.get(name)
+        return "(no info:id)", None
 
     # ---- conversion ----------------------------------------------------------------
     def _convert(self, material, double_sided):
         name = str(material.GetPath()) if material else "UsdPreviewSurface"
-        shader = self._surface(material)
-        if shader is None:
-            d = PREVIEW_DEFAULTS
-            index = self.writer.add_material(default_material(
-                name, base_color=[*d["diffuseColor"], 1.0], metallic=0.0, roughness=0.5,
-                double_sided=double_sided))
-            return index, None, None
-        sources = {k: self._source(shader, k) for k in PREVIEW_DEFAULTS}
+        found = self._surface(material)
+        if found is None:
+            return None
+        method, shader, family = found
+        reader = Reader(self.net, self.warn)
+        if method in ("standard_surface", "open_pbr", "gltf_pbr"):
+            surface = getattr(reader, method)(shader, name, shader.GetIdAttr().Get())
+        else:
+            surface = getattr(reader, method)(shader, name)
+        return self._build(name, surface, double_sided)
+
+    def _build(self, name, surface, double_sided):
+        """The lucerna material of a `surfaces.Surface`: (index, st primvar, colour
+        primvar)."""
         out = default_material(name, double_sided=double_sided, metallic=0.0)
         st_names = []
         color_primvar = None
@@ -269,88 +164,90 @@ class MaterialConverter:
             st_names.append(source.st_name)
             return {"texture": texture_index, "tex_coord": 0, "transform": source.transform}
 
-        # Base colour and opacity: coverage (a cut-out, or presence), or transmission.
-        kind, diffuse = sources["diffuseColor"]
-        okind, opacity = sources["opacity"]
-        threshold = float(sources["opacityThreshold"][1]) if sources["opacityThreshold"][0] == "value" else 0.0
-        mode = str(self._value(shader, "opacityMode", "transparent"))
-        if mode not in ("transparent", "presence"):
-            self.warn(name, f"unknown opacityMode {mode!r}: 'transparent' is used")
-            mode = "transparent"
-        see_through = okind == "texture" or float(opacity if okind == "value" else 1.0) < 1.0
-        coverage = see_through and (threshold > 0.0 or mode == "presence")
-        transmits = see_through and not coverage
-        rgb = [1.0, 1.0, 1.0] if kind != "value" else [float(c) for c in diffuse]
-        alpha = float(opacity) if okind == "value" and coverage else 1.0
+        # Base colour and coverage.
+        kind, base = surface.base_color
+        akind, alpha = surface.alpha
+        rgb = [1.0, 1.0, 1.0] if kind != "value" else [float(c) for c in _fit3(base)]
         if kind == "primvar":
-            color_primvar = diffuse
-        coverage_texture = okind == "texture" and coverage
+            color_primvar = base
+        coverage_texture = surface.alpha_mode is not None and akind == "texture"
+        a = float(np.atleast_1d(alpha)[0]) if akind == "value" and surface.alpha_mode else 1.0
         if kind == "texture" or coverage_texture:
             index, src = self._base_color_texture(
-                diffuse if kind == "texture" else None,
-                opacity if coverage_texture else None,
+                base if kind == "texture" else None, alpha if coverage_texture else None,
                 None if kind == "texture" else rgb, name)
             out["base_color_texture"] = ref(index, src)
             if kind == "texture":
                 rgb = [1.0, 1.0, 1.0]
-        out["base_color"] = [*rgb, alpha]
-        if coverage and threshold > 0.0:
-            out["alpha_mode"] = {"mask": {"cutoff": threshold}}
-        elif coverage:
+        out["base_color"] = [*rgb, a]
+        if isinstance(surface.alpha_mode, tuple):
+            out["alpha_mode"] = {"mask": {"cutoff": float(surface.alpha_mode[1])}}
+        elif surface.alpha_mode == "blend":
             out["alpha_mode"] = "blend"
+
+        # Transmission.
+        tkind, transmission = surface.transmission
+        transmits = tkind == "texture" or (tkind == "value" and float(np.atleast_1d(transmission)[0]) > 0.0)
         if transmits:
-            if okind == "texture":
+            if tkind == "texture":
                 out["transmission"] = 1.0
-                out["transmission_texture"] = ref(self._transmission_texture(opacity, name), opacity)
+                out["transmission_texture"] = ref(self._transmission_texture(transmission, name), transmission)
             else:
-                out["transmission"] = 1.0 - min(max(float(opacity), 0.0), 1.0)
-            out["transmission_color"] = [1.0, 1.0, 1.0]
+                out["transmission"] = min(max(float(np.atleast_1d(transmission)[0]), 0.0), 1.0)
+            if surface.transmission_color is not None:
+                out["transmission_color"] = [min(max(float(c), 0.0), 1.0) for c in surface.transmission_color]
+            if not surface.thin_walled and surface.absorption is not None:
+                out["volume"] = {"absorption": [max(float(c), 0.0) for c in surface.absorption]}
 
         # Metallic and roughness: G and B of one texture.
-        mk, metallic = sources["metallic"]
-        rk, roughness = sources["roughness"]
+        mk, metallic = surface.metallic
+        rk, roughness = surface.roughness
         if mk == "texture" or rk == "texture":
             index, src = self._metal_rough_texture(metallic, roughness, name)
             out["metallic_roughness_texture"] = ref(index, src)
-            out["metallic"] = 1.0 if mk == "texture" else float(metallic)
-            out["roughness"] = 1.0 if rk == "texture" else float(roughness)
+            out["metallic"] = 1.0 if mk == "texture" else _clamp01(metallic)
+            out["roughness"] = 1.0 if rk == "texture" else _clamp01(roughness)
         else:
-            out["metallic"] = float(metallic)
-            out["roughness"] = float(roughness)
+            out["metallic"] = _clamp01(metallic)
+            out["roughness"] = _clamp01(roughness)
 
-        ek, emissive = sources["emissiveColor"]
+        ek, emissive = surface.emissive
         if ek == "texture":
             index = self._color_texture(emissive, name + ":emissive")
             out["emissive_texture"] = ref(index, emissive)
             out["emissive"] = [1.0, 1.0, 1.0]
+        elif ek == "value":
+            out["emissive"] = [max(float(c), 0.0) for c in _fit3(emissive)]
         else:
-            out["emissive"] = [float(c) for c in emissive]
+            self.warn(name, "a primvar as emission is not supported: no emission")
 
-        nk, normal = sources["normal"]
-        if nk == "texture":
-            out["normal_texture"] = ref(self._normal_texture(normal, name), normal)
+        if surface.normal is not None:
+            out["normal_texture"] = ref(self._normal_texture(surface.normal, name), surface.normal)
+            out["normal_scale"] = float(getattr(surface.normal, "strength", 1.0))
 
-        ik, ior = sources["ior"]
-        out["ior"] = float(ior) if ik == "value" else 1.5
-        if transmits and out["ior"] != 1.0:
-            out["volume"] = {"absorption": [0.0, 0.0, 0.0]}
-        if sources["useSpecularWorkflow"][0] == "value" and int(sources["useSpecularWorkflow"][1]) == 1:
-            sk, spec = sources["specularColor"]
-            if sk != "value":
-                self.warn(name, "a texture on specularColor is not supported: the fallback is used")
-                spec = PREVIEW_DEFAULTS["specularColor"]
-            out["specular_color"] = [min(max(float(c), 0.0), 1.0) for c in spec]
-            out["metallic"] = 0.0  # also zeroes a metallic texture channel (factor x texel)
-        for key in ("clearcoat", "clearcoatRoughness"):
-            kind, value = sources[key]
-            field = "clearcoat" if key == "clearcoat" else "clearcoat_roughness"
-            if kind == "texture":
-                self.warn(name, f"a texture on {key} is not supported: the fallback is used")
-                value = PREVIEW_DEFAULTS[key]
-            out[field] = min(max(float(value), 0.0), 1.0)
-        for key in ("ior", "opacityThreshold"):
-            if sources[key][0] == "texture":
-                self.warn(name, f"a texture on {key} is not supported: the fallback is used")
+        out["ior"] = max(float(surface.ior), 1.0)
+        if surface.specular_f0 is not None:
+            out["specular_color"] = [float(c) for c in surface.specular_f0]
+        if surface.specular_weight != 1.0 or tuple(surface.specular_color) != (1.0, 1.0, 1.0):
+            out["specular"] = {"weight": max(float(surface.specular_weight), 0.0), "weight_texture": None,
+                               "color": [max(float(c), 0.0) for c in surface.specular_color],
+                               "color_texture": None}
+        out["clearcoat"] = min(max(float(surface.coat), 0.0), 1.0)
+        out["clearcoat_roughness"] = min(max(float(surface.coat_roughness), 0.0), 1.0)
+        if surface.sheen_color is not None and max(surface.sheen_color) > 0.0:
+            out["sheen"] = {"color": [min(max(float(c), 0.0), 1.0) for c in surface.sheen_color],
+                            "color_texture": None,
+                            "roughness": min(max(float(surface.sheen_roughness), 0.0), 1.0),
+                            "roughness_texture": None}
+        if surface.anisotropy is not None:
+            strength, rotation = surface.anisotropy
+            out["anisotropy"] = {"strength": min(max(float(strength), 0.0), 1.0),
+                                 "rotation": float(rotation), "texture": None}
+        if surface.iridescence is not None:
+            factor, ior, thickness = surface.iridescence
+            out["iridescence"] = {"factor": min(max(float(factor), 0.0), 1.0), "texture": None,
+                                  "ior": max(float(ior), 1.0), "thickness_min": float(thickness),
+                                  "thickness_max": float(thickness), "thickness_texture": None}
 
         if len(set(st_names)) > 1:
             self.warn(name, f"textures read several primvars {sorted(set(st_names))}: "
@@ -359,6 +256,7 @@ class MaterialConverter:
         return index, (st_names[0] if st_names else None), color_primvar
 
     # ---- textures ------------------------------------------------------------------
+    @_shared
     def _base_color_texture(self, diffuse, opacity, rgb, name):
         src = diffuse or opacity
         if (diffuse is not None and diffuse.plain and diffuse.srgb and diffuse.image.raw8 is not None
@@ -380,12 +278,19 @@ class MaterialConverter:
             out[..., 3] = images.resample(opacity.values(1), shape)[..., 0]
         return self.writer.add_texture(name + ":base_color", out, src.wrap), src
 
+    @_shared
     def _transmission_texture(self, source, name):
-        """1 - opacity in R (the transmission texture's channel)."""
+        """The transmission weight in R (the transmission texture's channel)."""
+        raw = _raw_channel(source)
+        if raw is not None:
+            out = np.full((*source.image.shape, 4), 255, np.uint8)
+            out[..., 0] = raw
+            return self.writer.add_texture(name + ":transmission", out, source.wrap)
         out = np.ones((*source.image.shape, 4), np.float32)
-        out[..., 0] = 1.0 - np.clip(source.values(1)[..., 0], 0.0, 1.0)
+        out[..., 0] = np.clip(source.values(1)[..., 0], 0.0, 1.0)
         return self.writer.add_texture(name + ":transmission", out, source.wrap)
 
+    @_shared
     def _color_texture(self, source, name):
         if (source.plain and source.srgb and source.image.raw8 is not None
                 and source.channels == [0, 1, 2]):
@@ -394,10 +299,20 @@ class MaterialConverter:
         out[..., :3] = source.values(3)
         return self.writer.add_texture(name, out, source.wrap)
 
+    @_shared
     def _metal_rough_texture(self, metallic, roughness, name):
         textures = [s for s in (metallic, roughness) if isinstance(s, TextureSource)]
         src = textures[0]
         shape = max((t.image.shape for t in textures), key=lambda s: s[0] * s[1])
+        raw = {c: _raw_channel(s) for c, s in ((2, metallic), (1, roughness))
+               if isinstance(s, TextureSource)}
+        if all(r is not None and r.shape == tuple(shape) for r in raw.values()):
+            # 8-bit data used as stored: packed as bytes, a quarter of float texels.
+            out = np.full((*shape, 4), 255, np.uint8)
+            out[..., 0] = 0
+            for channel, r in raw.items():
+                out[..., channel] = r
+            return self.writer.add_texture(name + ":metallic_roughness", out, src.wrap), src
         out = np.ones((*shape, 4), np.float32)
         for channel, s in ((2, metallic), (1, roughness)):
             out[..., channel] = (images.resample(s.values(1), shape)[..., 0]
@@ -405,6 +320,7 @@ class MaterialConverter:
         out[..., 0] = 0.0
         return self.writer.add_texture(name + ":metallic_roughness", out, src.wrap), src
 
+    @_shared
     def _normal_texture(self, source, name):
         standard = (np.allclose(source.scale[:3], 2.0) and np.allclose(source.bias[:3], -1.0))
         if standard and not source.srgb and source.image.raw8 is not None and source.channels == [0, 1, 2]:
@@ -415,16 +331,19 @@ class MaterialConverter:
         return self.writer.add_texture(name + ":normal", out, source.wrap)
 
 
-def _uv_transform(scale, rotation_degrees, translation):
-    """UsdTransform2d (st' = R(rotation) S st + translation, st with v up) as lucerna's
-    UvTransform on uv = (s, 1 - t)."""
-    r = math.radians(rotation_degrees)
-    c, s = math.cos(r), math.sin(r)
-    a = np.array([[c, -s], [s, c]]) @ np.diag([float(scale[0]), float(scale[1])])
-    d = np.diag([1.0, -1.0])
-    e = np.array([0.0, 1.0])
-    linear = d @ a @ d
-    offset = d @ (a @ e + np.asarray(translation, dtype=float)) + e
-    return {"x": [float(linear[0, 0]), float(linear[1, 0])],
-            "y": [float(linear[0, 1]), float(linear[1, 1])],
-            "offset": [float(offset[0]), float(offset[1])]}
+def _raw_channel(source):
+    """The 8-bit values of a one-channel texture used exactly as stored (no colour
+    decoding, scale or bias), or None."""
+    if (len(source.channels) == 1 and source.plain and source.image.raw8 is not None
+            and not source.srgb and source.color_space in ("raw", "auto")):
+        return source.image.raw8[..., source.channels[0]]
+    return None
+
+
+def _fit3(value):
+    a = np.atleast_1d(np.asarray(value, dtype=np.float64))
+    return np.repeat(a, 3) if a.size == 1 else a[:3]
+
+
+def _clamp01(value):
+    return min(max(float(np.atleast_1d(value)[0]), 0.0), 1.0)

@@ -74,6 +74,9 @@ class SceneWriter:
         self.domes = []
         self.light_groups = []
         self.warnings = []
+        # Texel arrays added so far by identity: an image several materials pass through
+        # unchanged is stored once (the arrays are kept, so identities stay unique).
+        self._texels = {}
 
     def _view(self, array, dtype, width):
         data = np.ascontiguousarray(np.asarray(array, dtype=dtype).reshape(-1, width))
@@ -122,6 +125,10 @@ class SceneWriter:
     def add_texture(self, name, texels, wrap=("repeat", "repeat")):
         """Adds an image (H, W, 4): uint8 (sRGB-encoded or data as the material slot
         reads it) or float32 (linear); returns its index."""
+        key = (id(texels), tuple(wrap))
+        if key in self._texels:
+            return self._texels[key][0]
+        original = texels
         texels = np.asarray(texels)
         height, width = texels.shape[:2]
         if texels.dtype == np.uint8:
@@ -138,6 +145,7 @@ class SceneWriter:
             "wrap_v": wrap[1],
             "nearest": False,
         })
+        self._texels[key] = (len(self.textures) - 1, original)
         return len(self.textures) - 1
 
     def write(self, path):

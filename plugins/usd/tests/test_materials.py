@@ -215,11 +215,15 @@ def test_specular_workflow_and_clearcoat(stage_file, converted):
     assert plain["clearcoat"] == 0.0 and plain["clearcoat_roughness"] == pytest.approx(0.01)
 
 
-def test_unknown_shader_is_a_warning_with_the_defaults(stage_file, converted):
-    text = stage("").replace('"UsdPreviewSurface"', '"MySurface"')
+def test_unknown_shader_is_a_warning_and_shows_the_display_color(stage_file, converted):
+    """As usdview does: a surface shader lucerna does not know falls back to the gprim's
+    displayColor; the warning names the shader prim and its id."""
+    text = stage("").replace('"UsdPreviewSurface"', '"MySurface"').replace(
+        'rel material:binding', 'color3f[] primvars:displayColor = [(0.2, 0.4, 0.6)]\n        rel material:binding')
     s = converted(stage_file(text), no_validate=True)
-    assert s.warnings_about("unknown shader 'MySurface'")
-    assert material(s)["base_color"] == pytest.approx([0.18, 0.18, 0.18, 1])
+    warning = s.warnings_about("unknown surface shader 'MySurface'")
+    assert warning and "/World/M/S" in warning[0]
+    assert material(s)["base_color"] == pytest.approx([0.2, 0.4, 0.6, 1])
 
 
 def test_an_image_beyond_the_memory_limit_is_not_decoded(stage_file, converted, tmp_path,
