@@ -9,6 +9,8 @@ use glam::{DMat4, DVec3, DVec4, Vec2, Vec3};
 
 /// Image size used when neither the request nor the scene decides it: the long side.
 pub const DEFAULT_LONG_SIDE: u32 = 512;
+/// Longest image side lucerna renders.
+pub const MAX_IMAGE_SIDE: u32 = 65536;
 
 /// A camera in render space.
 #[derive(Clone, Debug)]

@@ -3,7 +3,7 @@
 use clap::{Parser, Subcommand};
 use glam::Vec3;
 use lucerna::error::{Error, Result};
-use lucerna::film::aov::Aov;
+use lucerna::film::aov::{Aov, AovSet};
 use lucerna::film::exr::{Attribute, Header};
 use lucerna::plan::{self, PlanMode, RenderPlan, SceneFeatures};
 use lucerna::render::{self, RenderOptions};
@@ -105,6 +105,11 @@ struct LoadArgs {
     /// Do not load a USD stage's payloads.
     #[arg(long)]
     no_payloads: bool,
+    /// The USD RenderSettings prim whose camera, resolution, data window and products
+    /// (output files and their AOVs) the render follows (default: the stage's
+    /// renderSettingsPrimPath, else its first RenderSettings prim).
+    #[arg(long, value_name = "PRIM")]
+    render_settings: Option<String>,
     /// Seconds the USD plugin may take to convert a stage before it is stopped.
     #[arg(long, default_value_t = ingest::DEFAULT_PLUGIN_TIMEOUT.as_secs_f64(), value_parser = parse_timeout)]
     usd_timeout: f64,
@@ -120,6 +125,7 @@ impl LoadArgs {
             variants: self.variants.clone(),
             purpose: self.purpose.clone(),
             payloads: !self.no_payloads,
+            render_settings: self.render_settings.clone(),
             plugin_timeout: std::time::Duration::from_secs_f64(self.usd_timeout),
         }
     }
@@ -133,9 +139,10 @@ struct RenderArgs {
     #[command(flatten)]
     load: LoadArgs,
     /// Output EXR file; `{frame}` (four digits), `{scene}` (the file's stem) and `{camera}`
-    /// are replaced, e.g. `out/{scene}.{camera}.{frame}.exr`.
-    #[arg(short, long, default_value = "render.exr")]
-    output: PathBuf,
+    /// are replaced, e.g. `out/{scene}.{camera}.{frame}.exr`. Default: the render products a
+    /// USD stage declares (its render settings), else `render.exr`.
+    #[arg(short, long)]
+    output: Option<PathBuf>,
     /// Frames to render, e.g. 1-24, 1-24x2 (every second), 1,5,10-12; the output needs
     /// `{frame}`.
     #[arg(long, conflicts_with = "frame", value_parser = FrameList::parse)]
@@ -329,7 +336,7 @@ fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
         v.trim()
             .parse::<u32>()
             .ok()
-            .filter(|v| (1..=65536).contains(v))
+            .filter(|v| (1..=lucerna::camera::MAX_IMAGE_SIDE).contains(v))
     };
     match (parse(w), parse(h)) {
         (Some(w), Some(h)) => Ok((w, h)),
@@ -488,7 +495,12 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
     let pool = thread_pool(args.threads)?;
     let frames = match &args.frames {
         Some(FrameList(frames)) => {
-            if frames.len() > 1 && !args.output.to_string_lossy().contains("{frame}") {
+            if frames.len() > 1
+                && args
+                    .output
+                    .as_ref()
+                    .is_some_and(|o| !o.to_string_lossy().contains("{frame}"))
+            {
                 return Err(Error::bad_input(
                     "",
                     "--output",
@@ -499,12 +511,28 @@ fn render_command(args: RenderArgs) -> Result<ExitCode> {
         }
         None => vec![args.load.frame],
     };
+    let several = frames.len() > 1;
     for frame in frames {
-        if let Some(code) = render_frame(&args, &options, &pool, frame)? {
+        if let Some(code) = render_frame(&args, &options, &pool, frame, several)? {
             return Ok(ExitCode::from(code));
         }
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// One render of a frame: the camera, size and AOVs it takes (in its options) and the files
+/// it writes. The first output is where a checkpoint goes and what `--resume` continues.
+struct View {
+    camera: Option<String>,
+    resolution: Option<(u32, u32)>,
+    options: RenderOptions,
+    outputs: Vec<ViewOutput>,
+}
+
+/// A file a view writes: `aovs` selects its layers (`None`: all the render's).
+struct ViewOutput {
+    path: PathBuf,
+    aovs: Option<AovSet>,
 }
 
 /// Renders one frame; `Some(exit code)` if a signal stopped it (its checkpoint written).
@@ -513,6 +541,7 @@ fn render_frame(
     options: &RenderOptions,
     pool: &rayon::ThreadPool,
     frame: Option<f64>,
+    several_frames: bool,
 ) -> Result<Option<u8>> {
     let load = ingest::LoadOptions {
         frame,
@@ -524,27 +553,162 @@ fn render_frame(
         .as_deref()
         .and_then(Path::file_stem)
         .map_or("default".into(), |s| s.to_string_lossy().into_owned());
-    let camera_name = match &args.camera {
-        Some(name) => name.clone(),
-        None => scene
-            .cameras
-            .first()
-            .map_or("default".into(), |c| c.name.clone()),
+    let settings = scene.render_settings.take().unwrap_or_default();
+    let views = match &args.output {
+        None if !settings.products.is_empty() => declared_views(args, options, &settings)?,
+        _ => {
+            let pattern = args.output.clone().unwrap_or_else(|| "render.exr".into());
+            if several_frames && !pattern.to_string_lossy().contains("{frame}") {
+                return Err(Error::bad_input(
+                    "",
+                    "--output",
+                    "several frames need {frame} in the output name",
+                ));
+            }
+            // The settings' camera, size and window apply where the command line gives none.
+            let camera = args.camera.clone().or(settings.camera.clone());
+            let camera_name = match &camera {
+                Some(name) => name.clone(),
+                None => scene
+                    .cameras
+                    .first()
+                    .map_or("default".into(), |c| c.name.clone()),
+            };
+            let path = output_path(&pattern, frame, &stem, &camera_name)
+                .map_err(|e| Error::bad_input("", "--output", e))?;
+            let mut view_options = options.clone();
+            if let (None, None, Some([x0, y0, x1, y1])) =
+                (options.crop, args.resolution, settings.crop)
+            {
+                view_options
+                    .set("crop", &format!("{x0},{y0},{x1},{y1}"))
+                    .map_err(|e| Error::bad_input("", settings.path.as_str(), e))?;
+            }
+            vec![View {
+                camera,
+                resolution: args.resolution.or(settings.resolution.map(|[w, h]| (w, h))),
+                options: view_options,
+                outputs: vec![ViewOutput { path, aovs: None }],
+            }]
+        }
     };
-    let output = output_path(&args.output, frame, &stem, &camera_name)
-        .map_err(|e| Error::bad_input("", "--output", e))?;
-    // Checked (and its directory made) before rendering, so an impossible output fails
-    // at once.
-    lucerna::files::check_output(&output, "--output")?;
+    // Every output is checked (and its directory made) before rendering, so an impossible
+    // output fails at once.
+    for output in views.iter().flat_map(|v| &v.outputs) {
+        lucerna::files::check_output(&output.path, "--output")?;
+    }
     let preview = args
         .preview
         .as_ref()
-        .map(|p| output_path(p, frame, &stem, &camera_name))
+        .map(|p| {
+            let camera = views[0].camera.clone().unwrap_or_else(|| "default".into());
+            output_path(p, frame, &stem, &camera)
+        })
         .transpose()
         .map_err(|e| Error::bad_input("", "--preview", e))?;
     if let Some(png) = &preview {
         lucerna::files::check_output(png, "--preview")?;
     }
+    let count = views.len();
+    for (i, view) in views.into_iter().enumerate() {
+        let scene = if i + 1 == count {
+            std::mem::take(&mut scene)
+        } else {
+            scene.clone()
+        };
+        let preview = if i == 0 { preview.as_deref() } else { None };
+        if let Some(code) = render_view(args, &view, pool, frame, scene, preview)? {
+            return Ok(Some(code));
+        }
+    }
+    Ok(None)
+}
+
+/// The views of a scene's declared render products: products that share camera, size and
+/// data window are rendered once, with the union of their AOVs, and each file gets its own
+/// layers. Command-line `--camera`, `--resolution`, `--crop` and `--aov` apply to all.
+fn declared_views(
+    args: &RenderArgs,
+    options: &RenderOptions,
+    settings: &lucerna::scene::RenderSettings,
+) -> Result<Vec<View>> {
+    let mut views: Vec<View> = Vec::new();
+    // Products that agree on these share a render: camera, resolution, pixel window.
+    type Shared = (Option<String>, Option<(u32, u32)>, Option<[u32; 4]>);
+    let mut keys: Vec<Shared> = Vec::new();
+    let mut lists: Vec<Vec<String>> = Vec::new();
+    for (i, product) in settings.products.iter().enumerate() {
+        let element = format!("{}: product {i}", settings.path);
+        let camera = args.camera.clone().or_else(|| product.camera.clone());
+        let resolution = args.resolution.or(product.resolution.map(|[w, h]| (w, h)));
+        // A declared window is in the declared resolution's pixels.
+        let crop = if options.crop.is_some() || args.resolution.is_some() {
+            None
+        } else {
+            product.crop
+        };
+        let own = if args.aov.is_some() {
+            None
+        } else {
+            Some(AovSet::parse(&product.aovs).map_err(|e| Error::bad_input("", &element, e))?)
+        };
+        let output = ViewOutput {
+            path: PathBuf::from(&product.output),
+            aovs: own,
+        };
+        let key = (camera.clone(), resolution, crop);
+        match keys.iter().position(|k| *k == key) {
+            Some(k) => {
+                views[k].outputs.push(output);
+                lists[k].push(product.aovs.clone());
+            }
+            None => {
+                let mut view_options = options.clone();
+                if let Some([x0, y0, x1, y1]) = crop {
+                    view_options
+                        .set("crop", &format!("{x0},{y0},{x1},{y1}"))
+                        .map_err(|e| Error::bad_input("", &element, e))?;
+                }
+                keys.push(key);
+                lists.push(vec![product.aovs.clone()]);
+                views.push(View {
+                    camera,
+                    resolution,
+                    options: view_options,
+                    outputs: vec![output],
+                });
+            }
+        }
+    }
+    if args.aov.is_none() {
+        for (view, list) in views.iter_mut().zip(&lists) {
+            let union = list.join(",");
+            view.options.aovs = AovSet::parse(&union)
+                .map_err(|e| Error::bad_input("", settings.path.as_str(), e))?;
+        }
+    }
+    if args.resume && views.iter().any(|v| v.outputs.len() > 1) {
+        return Err(Error::bad_input(
+            "",
+            "--resume",
+            "render products that share one render cannot be resumed (each file holds only its own layers)",
+        ));
+    }
+    Ok(views)
+}
+
+/// Renders `scene` as `view` says and writes its files; `Some(exit code)` if a signal
+/// stopped it (its checkpoint written).
+fn render_view(
+    args: &RenderArgs,
+    view: &View,
+    pool: &rayon::ThreadPool,
+    frame: Option<f64>,
+    mut scene: Scene,
+    preview: Option<&Path>,
+) -> Result<Option<u8>> {
+    let options = &view.options;
+    let output = view.outputs[0].path.clone();
     if let Some(radiance) = args.env {
         ingest::set_constant_environment(&mut scene, radiance);
     }
@@ -555,7 +719,7 @@ fn render_frame(
         plan::strip_unused_attributes(&mut scene);
     }
     let limit = args.max_memory.or_else(memory::default_limit);
-    memory_estimate(&scene, args.camera.as_deref(), args.resolution, options)
+    memory_estimate(&scene, view.camera.as_deref(), view.resolution, options)
         .check(limit, &scene.source)?;
     let source = scene.source.clone();
     let identity = ingest::scene_identity(args.scene.as_deref());
@@ -563,8 +727,8 @@ fn render_frame(
     let world = pool.install(|| {
         World::build(
             scene,
-            args.camera.as_deref(),
-            args.resolution,
+            view.camera.as_deref(),
+            view.resolution,
             options.settings.light_select,
         )
     })?;
@@ -695,7 +859,14 @@ fn render_frame(
     } else {
         &[]
     };
-    film::exr::write(&output, &film, &header, extra)?;
+    for out in &view.outputs {
+        match &out.aovs {
+            None => film::exr::write(&out.path, &film, &header, extra)?,
+            Some(own) => film::exr::write_layers(&out.path, &film, &header, extra, |aov| {
+                own.contains(aov) || (matches!(aov, Aov::LightGroup(_)) && own.wants_light_groups())
+            })?,
+        }
+    }
     if stats.interrupted {
         eprintln!(
             "lucerna: interrupted (signal {}): wrote the {} samples taken so far to {}; continue with --resume",
@@ -705,15 +876,20 @@ fn render_frame(
         );
         return Ok(Some(interrupted_exit_code()));
     }
-    if let Some(png) = &preview {
+    if let Some(png) = preview {
         film::preview::write(png, &film)?;
     }
     let peak = render::peak_memory_bytes().map_or(String::new(), |b| {
         format!(", peak memory {:.1} MB", b as f64 / 1e6)
     });
+    let written: Vec<String> = view
+        .outputs
+        .iter()
+        .map(|o| o.path.display().to_string())
+        .collect();
     eprintln!(
         "lucerna: wrote {} ({}x{}, {} threads): scene prepared in {:.2} s ({} primitives{}, BVH built in {:.2} s); rendered in {}{peak}",
-        output.display(),
+        written.join(", "),
         film.width,
         film.height,
         pool.current_num_threads(),

@@ -132,9 +132,22 @@ pub fn channel_names(film: &Film, extra: &[Aov]) -> Vec<String> {
 /// into place), with `header` in the header; `extra` AOVs (data layers the film can always
 /// produce, such as `spp`) are written too even if the film's AOV set lacks them.
 pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result<()> {
+    write_layers(path, film, header, extra, |_| true)
+}
+
+/// [`write`] with only the layers `keep` accepts (the beauty always): one render product
+/// of several that share a render.
+pub fn write_layers(
+    path: &Path,
+    film: &Film,
+    header: &Header,
+    extra: &[Aov],
+    keep: impl Fn(Aov) -> bool,
+) -> Result<()> {
     let mut channels = Vec::new();
     let mut aovs: Vec<Aov> = film.aovs.iter().collect();
     aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
+    aovs.retain(|&a| a == Aov::Beauty || extra.contains(&a) || keep(a));
     for aov in aovs {
         channels.extend(
             film.aovs

@@ -45,6 +45,9 @@ pub struct LoadOptions {
     pub purpose: String,
     /// Load USD payloads.
     pub payloads: bool,
+    /// The USD RenderSettings prim to render by (default: the stage's
+    /// `renderSettingsPrimPath`, else its first RenderSettings prim).
+    pub render_settings: Option<String>,
     /// How long the USD plugin may take to convert a stage before it is stopped.
     pub plugin_timeout: std::time::Duration,
 }
@@ -63,6 +66,7 @@ impl Default for LoadOptions {
             variants: Vec::new(),
             purpose: "render".into(),
             payloads: true,
+            render_settings: None,
             plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }

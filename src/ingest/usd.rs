@@ -4,7 +4,7 @@
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
 //! [--no-validate | --strict] [--variant SET=NAME]... [--purpose LIST] [--no-payloads]
-//! [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
+//! [--render-settings PRIM] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
 //! the repository's `.venv` (where `tools/test.sh` installs the plugin's requirements), else
 //! `python3`; the plugin folder is `$LUCERNA_USD_PLUGIN`, else `plugins/usd` of the source tree
 //! this binary was built from (put before any `PYTHONPATH` already set).
@@ -98,6 +98,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     command.arg("--purpose").arg(&options.purpose);
     if !options.payloads {
         command.arg("--no-payloads");
+    }
+    if let Some(prim) = &options.render_settings {
+        command.arg("--render-settings").arg(prim);
     }
     if let Some(limit) = crate::memory::process_limit() {
         command.arg("--max-memory").arg(limit.to_string());

@@ -14,7 +14,7 @@
 //! before anything uses the scene.
 
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
-use super::{Cylinder, Disk, Instance, LightGroup, Sphere, Texels, Texture, Wrap};
+use super::{Cylinder, Disk, Instance, LightGroup, RenderSettings, Sphere, Texels, Texture, Wrap};
 use crate::error::{Error, Result};
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
@@ -53,6 +53,8 @@ struct Manifest {
     #[serde(default)]
     light_groups: Vec<LightGroup>,
     warnings: Vec<String>,
+    #[serde(default)]
+    render_settings: Option<RenderSettings>,
 }
 
 /// `count` elements starting `offset` bytes into the buffer.
@@ -207,6 +209,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         environment: scene.environment.clone(),
         light_groups: scene.light_groups.clone(),
         warnings: scene.warnings.clone(),
+        render_settings: scene.render_settings.clone(),
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
@@ -360,6 +363,7 @@ pub fn parse(
         environment: manifest.environment,
         light_groups: manifest.light_groups,
         warnings: manifest.warnings,
+        render_settings: manifest.render_settings,
     };
     validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
     Ok(scene)
@@ -469,6 +473,44 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 format!("light_groups[{i}].name"),
                 "a light group name is lower-case letters, digits and _",
             );
+        }
+    }
+    if let Some(settings) = &scene.render_settings {
+        let views = std::iter::once((
+            "render_settings".to_string(),
+            settings.resolution,
+            settings.crop,
+        ))
+        .chain(settings.products.iter().enumerate().map(|(i, p)| {
+            (
+                format!("render_settings.products[{i}]"),
+                p.resolution,
+                p.crop,
+            )
+        }));
+        let side = 1..=crate::camera::MAX_IMAGE_SIDE;
+        for (element, resolution, crop) in views {
+            if let Some([w, h]) = resolution
+                && !(side.contains(&w) && side.contains(&h))
+            {
+                return fail(
+                    format!("{element}.resolution"),
+                    "width and height must be 1 to 65536",
+                );
+            }
+            if let Some([x0, y0, x1, y1]) = crop
+                && (x0 >= x1 || y0 >= y1)
+            {
+                return fail(format!("{element}.crop"), "an empty pixel window");
+            }
+        }
+        for (i, p) in settings.products.iter().enumerate() {
+            if p.output.is_empty() {
+                return fail(
+                    format!("render_settings.products[{i}].output"),
+                    "an output file name is needed",
+                );
+            }
         }
     }
     for (i, m) in scene.meshes.iter().enumerate() {

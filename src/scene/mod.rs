@@ -37,6 +37,40 @@ pub struct Scene {
     pub light_groups: Vec<LightGroup>,
     /// Problems that did not stop the import (unsupported features, repaired data).
     pub warnings: Vec<String>,
+    /// The outputs the scene declares (USD render settings and products), used unless the
+    /// command line names an output.
+    pub render_settings: Option<RenderSettings>,
+}
+
+/// A scene's declared render: the settings prim it came from and its products.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RenderSettings {
+    /// Where the settings came from (a USD RenderSettings prim path).
+    pub path: String,
+    /// The settings' own camera, size and pixel window: what a render without products
+    /// (or with `--output`) takes where the command line gives none.
+    #[serde(default)]
+    pub camera: Option<String>,
+    #[serde(default)]
+    pub resolution: Option<[u32; 2]>,
+    #[serde(default)]
+    pub crop: Option<[u32; 4]>,
+    pub products: Vec<RenderProduct>,
+}
+
+/// One output file of a declared render: what it sees, at what size, with which layers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderProduct {
+    /// The file to write (frame tokens already expanded by the importer).
+    pub output: String,
+    /// The camera, by name; `None`: the scene's first.
+    pub camera: Option<String>,
+    /// Width and height in pixels; `None`: from the camera.
+    pub resolution: Option<[u32; 2]>,
+    /// Pixels `[x0, y0, x1, y1]` (ends excluded) to render, the EXR's data window.
+    pub crop: Option<[u32; 4]>,
+    /// lucerna's AOV list (as `--aov` takes it) for this file's layers.
+    pub aovs: String,
 }
 
 /// A light group: the emitters named in `members` (instances, analytic shapes, punctual

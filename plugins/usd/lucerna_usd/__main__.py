@@ -146,13 +146,13 @@ def _validate(stage, path, strict, warnings):
 
 
 def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False,
-            variants=(), purposes=("render",), payloads=True):
+            variants=(), purposes=("render",), payloads=True, render_settings=None):
     """Converts `path` to the scene file `output`; returns the exit status."""
     from pxr import Tf
 
     try:
         return _convert(path, output, frame, no_validate, quiet, strict, variants, purposes,
-                        payloads)
+                        payloads, render_settings)
     except Tf.ErrorException as e:
         # usd-core raises on layers it cannot parse when composition reaches them.
         _error(path, "stage", _tf_reason(e))
@@ -166,7 +166,7 @@ def _tf_reason(error):
 
 
 def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purposes=("render",),
-             payloads=True):
+             payloads=True, render_settings=None):
     from . import StageError
     from .convert import Converter
 
@@ -197,13 +197,24 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             text = e.GetErrorAsString() if hasattr(e, "GetErrorAsString") else str(e)
             warnings.append(f"composition: {' '.join(text.split())}")
     captured = []
+    from . import render_settings as usd_render
+
     try:
         with _captured_stderr(captured):
-            converter = Converter(stage, path, _time(stage, frame), purposes)
+            time = _time(stage, frame)
+            converter = Converter(stage, path, time, purposes)
             writer = converter.run()
+            # Frame tokens of product names: the frame rendered, else the stage's start, else 1
+            # (husk's default frame).
+            number = frame if frame is not None else (
+                stage.GetStartTimeCode() if stage.HasAuthoredTimeCodeRange() else 1.0)
+            usd_render.convert(stage, writer, time, number, render_settings, converter.warn)
         del stage_layers  # the stage is no longer read
     except StageError as e:
         _error(path, e.element, e.reason)
+        return EXIT_BAD_INPUT
+    except ValueError as e:  # an explicit --render-settings that names no settings prim
+        _error(path, "--render-settings", str(e))
         return EXIT_BAD_INPUT
     writer.warnings[:0] = warnings
     for text in captured:
@@ -246,6 +257,9 @@ def main(argv=None):
     c.add_argument("--purpose", default="render",
                    help="purposes rendered besides default, comma-separated (render, proxy, guide)")
     c.add_argument("--no-payloads", action="store_true", help="do not load payloads")
+    c.add_argument("--render-settings", metavar="PRIM",
+                   help="the RenderSettings prim to follow (default: renderSettingsPrimPath, "
+                        "else the first RenderSettings prim)")
     c.add_argument("--max-memory", type=int, metavar="BYTES",
                    help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
     v = commands.add_parser("validate", help="print the validators' findings")
@@ -282,7 +296,8 @@ def main(argv=None):
             _error(args.stage, "--purpose", f"unknown purpose {unknown[0]!r} (render, proxy, guide)")
             return EXIT_BAD_INPUT
         return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet,
-                       args.strict, args.variant, purposes, not args.no_payloads)
+                       args.strict, args.variant, purposes, not args.no_payloads,
+                       args.render_settings)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request
         if os.environ.get("LUCERNA_USD_DEBUG"):
             raise

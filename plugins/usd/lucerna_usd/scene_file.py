@@ -74,6 +74,8 @@ class SceneWriter:
         self.domes = []
         self.light_groups = []
         self.warnings = []
+        # The stage's UsdRender settings and products (render_settings.convert), or None.
+        self.render_settings = None
         # Texel arrays added so far by identity: an image several materials pass through
         # unchanged is stored once (the arrays are kept, so identities stay unique).
         self._texels = {}
@@ -169,6 +171,7 @@ class SceneWriter:
             "environment": self.environment,
             "light_groups": self.light_groups,
             "warnings": self.warnings,
+            "render_settings": self.render_settings,
         }
         text = json.dumps(manifest, indent=1, allow_nan=False)
         _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._chunks)

@@ -1,0 +1,182 @@
+"""UsdRender: a stage's RenderSettings, products and vars decide the camera, size, data
+window, files and layers of the render (render_settings.py, `lucerna render` without -o)."""
+
+import subprocess
+
+import numpy as np
+import OpenImageIO as oiio
+import pytest
+
+from conftest import lucerna_bin
+
+STAGE = '''#usda 1.0
+(
+    defaultPrim = "World"
+    metersPerUnit = 1
+    upAxis = "Y"
+    renderSettingsPrimPath = "/Render/Settings"
+    startTimeCode = 7
+    endTimeCode = 7
+)
+def Xform "World" {
+    def Sphere "Ball" {
+        double radius = 1
+    }
+    def Camera "Front" {
+        float focalLength = 35
+        float horizontalAperture = 36
+        float verticalAperture = 24
+        double3 xformOp:translate = (0, 0, 10)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def Camera "Side" {
+        float focalLength = 35
+        float horizontalAperture = 24
+        float verticalAperture = 24
+        double3 xformOp:translate = (10, 0, 0)
+        float3 xformOp:rotateXYZ = (0, 90, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }
+    def DomeLight "Sky" {
+        float inputs:intensity = 1
+    }
+}
+def Scope "Render" {
+    def RenderSettings "Settings" {
+        rel camera = </World/Front>
+        int2 resolution = (60, 40)
+        rel products = [</Render/Beauty>, </Render/Data>, </Render/Extra>]
+    }
+    def RenderSettings "OtherSettings" {
+        rel camera = </World/Side>
+        int2 resolution = (30, 30)
+        rel products = [</Render/Other>]
+    }
+    def RenderProduct "Beauty" {
+        token productName = "out/front.$F4.exr"
+        rel orderedVars = [</Render/Vars/C>, </Render/Vars/Albedo>]
+    }
+    def RenderProduct "Extra" {
+        token productName = "out/front_direct.<F>.exr"
+        rel orderedVars = [</Render/Vars/Direct>]
+    }
+    def RenderProduct "Data" {
+        token productName = "out/side.####.exr"
+        rel camera = </World/Side>
+        int2 resolution = (40, 40)
+        float4 dataWindowNDC = (0, 0, 0.5, 1)
+        rel orderedVars = [</Render/Vars/N>, </Render/Vars/Depth>, </Render/Vars/Custom>]
+    }
+    def RenderProduct "Other" {
+        token productName = "out/other.exr"
+    }
+    def Scope "Vars" {
+        def RenderVar "C" {
+            string sourceName = "Ci"
+        }
+        def RenderVar "Albedo" {
+            string sourceName = "albedo"
+        }
+        def RenderVar "Direct" {
+            string sourceName = "direct"
+        }
+        def RenderVar "N" {
+            string sourceName = "N"
+        }
+        def RenderVar "Depth" {
+            string sourceName = "Pz"
+        }
+        def RenderVar "Custom" {
+            string sourceName = "myStudioAOV"
+        }
+    }
+}
+'''
+
+
+def spec(path):
+    buf = oiio.ImageBuf(str(path))
+    assert not buf.has_error, buf.geterror()
+    return buf.spec()
+
+
+def camera_position(s):
+    """The camera's world position from the EXR's worldToCamera (Imath row vectors)."""
+    m = np.array(s.getattribute("worldToCamera"), dtype=float).reshape(4, 4)
+    return np.linalg.inv(m)[3, :3]
+
+
+def run(tmp_path, *args):
+    (tmp_path / "shot.usda").write_text(STAGE)
+    return subprocess.run([lucerna_bin(), "render", "shot.usda", "--spp", "4", *args],
+                          cwd=tmp_path, capture_output=True, text=True)
+
+
+def test_products_decide_files_cameras_sizes_and_layers(tmp_path):
+    done = run(tmp_path)
+    assert done.returncode == 0, done.stderr
+    out = tmp_path / "out"
+    assert sorted(p.name for p in out.iterdir()) == [
+        "front.0007.exr", "front_direct.7.exr", "side.0007.exr"]
+    front = spec(out / "front.0007.exr")
+    assert (front.full_width, front.full_height) == (60, 40)
+    assert sorted(front.channelnames) == sorted(
+        ["R", "G", "B", "A", "albedo.R", "albedo.G", "albedo.B"])
+    assert camera_position(front) == pytest.approx([0, 0, 10], abs=1e-4)
+    direct = spec(out / "front_direct.7.exr")
+    assert sorted(direct.channelnames) == sorted(["R", "G", "B", "A", "direct.R", "direct.G", "direct.B"])
+    side = spec(out / "side.0007.exr")
+    assert (side.full_width, side.full_height) == (40, 40)
+    # dataWindowNDC (0, 0, 0.5, 1): the left half is rendered, the EXR's data window.
+    assert (side.x, side.y, side.width, side.height) == (0, 0, 20, 40)
+    assert camera_position(side) == pytest.approx([10, 0, 0], abs=1e-4)
+    assert {"normal.X", "depth.Z"} <= set(side.channelnames)
+    assert "RenderVar 'myStudioAOV' (raw) has no lucerna equivalent" in done.stderr
+    # Front's aperture is 3:2 and the image 3:2: one render for both front products.
+    assert done.stderr.count("lucerna: wrote") == 2
+
+
+def test_render_settings_option_and_output_override(tmp_path):
+    done = run(tmp_path, "--render-settings", "/Render/OtherSettings")
+    assert done.returncode == 0, done.stderr
+    other = spec(tmp_path / "out" / "other.exr")
+    assert (other.full_width, other.full_height) == (30, 30)
+    assert camera_position(other) == pytest.approx([10, 0, 0], abs=1e-4)
+    # -o names the file: the settings' camera and size still apply, the products do not.
+    done = run(tmp_path, "-o", "mine.exr")
+    assert done.returncode == 0, done.stderr
+    mine = spec(tmp_path / "mine.exr")
+    assert (mine.full_width, mine.full_height) == (60, 40)
+    assert camera_position(mine) == pytest.approx([0, 0, 10], abs=1e-4)
+    bad = run(tmp_path, "--render-settings", "/World/Ball")
+    assert bad.returncode == 2
+    assert "--render-settings /World/Ball: no RenderSettings prim there" in bad.stderr
+
+
+def test_conform_policy_expands_the_aperture(stage_file, converted):
+    """A 1:1 image through a 3:2 aperture: expandAperture keeps the width's field of view
+    and grows the height's; cropAperture keeps the height's."""
+    from lucerna_usd.render_settings import _fitted_camera
+
+    writer = type("W", (), {})()
+    yfov = 2 * np.arctan(12 / 35)
+    writer.cameras = [{"name": "/C", "projection": {"perspective": {"yfov": yfov, "aspect": 1.5}}}]
+    warnings = []
+    expanded = _fitted_camera(writer, "/C", 100, 100, 1.0, "expandAperture", "p", lambda *a: warnings.append(a))
+    cropped = _fitted_camera(writer, "/C", 100, 100, 1.0, "cropAperture", "p", lambda *a: warnings.append(a))
+    by_name = {c["name"]: c["projection"]["perspective"] for c in writer.cameras}
+    assert by_name[expanded]["yfov"] == pytest.approx(2 * np.arctan(18 / 35))
+    assert cropped == "/C"  # cropping keeps the vertical field of view lucerna uses
+    assert not warnings
+
+
+def test_frame_tokens():
+    from lucerna_usd.render_settings import expand_frame
+
+    assert expand_frame("a.$F4.exr", 12) == "a.0012.exr"
+    assert expand_frame("a.$F.exr", 12) == "a.12.exr"
+    assert expand_frame("a.<F3>.exr", 5) == "a.005.exr"
+    assert expand_frame("a.####.exr", 5) == "a.0005.exr"
+    assert expand_frame("a.%04d.exr", 5) == "a.0005.exr"
+    assert expand_frame("a.{frame}.exr", 5) == "a.0005.exr"
+    assert expand_frame("a.$F4.exr", 1.5) == "a.1.5.exr"
