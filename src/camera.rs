@@ -82,12 +82,22 @@ pub fn framing_camera(lo: DVec3, hi: DVec3) -> scene::Camera {
         focus_distance: distance,
         clip_near: 0.0,
         clip_far: None,
+        fit: Default::default(),
     }
+}
+
+/// The camera's aperture aspect where `fit` keeps the aperture's width instead of its height:
+/// an image narrower than the aperture under [`CameraFit::ExpandAperture`].
+fn expanded(fit: scene::CameraFit, aperture: Option<f32>, image: f32) -> Option<f32> {
+    aperture.filter(|&a| {
+        fit == scene::CameraFit::ExpandAperture && a.is_finite() && a > 0.0 && image < a
+    })
 }
 
 impl Camera {
     /// The render camera for scene camera `c` at `width` × `height`. A perspective camera
-    /// keeps its vertical field of view, an orthographic one its height.
+    /// keeps its vertical field of view, an orthographic one its height, unless `c.fit`
+    /// keeps the aperture's width for an image narrower than it.
     pub fn new(c: &scene::Camera, space: &RenderSpace, width: u32, height: u32) -> Self {
         let aspect = width as f32 / height as f32;
         let m = c.transform;
@@ -98,17 +108,29 @@ impl Camera {
         let up_w = right_w.cross(forward_w).normalize();
         let right_w = forward_w.cross(up_w);
         let kind = match c.projection {
-            Projection::Perspective { yfov, .. } => {
-                let tan_half_y = (yfov * 0.5).tan();
+            Projection::Perspective {
+                yfov,
+                aspect: aperture,
+            } => {
+                let mut tan_half_y = (yfov * 0.5).tan();
+                if let Some(aperture) = expanded(c.fit, aperture, aspect) {
+                    tan_half_y *= aperture / aspect;
+                }
                 Kind::Perspective {
                     tan_half_x: tan_half_y * aspect,
                     tan_half_y,
                 }
             }
-            Projection::Orthographic { ymag, .. } => Kind::Orthographic {
-                half_width: ymag * aspect * space.scale as f32,
-                half_height: ymag * space.scale as f32,
-            },
+            Projection::Orthographic { xmag, ymag } => {
+                let ymag = match expanded(c.fit, Some(xmag / ymag), aspect) {
+                    Some(_) => xmag / aspect,
+                    None => ymag,
+                };
+                Kind::Orthographic {
+                    half_width: ymag * aspect * space.scale as f32,
+                    half_height: ymag * space.scale as f32,
+                }
+            }
         };
         let camera_to_world = DMat4::from_cols(
             right_w.extend(0.0),
@@ -288,6 +310,7 @@ mod tests {
             focus_distance: 5.0,
             clip_near: 0.5,
             clip_far: Some(20.0),
+            fit: Default::default(),
         };
         let space = RenderSpace::from_bounds(DVec3::splat(-4.0), DVec3::splat(6.0));
         Camera::new(&c, &space, 64, 48)

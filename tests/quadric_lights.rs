@@ -42,6 +42,7 @@ fn scene(analytic: bool) -> Scene {
             focus_distance: 1.0,
             clip_near: 0.0,
             clip_far: None,
+            fit: Default::default(),
         }],
         ..Default::default()
     };

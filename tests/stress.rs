@@ -352,6 +352,7 @@ fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
             focus_distance: 1.0,
             clip_near: 0.0,
             clip_far: None,
+            fit: Default::default(),
         }],
         ..Default::default()
     };

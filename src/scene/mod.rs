@@ -259,6 +259,22 @@ pub struct Camera {
     pub clip_near: f64,
     /// Far clipping distance, if any.
     pub clip_far: Option<f64>,
+    /// How the view fits an image whose aspect differs from the camera's.
+    #[serde(default)]
+    pub fit: CameraFit,
+}
+
+/// How a camera's view fits an image of another aspect ratio.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CameraFit {
+    /// Keep the vertical field of view (glTF's rule).
+    #[default]
+    Vertical,
+    /// Keep the whole aperture in view: the vertical field of view, or the horizontal one
+    /// where the image is narrower than the aperture (USD's expandAperture, the default
+    /// aspectRatioConformPolicy).
+    ExpandAperture,
 }
 
 /// Camera projections.

@@ -125,6 +125,7 @@ pub fn ortho_camera(eye: DVec3, half: f32) -> Camera {
         focus_distance: 1.0,
         clip_near: 0.0,
         clip_far: None,
+        fit: Default::default(),
     }
 }
 

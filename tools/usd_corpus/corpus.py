@@ -8,7 +8,10 @@ Each stage is rendered at 32x24, 1 spp, beauty only, with a timeout of 300 s. A 
 "renders" when lucerna exits 0 with an EXR. The report groups refusals by their reason
 (the element and reason of lucerna's one-line error, numbers and paths stripped), and
 counts the plugin's warnings (validator findings, skipped prims, approximations).
-Standard library only; needs the release binary (`cargo build --release`).
+Standard library only; needs the release binary (`cargo build --release`). With usd-core
+in the repository's .venv (or $LUCERNA_PYTHON), every file is also classified: a file whose
+composed stage holds no gprim, point instancer or light at all (a material library, a
+camera or layout layer) is not a scene, and the report gives the rate over scenes too.
 """
 import argparse
 import json
@@ -60,6 +63,42 @@ def reason_class(error, stage):
     return text[:160]
 
 
+CLASSIFY = r'''
+import json, sys
+from pxr import Usd, UsdGeom, UsdLux
+out = {}
+for path in sys.argv[1:]:
+    try:
+        stage = Usd.Stage.Open(path)
+    except Exception:
+        out[path] = "unopenable"
+        continue
+    if stage is None:
+        out[path] = "unopenable"
+        continue
+    kind = "layer"
+    for prim in stage.Traverse(Usd.TraverseInstanceProxies(Usd.PrimAllPrimsPredicate)):
+        if prim.IsA(UsdGeom.Gprim) or prim.IsA(UsdGeom.PointInstancer) or prim.HasAPI(UsdLux.LightAPI):
+            kind = "scene"
+            break
+    out[path] = kind
+print(json.dumps(out))
+'''
+
+
+def classify(stages):
+    """{stage: "scene" | "layer" | "unopenable"} by usd-core, or {} without it."""
+    python = os.environ.get("LUCERNA_PYTHON", str(ROOT / ".venv/bin/python"))
+    if not Path(python).exists():
+        return {}
+    proc = subprocess.run([python, "-c", CLASSIFY, *map(str, stages)], capture_output=True,
+                          text=True)
+    try:
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+    except (IndexError, ValueError):
+        return {}
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("folder", type=Path)
@@ -75,6 +114,11 @@ def main():
             status = "ok " if r["rendered"] else f"{r['exit']:>3}"
             print(f"[{i + 1}/{len(stages)}] {status} {r['seconds']:6.1f} s "
                   f"{stage.relative_to(args.folder)} {r['error'][:150]}", flush=True)
+    kinds = classify(stages)
+    for r in results:
+        r["kind"] = kinds.get(r["stage"], "unknown")
+    scenes = [r for r in results if r["kind"] != "layer"]
+    scenes_rendered = sum(r["rendered"] for r in scenes)
     rendered = sum(r["rendered"] for r in results)
     reasons = Counter(reason_class(r["error"], r["stage"]) for r in results if not r["rendered"])
     lines = [
@@ -86,10 +130,19 @@ def main():
         f"timeouts: {sum(r['exit'] == 'timeout' for r in results)}; "
         f"slowest {max((r['seconds'] for r in results), default=0):.1f} s.",
         "",
+        f"Scenes (files whose composed stage has a gprim, point instancer or light, or that "
+        f"usd-core cannot open): **{scenes_rendered} of {len(scenes)} "
+        f"({100 * scenes_rendered / max(len(scenes), 1):.1f} %)**; the other "
+        f"{len(results) - len(scenes)} files are layers without geometry or lights (material "
+        "libraries, camera and layout layers), refused as having nothing to render.",
+        "",
         "| refusals | reason |",
         "|---|---|",
     ]
     lines += [f"| {n} | {reason} |" for reason, n in reasons.most_common()]
+    lines += ["", "Scenes not rendered:", ""]
+    lines += [f"- `{Path(r['stage']).relative_to(args.folder)}`: {r['error'] or r['exit']}"
+              for r in scenes if not r["rendered"]]
     report = "\n".join(lines) + "\n"
     print(report)
     if args.out:

@@ -24,9 +24,12 @@ from .mesh import MeshData
 from .scene_file import SceneWriter, matrix, mean_scale
 
 # Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
-_SKIPPED_GPRIMS = (UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane,
-                   UsdGeom.Points, UsdGeom.BasisCurves, UsdGeom.NurbsCurves, UsdGeom.NurbsPatch,
+_SKIPPED_GPRIMS = (UsdGeom.BasisCurves, UsdGeom.NurbsCurves, UsdGeom.NurbsPatch,
                    UsdGeom.HermiteCurves, UsdGeom.TetMesh)
+#: Implicit gprims tessellated into meshes (Sphere stays analytic, Points become spheres).
+_TESSELLATED = (UsdGeom.Cube, UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane)
+#: Segments around the axis of a tessellated cylinder, cone or capsule.
+SEGMENTS = 64
 
 
 class Group:
@@ -118,6 +121,18 @@ class Converter:
                         "name": name if len(world) == 1 else f"{name}[{k}]",
                         "centre": [float(x) for x in m[3, :3]],
                         "radius": radius * scale, "material": material})
+            elif g.kind == "points":
+                positions, radii, material, name = g.payload
+                for k, m in enumerate(world):
+                    scale, uniform = mean_scale(m[:3, :3])
+                    if not uniform:
+                        self.warn(name, "non-uniform scale on Points: the mean scale is used")
+                    centres = positions @ m[:3, :3] + m[3, :3]
+                    for i, (centre, radius) in enumerate(zip(centres, radii)):
+                        self.writer.spheres.append({
+                            "name": f"{name}[{i}]" if len(world) == 1 else f"{name}[{k}][{i}]",
+                            "centre": [float(x) for x in centre],
+                            "radius": float(radius * scale), "material": material})
             elif g.kind == "camera":
                 for m in world:
                     self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
@@ -176,8 +191,10 @@ class Converter:
             if prim.HasAPI(UsdLux.MeshLightAPI) or prim.HasAPI(UsdLux.LightAPI):
                 self._mesh_light(prim, meshes)
             groups += meshes
-        elif prim.IsA(UsdGeom.Sphere) or prim.IsA(UsdGeom.Cube):
+        elif prim.IsA(UsdGeom.Sphere) or any(prim.IsA(t) for t in _TESSELLATED):
             groups += self._implicit(prim, inherited)
+        elif prim.IsA(UsdGeom.Points):
+            groups += self._points(prim, inherited)
         elif prim.IsA(UsdGeom.PointInstancer):
             return self._point_instancer(prim, inherited)
         elif prim.IsA(UsdGeom.Camera):
@@ -276,12 +293,37 @@ class Converter:
         if prim.IsA(UsdGeom.Sphere):
             radius = float(UsdGeom.Sphere(prim).GetRadiusAttr().Get(self.time))
             return [Group("sphere", (radius, material[0], path))]
-        size = float(UsdGeom.Cube(prim).GetSizeAttr().Get(self.time)) / 2
-        corners = np.array([[x, y, z] for x in (-size, size) for y in (-size, size) for z in (-size, size)])
-        faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
-        triangles = np.array([[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces])
-        mesh = self.writer.add_mesh(path, material[0], corners, triangles)
+        shape = _tessellate(prim, self.time)
+        if isinstance(shape, str):
+            self.warn(path, f"{prim.GetTypeName()}: {shape}: skipped")
+            return []
+        corners, triangles, normals = shape
+        mesh = self.writer.add_mesh(path, material[0], corners, triangles, normals)
         return [Group("mesh", (mesh, path))]
+
+    def _points(self, prim, inherited):
+        """UsdGeom.Points as analytic spheres of diameter `widths` (per point, or one for
+        all; 1 where unauthored), in the gprim's material or constant displayColor."""
+        path = str(prim.GetPath())
+        points = UsdGeom.Points(prim)
+        positions = np.asarray(points.GetPointsAttr().Get(self.time) or [], np.float64).reshape(-1, 3)
+        widths = np.asarray(points.GetWidthsAttr().Get(self.time) or [1.0], np.float64).ravel()
+        if len(widths) not in (1, len(positions)):
+            self.warn(path, f"{len(widths)} widths for {len(positions)} points: the first is used for all")
+            widths = widths[:1]
+        radii = np.broadcast_to(widths / 2, (len(positions),))
+        keep = np.isfinite(positions).all(axis=1) & np.isfinite(radii) & (radii > 0)
+        if not keep.all():
+            self.warn(path, f"{int((~keep).sum())} points with NaN positions or non-positive widths: skipped")
+        if not keep.any():
+            return []
+        material = self._material(prim, inherited, False)
+        if material is None:
+            color = self._constant_display_color(points)
+            if color is None:
+                self.warn(path, "per-point displayColor is not supported on points: white is used")
+            material = self.materials.display_color(color, False, self._constant_display_opacity(points))
+        return [Group("points", (positions[keep], np.ascontiguousarray(radii[keep]), material[0], path))]
 
     def _constant_display_opacity(self, gprim):
         pv = gprim.GetDisplayOpacityPrimvar()
@@ -328,6 +370,8 @@ class Converter:
             "focus_distance": cam.focusDistance * mpu if cam.focusDistance > 0 else 1.0,
             "clip_near": max(near, 0.0) * mpu,
             "clip_far": far * mpu if math.isfinite(far) and far > near else None,
+            # USD's default aspectRatioConformPolicy: the whole aperture stays in view.
+            "fit": "expand_aperture",
         })
 
     # ---- meshes ----------------------------------------------------------------------
@@ -372,3 +416,98 @@ class Converter:
             groups.append(Group("mesh", (mesh_index, name)))
         return groups
 
+
+
+def _axis_frame(axis):
+    """Columns mapping a shape's local (x, y, z-along-axis) to USD's axes for `axis`."""
+    return {"X": np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0]], float),
+            "Y": np.array([[0, 1, 0], [0, 0, 1], [1, 0, 0]], float),
+            "Z": np.eye(3)}.get(str(axis), np.eye(3))
+
+
+def _revolve(profile, axis):
+    """A surface of revolution around `axis`: `profile` is a list of (r, z, nr, nz) from the
+    bottom up, outward normals; consecutive points at the same place (a rim where the
+    normal turns) start a new band. Returns (positions, triangles, normals)."""
+    angles = np.linspace(0.0, 2 * np.pi, SEGMENTS + 1)[:-1]
+    c, s = np.cos(angles), np.sin(angles)
+    positions, normals, triangles = [], [], []
+    for r, z, nr, nz in profile:
+        positions.append(np.stack([r * c, r * s, np.full_like(c, z)], 1))
+        normals.append(np.stack([nr * c, nr * s, np.full_like(c, nz)], 1))
+    j = np.arange(SEGMENTS)
+    j1 = (j + 1) % SEGMENTS
+    for i in range(len(profile) - 1):
+        (r0, z0, *_), (r1, z1, *_) = profile[i], profile[i + 1]
+        if r0 == r1 and z0 == z1:
+            continue
+        a, b = i * SEGMENTS + j, (i + 1) * SEGMENTS + j
+        a1, b1 = i * SEGMENTS + j1, (i + 1) * SEGMENTS + j1
+        triangles += [np.stack([a, a1, b1], 1), np.stack([a, b1, b], 1)]
+    frame = _axis_frame(axis)
+    positions = np.concatenate(positions) @ frame.T
+    normals = np.concatenate(normals) @ frame.T
+    return positions, np.concatenate(triangles), normals
+
+
+def _tessellate(prim, time):
+    """(positions, triangles, normals) of an implicit gprim, or a reason it has none."""
+    def get(schema, name):
+        return float(getattr(schema, f"Get{name}Attr")().Get(time))
+
+    if prim.IsA(UsdGeom.Cube):
+        size = get(UsdGeom.Cube(prim), "Size") / 2
+        if not size > 0:
+            return "size is not positive"
+        corners = np.array([[x, y, z] for x in (-size, size) for y in (-size, size) for z in (-size, size)])
+        faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        triangles = np.array([[f[0], f[1], f[2]] for f in faces] + [[f[0], f[2], f[3]] for f in faces])
+        return corners, triangles, None
+    if prim.IsA(UsdGeom.Plane):
+        plane = UsdGeom.Plane(prim)
+        w, length = get(plane, "Width") / 2, get(plane, "Length") / 2
+        if not (w > 0 and length > 0):
+            return "width or length is not positive"
+        # UsdGeomPlane: width along X (Z for axis X), length along Y (Z for axis Y).
+        axis = str(plane.GetAxisAttr().Get(time))
+        u, v, normal = {"X": (2, 1, 0), "Y": (0, 2, 1)}.get(axis, (0, 1, 2))
+        quad = np.zeros((4, 3))
+        quad[:, u] = [-w, w, w, -w]
+        quad[:, v] = [-length, -length, length, length]
+        n = np.zeros(3)
+        n[normal] = 1.0
+        triangles = np.array([[0, 1, 2], [0, 2, 3]])
+        if np.cross(quad[1] - quad[0], quad[2] - quad[0]) @ n < 0:
+            triangles = triangles[:, [0, 2, 1]]
+        return quad, triangles, np.repeat(n[None], 4, 0)
+    if prim.IsA(UsdGeom.Cylinder):
+        shape = UsdGeom.Cylinder(prim)
+        r, h = get(shape, "Radius"), get(shape, "Height") / 2
+        if not (r > 0 and h > 0):
+            return "radius or height is not positive"
+        profile = [(0, -h, 0, -1), (r, -h, 0, -1), (r, -h, 1, 0), (r, h, 1, 0), (r, h, 0, 1), (0, h, 0, 1)]
+        return _revolve(profile, shape.GetAxisAttr().Get(time))
+    if prim.IsA(UsdGeom.Cone):
+        shape = UsdGeom.Cone(prim)
+        r, h = get(shape, "Radius"), get(shape, "Height") / 2
+        if not (r > 0 and h > 0):
+            return "radius or height is not positive"
+        slope = np.hypot(2 * h, r)
+        nr, nz = 2 * h / slope, r / slope
+        profile = [(0, -h, 0, -1), (r, -h, 0, -1), (r, -h, nr, nz), (0, h, nr, nz)]
+        return _revolve(profile, shape.GetAxisAttr().Get(time))
+    if prim.IsA(UsdGeom.Capsule):
+        shape = UsdGeom.Capsule(prim)
+        r, h = get(shape, "Radius"), get(shape, "Height") / 2
+        if not (r > 0 and h >= 0):
+            return "radius is not positive or height negative"
+        rings = SEGMENTS // 4
+        profile = []
+        for k in range(rings + 1):
+            t = -np.pi / 2 + (np.pi / 2) * k / rings
+            profile.append((r * np.cos(t), -h + r * np.sin(t), np.cos(t), np.sin(t)))
+        for k in range(rings + 1):
+            t = (np.pi / 2) * k / rings
+            profile.append((r * np.cos(t), h + r * np.sin(t), np.cos(t), np.sin(t)))
+        return _revolve(profile, shape.GetAxisAttr().Get(time))
+    return "not a shape lucerna tessellates"

@@ -107,6 +107,33 @@ class MeshData:
             return None
         return per_corner
 
+    def _subdivision_normals(self, name):
+        """Per-corner smooth normals of a subdivision surface (any subdivisionScheme but
+        "none"; catmullClark is USD's default), whose authored normals USD ignores: the
+        area-weighted mean of the faces around each point. lucerna renders the control
+        cage (warned), shaded smooth as the limit surface would be; None for a polygonal
+        mesh."""
+        scheme = self.mesh.GetSubdivisionSchemeAttr().Get(self.time) or "catmullClark"
+        if scheme == "none":
+            return None
+        self.warn(name, f"subdivision surface ({scheme}): rendered as its control cage, "
+                  "shaded with smooth normals (lucerna does not subdivide)")
+        tri_points = self.indices[self.corner_triangles]
+        p = self.points[tri_points]
+        # Each polygon's area vector (the sum over its fan, outward: corner_triangles are
+        # wound counter-clockwise already) goes once to every point it has; faces on NaN
+        # points (skipped by read) weigh nothing.
+        tri = np.nan_to_num(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), nan=0.0, posinf=0.0, neginf=0.0)
+        faces = np.stack([np.bincount(self.face_of_triangle, tri[:, k], self.face_count)
+                          for k in range(3)], 1)
+        per_corner = faces[self.face_of_corner]
+        normals = np.stack([np.bincount(self.indices, per_corner[:, k], len(self.points))
+                            for k in range(3)], 1)
+        length = np.linalg.norm(normals, axis=1, keepdims=True)
+        if (length[self.indices] == 0).any():
+            return None  # a corner with no area around its point: flat shading
+        return normals[self.indices] / length[self.indices]
+
     def build(self, face_mask, st_name, color_primvar, name):
         """(positions, triangles, normals, uvs, colors) of the faces in `face_mask`, welded,
         or None when no triangle is left."""
@@ -114,6 +141,8 @@ class MeshData:
         if not len(tri):
             return None
         normals = self._primvar("normals", 3)
+        if normals is None:
+            normals = self._subdivision_normals(name)
         uvs = self._primvar(st_name, 2) if st_name else None
         if st_name and uvs is None:
             self.warn(name, f"the material reads primvar {st_name!r}, which the mesh lacks: "

@@ -9,10 +9,11 @@ the settings'):
 - camera: the `camera` relationship (lucerna's cameras are named by prim path);
 - resolution in pixels; dataWindowNDC (x0, y0, x1, y1, origin bottom-left) becomes the
   pixel window rendered, the EXR's data window;
-- aspectRatioConformPolicy (expandAperture, the default, cropAperture, adjustApertureWidth,
-  adjustApertureHeight, adjustPixelAspectRatio) fits the camera's aperture to the image,
-  giving a per-product camera where the fit changes the field of view; pixel aspect ratios
-  other than 1 are warned about (lucerna's pixels are square);
+- aspectRatioConformPolicy: expandAperture, the default, is every USD camera's own fit in
+  lucerna (the whole aperture stays in view); cropAperture, adjustApertureWidth and
+  adjustApertureHeight give a per-product camera with the field of view they imply;
+  adjustPixelAspectRatio and pixel aspect ratios other than 1 are warned about (lucerna's
+  pixels are square);
 - productName is the output file, relative to the working directory as husk writes it,
   with frame tokens expanded ($F, $F4, <F>, <F4>, ####, %04d, {frame});
 - orderedVars select lucerna's AOVs by each RenderVar's sourceName: lucerna's own layer
@@ -223,6 +224,10 @@ def _product(writer, stage, fields, output, aovs, element, warn, time):
             "crop": crop, "aovs": ",".join(aovs) if aovs else "beauty"}
 
 
+_POLICIES = {"expandAperture", "cropAperture", "adjustApertureWidth", "adjustApertureHeight",
+             "adjustPixelAspectRatio"}
+
+
 def _fitted_camera(writer, name, width, height, pixel_aspect, policy, element, warn):
     """The camera to render `name` through at width x height: itself where its aperture
     fits the image, else a copy whose field of view follows the conform policy."""
@@ -232,37 +237,29 @@ def _fitted_camera(writer, name, width, height, pixel_aspect, policy, element, w
         return None
     if width is None or "perspective" not in camera["projection"]:
         return name
+    if policy in ("expandAperture", "adjustPixelAspectRatio") or policy not in _POLICIES:
+        if policy == "adjustPixelAspectRatio":
+            warn(element, "aspectRatioConformPolicy adjustPixelAspectRatio: lucerna renders "
+                 "square pixels; the aperture is expanded instead")
+        elif policy != "expandAperture":
+            warn(element, f"unknown aspectRatioConformPolicy {policy!r}: expandAperture is used")
+        return name  # the renderer keeps the whole aperture in view (the camera's fit)
     persp = camera["projection"]["perspective"]
     aperture_aspect = persp["aspect"]
     image_aspect = width * pixel_aspect / height
-    if abs(image_aspect - aperture_aspect) < 1e-6 * aperture_aspect:
-        return name
     tan_v = math.tan(persp["yfov"] / 2)
     tan_h = tan_v * aperture_aspect
-    # lucerna keeps the vertical field of view and widens or narrows the horizontal one
-    # to the image: the tangent of the vertical half-angle decides.
-    if policy == "expandAperture":
-        tan_v = max(tan_v, tan_h / image_aspect)
-    elif policy == "cropAperture":
+    if policy == "cropAperture":
         tan_v = min(tan_v, tan_h / image_aspect)
-    elif policy == "adjustApertureWidth":
-        pass
     elif policy == "adjustApertureHeight":
         tan_v = tan_h / image_aspect
-    elif policy == "adjustPixelAspectRatio":
-        warn(element, "aspectRatioConformPolicy adjustPixelAspectRatio: lucerna renders square "
-             "pixels; the aperture is expanded instead")
-        tan_v = max(tan_v, tan_h / image_aspect)
-    else:
-        warn(element, f"unknown aspectRatioConformPolicy {policy!r}: expandAperture is used")
-        tan_v = max(tan_v, tan_h / image_aspect)
+    # adjustApertureWidth keeps the vertical field of view.
     yfov = 2 * math.atan(tan_v)
-    if abs(yfov - persp["yfov"]) < 1e-9:
-        return name
     fitted = f"{name} ({width}x{height}, {policy})"
     if not any(c["name"] == fitted for c in writer.cameras):
         copy = dict(camera)
         copy["name"] = fitted
         copy["projection"] = {"perspective": {"yfov": yfov, "aspect": image_aspect}}
+        copy["fit"] = "vertical"
         writer.cameras.append(copy)
     return fitted

@@ -335,3 +335,69 @@ def test_camera(stage_file, converted):
     assert cam["focus_distance"] == pytest.approx(2.5)
     assert cam["transform"][12:15] == pytest.approx([0, 1, 5])
     assert cam["transform"][0] == pytest.approx(1)  # scale removed: an orthonormal frame
+
+
+def test_subdivision_surface_is_shaded_smooth_and_warned(stage_file, converted):
+    """A catmullClark cube (USD's default scheme) without normals: lucerna renders the cage
+    with the area-weighted point normals, each along a cube diagonal, and says so."""
+    cube = '''def Mesh "Cube" {
+        int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]
+        int[] faceVertexIndices = [0, 1, 3, 2, 4, 6, 7, 5, 0, 4, 5, 1, 2, 3, 7, 6, 0, 2, 6, 4, 1, 5, 7, 3]
+        point3f[] points = [(-1, -1, -1), (1, -1, -1), (-1, 1, -1), (1, 1, -1), (-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1)]
+        %s
+    }'''
+    s = converted(stage_file(cube % ""))
+    mesh = s.mesh("/Cube")
+    normals = s.array(mesh["normals"], "<f4", 3)
+    positions = s.positions(mesh)
+    expected = positions / np.linalg.norm(positions, axis=1, keepdims=True)
+    assert np.allclose(np.abs(normals), 1 / np.sqrt(3), atol=1e-5)
+    # Outward: each normal points along its corner's diagonal (the winding decides the sign).
+    signs = np.sign(np.sum(normals * expected, axis=1))
+    assert np.all(signs == signs[0])
+    assert s.warnings_about("subdivision surface (catmullClark): rendered as its control cage")
+    flat = converted(stage_file(cube % 'uniform token subdivisionScheme = "none"', "flat.usda"))
+    assert flat.mesh("/Cube")["normals"] is None
+    assert not flat.warnings_about("subdivision surface")
+
+
+@pytest.mark.parametrize("shape,extent", [
+    ('Cylinder "S" {\n        double radius = 0.5\n        double height = 2\n        uniform token axis = "X"\n    }',
+     [(-1, -0.5, -0.5), (1, 0.5, 0.5)]),
+    ('Cone "S" {\n        double radius = 1\n        double height = 2\n    }', [(-1, -1, -1), (1, 1, 1)]),
+    ('Capsule "S" {\n        double radius = 0.5\n        double height = 1\n        uniform token axis = "Y"\n    }',
+     [(-0.5, -1, -0.5), (0.5, 1, 0.5)]),
+    ('Plane "S" {\n        double width = 2\n        double length = 4\n        uniform token axis = "Y"\n    }',
+     [(-1, 0, -2), (1, 0, 2)]),
+])
+def test_implicit_gprims_are_tessellated_with_outward_normals(stage_file, converted, shape, extent):
+    """Cylinder, Cone, Capsule and Plane: their extent along the authored axis, unit
+    normals, and triangles wound counter-clockwise seen from where their normals point."""
+    s = converted(stage_file("def " + shape + "\n"))
+    mesh = s.mesh("/S")
+    p = s.positions(mesh).astype(float)
+    n = s.array(mesh["normals"], "<f4", 3).astype(float)
+    t = s.triangles(mesh)
+    assert np.allclose(p.min(0), extent[0], atol=1e-6) and np.allclose(p.max(0), extent[1], atol=1e-6)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1, atol=1e-5)
+    face = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    area = np.linalg.norm(face, axis=1)
+    real = area > 1e-9
+    mean_normal = n[t].mean(axis=1)
+    assert np.all(np.sum(face[real] * mean_normal[real], axis=1) > 0)
+    assert not s.warnings_about("skipped")
+
+
+def test_points_are_spheres_of_their_widths(stage_file, converted):
+    s = converted(stage_file('''def Points "P" {
+        point3f[] points = [(0, 0, 0), (2, 0, 0), (4, 0, 0)]
+        float[] widths = [0.5, 1, 2] (interpolation = "vertex")
+        color3f[] primvars:displayColor = [(1, 0, 0)]
+        double3 xformOp:translate = (0, 1, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+'''))
+    spheres = s["spheres"]
+    assert [sp["radius"] for sp in spheres] == pytest.approx([0.25, 0.5, 1.0])
+    assert [sp["centre"] for sp in spheres] == [pytest.approx([x, 1, 0]) for x in (0, 2, 4)]
+    assert s["materials"][spheres[0]["material"]]["base_color"] == pytest.approx([1, 0, 0, 1])

@@ -153,21 +153,40 @@ def test_render_settings_option_and_output_override(tmp_path):
     assert "--render-settings /World/Ball: no RenderSettings prim there" in bad.stderr
 
 
-def test_conform_policy_expands_the_aperture(stage_file, converted):
-    """A 1:1 image through a 3:2 aperture: expandAperture keeps the width's field of view
-    and grows the height's; cropAperture keeps the height's."""
+def test_conform_policies(tmp_path):
+    """A 1:1 image through a 3:2 aperture. expandAperture (USD's default, every USD camera's
+    fit in lucerna) keeps the aperture's width in view, so the height's field of view grows;
+    cropAperture keeps the height's and loses the sides."""
     from lucerna_usd.render_settings import _fitted_camera
 
     writer = type("W", (), {})()
     yfov = 2 * np.arctan(12 / 35)
-    writer.cameras = [{"name": "/C", "projection": {"perspective": {"yfov": yfov, "aspect": 1.5}}}]
+    writer.cameras = [{"name": "/C", "projection": {"perspective": {"yfov": yfov, "aspect": 1.5}},
+                       "fit": "expand_aperture"}]
     warnings = []
     expanded = _fitted_camera(writer, "/C", 100, 100, 1.0, "expandAperture", "p", lambda *a: warnings.append(a))
     cropped = _fitted_camera(writer, "/C", 100, 100, 1.0, "cropAperture", "p", lambda *a: warnings.append(a))
-    by_name = {c["name"]: c["projection"]["perspective"] for c in writer.cameras}
-    assert by_name[expanded]["yfov"] == pytest.approx(2 * np.arctan(18 / 35))
-    assert cropped == "/C"  # cropping keeps the vertical field of view lucerna uses
+    by_name = {c["name"]: c for c in writer.cameras}
+    assert expanded == "/C"
+    assert by_name[cropped]["fit"] == "vertical"
+    assert by_name[cropped]["projection"]["perspective"]["yfov"] == pytest.approx(yfov)
     assert not warnings
+    # The renderer's side: a square render of the stage's 3:2 Front camera sees the whole
+    # 36 mm width: the ball (radius 1 at distance 10, focal 35) spans 2 tan(asin(1/10)) of
+    # the 2 x 18/35 the image's width sees, 14.1 pixels (keeping the height's 24 mm would
+    # make it 21.1).
+    (tmp_path / "shot.usda").write_text(STAGE)
+    done = subprocess.run([lucerna_bin(), "render", "shot.usda", "--spp", "16", "-o", "sq.exr",
+                           "--resolution", "72x72", "--camera", "/World/Front", "--aov", "beauty,depth"],
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    depth = oiio.ImageBuf(str(tmp_path / "sq.exr")).get_pixels(oiio.FLOAT)
+    names = spec(tmp_path / "sq.exr").channelnames
+    z = depth[..., names.index("depth.Z")]
+    row = z[36]
+    hit = np.where((row > 0) & (row < 100))[0]
+    width = 72 * (2 / np.sqrt(99)) / (2 * 18 / 35)
+    assert abs(len(hit) - width) <= 1.5, (len(hit), width)
 
 
 def test_frame_tokens():
