@@ -42,6 +42,30 @@ scene = bpy.context.scene
 cams = [o for o in scene.objects if o.type == "CAMERA"]
 if cams:
     scene.camera = cams[0]
+    # USD's default conform policy, expandAperture, keeps the whole aperture in view; the
+    # importer fits the sensor's width whatever the image's shape.
+    cam = cams[0].data
+    aspect = args["resolution"][0] / args["resolution"][1]
+    cam.sensor_fit = "VERTICAL" if aspect >= cam.sensor_width / cam.sensor_height else "HORIZONTAL"
+# A texture without a file renders magenta (or, on an emission input, white) in Blender;
+# lucerna uses the input's fallback: 0.8 grey for a base colour (MaterialX's default),
+# black for emission. The same here.
+import os
+for mat in bpy.data.materials:
+    if not mat.node_tree:
+        continue
+    for node in list(mat.node_tree.nodes):
+        if node.type != "TEX_IMAGE":
+            continue
+        if node.image is not None and os.path.exists(bpy.path.abspath(node.image.filepath)):
+            continue
+        for link in list(node.outputs[0].links):
+            socket = link.to_socket
+            mat.node_tree.links.remove(link)
+            if socket.name == "Base Color":
+                socket.default_value = (0.8, 0.8, 0.8, 1.0)
+            elif socket.name.startswith("Emission"):
+                socket.default_value = (0.0, 0.0, 0.0, 1.0)
 scene.render.engine = "CYCLES"
 scene.cycles.device = "CPU"
 scene.cycles.samples = args["spp"]
@@ -77,6 +101,12 @@ if p:
     bsdf.inputs["Sheen Weight"].default_value = p["fuzz"]
     bsdf.inputs["Sheen Tint"].default_value = (*p["fuzz_color"], 1.0)
     bsdf.inputs["Emission Color"].default_value = (*p["emission_color"], 1.0)
+    bsdf.inputs["Subsurface Weight"].default_value = p["subsurface"]
+    if p["subsurface"] > 0:
+        # Blender's subsurface takes the base colour as its colour.
+        w = p["subsurface"]
+        bsdf.inputs["Base Color"].default_value = (
+            *[(1 - w) * b + w * c for b, c in zip(p["base_color"], p["subsurface_color"])], 1.0)
     bsdf.inputs["Emission Strength"].default_value = p["emission"]
     if p["transmission"] > 0 and any(c < 1 for c in p["transmission_color"]):
         # OpenPBR's transmission colour without depth tints at the surface; the Principled
@@ -116,7 +146,8 @@ def open_pbr_inputs(stage, material_path):
                 "transmission_color": c("transmission_color"), "coat": float(values["coat"]),
                 "coat_roughness": float(values["coat_roughness"]), "coat_ior": float(values["coat_IOR"]),
                 "fuzz": float(values["sheen"]), "fuzz_color": c("sheen_color"),
-                "emission": float(values["emission"]), "emission_color": c("emission_color")}
+                "emission": float(values["emission"]), "emission_color": c("emission_color"),
+                "subsurface": float(values["subsurface"]), "subsurface_color": c("subsurface_color")}
     return {"base_color": [values["base_weight"] * x for x in c("base_color")],
             "metallic": float(values["base_metalness"]), "roughness": float(values["specular_roughness"]),
             "ior": float(values["specular_ior"]), "specular_weight": float(values["specular_weight"]),
@@ -124,7 +155,8 @@ def open_pbr_inputs(stage, material_path):
             "transmission_color": c("transmission_color"), "coat": float(values["coat_weight"]),
             "coat_roughness": float(values["coat_roughness"]), "coat_ior": float(values["coat_ior"]),
             "fuzz": float(values["fuzz_weight"]), "fuzz_color": c("fuzz_color"),
-            "emission": float(values["emission_luminance"]), "emission_color": c("emission_color")}
+            "emission": float(values["emission_luminance"]), "emission_color": c("emission_color"),
+            "subsurface": float(values["subsurface_weight"]), "subsurface_color": c("subsurface_color")}
 
 
 def flatten(stage_path, variant, out):
@@ -142,6 +174,15 @@ def flatten(stage_path, variant, out):
         ball = stage.GetPrimAtPath(BALL)
         material = UsdShade.MaterialBindingAPI(ball).ComputeBoundMaterial()[0]
         principled = open_pbr_inputs(stage, material.GetPath())
+    # Asset paths absolute (on the session layer), so the flattened file finds them.
+    from pxr import Sdf
+    with Usd.EditContext(stage, stage.GetSessionLayer()):
+        for prim in stage.Traverse():
+            for attr in prim.GetAttributes():
+                if attr.GetTypeName() == Sdf.ValueTypeNames.Asset:
+                    value = attr.Get()
+                    if value is not None and value.resolvedPath:
+                        attr.Set(Sdf.AssetPath(value.resolvedPath))
     stage.Export(str(out))
     del keep
     return principled
@@ -158,13 +199,14 @@ def main():
     ap.add_argument("--blender", required=True, help="a Python with bpy 5.0 (pip install bpy)")
     ap.add_argument("--out", default=str(ROOT / "tools/usd_compare/results"))
     ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--variants", default=",".join(VARIANTS))
     args = ap.parse_args()
     out = Path(args.out)
     work = out / "work"
     work.mkdir(parents=True, exist_ok=True)
     lucerna = os.environ.get("LUCERNA_BIN", str(ROOT / "target/release/lucerna"))
     rows = []
-    for variant in VARIANTS:
+    for variant in args.variants.split(","):
         flat = work / f"{variant}.usda"
         principled = flatten(args.stage, variant, flat)
         cycles_exr = work / f"{variant}.cycles.exr"
