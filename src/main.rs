@@ -577,12 +577,8 @@ fn render_frame(
             let path = output_path(&pattern, frame, &stem, &camera_name)
                 .map_err(|e| Error::bad_input("", "--output", e))?;
             let mut view_options = options.clone();
-            if let (None, None, Some([x0, y0, x1, y1])) =
-                (options.crop, args.resolution, settings.crop)
-            {
-                view_options
-                    .set("crop", &format!("{x0},{y0},{x1},{y1}"))
-                    .map_err(|e| Error::bad_input("", settings.path.as_str(), e))?;
+            if let (None, None, Some(crop)) = (options.crop, args.resolution, settings.crop) {
+                view_options.crop = Some(pixel_window(crop));
             }
             vec![View {
                 camera,
@@ -632,11 +628,10 @@ fn declared_views(
     options: &RenderOptions,
     settings: &lucerna::scene::RenderSettings,
 ) -> Result<Vec<View>> {
-    let mut views: Vec<View> = Vec::new();
-    // Products that agree on these share a render: camera, resolution, pixel window.
+    // Products that agree on camera, resolution and pixel window share a render; each
+    // group keeps its products' AOV lists, whose union the render takes.
     type Shared = (Option<String>, Option<(u32, u32)>, Option<[u32; 4]>);
-    let mut keys: Vec<Shared> = Vec::new();
-    let mut lists: Vec<Vec<String>> = Vec::new();
+    let mut groups: Vec<(Shared, View, Vec<&str>)> = Vec::new();
     for (i, product) in settings.products.iter().enumerate() {
         let element = format!("{}: product {i}", settings.path);
         let camera = args.camera.clone().or_else(|| product.camera.clone());
@@ -657,35 +652,33 @@ fn declared_views(
             aovs: own,
         };
         let key = (camera.clone(), resolution, crop);
-        match keys.iter().position(|k| *k == key) {
-            Some(k) => {
-                views[k].outputs.push(output);
-                lists[k].push(product.aovs.clone());
+        match groups.iter_mut().find(|(k, ..)| *k == key) {
+            Some((_, view, aovs)) => {
+                view.outputs.push(output);
+                aovs.push(&product.aovs);
             }
             None => {
                 let mut view_options = options.clone();
-                if let Some([x0, y0, x1, y1]) = crop {
-                    view_options
-                        .set("crop", &format!("{x0},{y0},{x1},{y1}"))
-                        .map_err(|e| Error::bad_input("", &element, e))?;
+                if let Some(window) = crop.map(pixel_window) {
+                    view_options.crop = Some(window);
                 }
-                keys.push(key);
-                lists.push(vec![product.aovs.clone()]);
-                views.push(View {
+                let view = View {
                     camera,
                     resolution,
                     options: view_options,
                     outputs: vec![output],
-                });
+                };
+                groups.push((key, view, vec![&product.aovs]));
             }
         }
     }
-    if args.aov.is_none() {
-        for (view, list) in views.iter_mut().zip(&lists) {
-            let union = list.join(",");
-            view.options.aovs = AovSet::parse(&union)
+    let mut views = Vec::with_capacity(groups.len());
+    for (_, mut view, aovs) in groups {
+        if args.aov.is_none() {
+            view.options.aovs = AovSet::parse(&aovs.join(","))
                 .map_err(|e| Error::bad_input("", settings.path.as_str(), e))?;
         }
+        views.push(view);
     }
     if args.resume && views.iter().any(|v| v.outputs.len() > 1) {
         return Err(Error::bad_input(
@@ -695,6 +688,17 @@ fn declared_views(
         ));
     }
     Ok(views)
+}
+
+/// The film window of a declared pixel window `[x0, y0, x1, y1]` (ends excluded; the scene
+/// file guarantees x0 < x1 and y0 < y1).
+fn pixel_window([x0, y0, x1, y1]: [u32; 4]) -> lucerna::film::Window {
+    lucerna::film::Window {
+        x: x0,
+        y: y0,
+        width: x1 - x0,
+        height: y1 - y0,
+    }
 }
 
 /// Renders `scene` as `view` says and writes its files; `Some(exit code)` if a signal

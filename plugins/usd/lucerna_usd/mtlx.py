@@ -8,10 +8,10 @@ library also gives each input's default value (`defaults`) and each output's typ
 
 Referenced documents. usd-core ships no file-format plugin for .mtlx (usdMtlx is built
 only with MaterialX support), so a reference, payload or sublayer naming a .mtlx file
-fails to compose. `substitute_documents` walks the layer stack before the stage is
-opened, reads each .mtlx document with the `MaterialX` package and writes the USD that
+fails to compose. `substitute_documents` looks through the layers the opened stage uses,
+reads each .mtlx document with the `MaterialX` package and writes the USD that
 usdMtlx would (`/MaterialX/Materials/<material>` with `outputs:mtlx:surface`), then points
-the arc at that in-memory layer. Each material carries its shader and every node and node
+the arc at that in-memory layer and the stage recomposes. Each material carries its shader and every node and node
 graph it reads as children, so a reference to one material alone keeps its connections.
 File names are resolved against the document (fileprefix and the document's directory);
 colour spaces become USD colorSpace metadata."""
@@ -167,11 +167,8 @@ class _DocumentWriter:
         self.doc_color_space = doc.getColorSpace() or ""
 
     def material(self, material):
-        name = _prim_name(material.getName())
-        mpath = Sdf.Path("/MaterialX/Materials").AppendChild(name)
-        spec = Sdf.CreatePrimInLayer(self.layer, mpath)
-        spec.specifier = Sdf.SpecifierDef
-        spec.typeName = "Material"
+        mpath = Sdf.Path("/MaterialX/Materials").AppendChild(_prim_name(material.getName()))
+        spec = self.prim(mpath, "Material")
         written = {}
         for inp in material.getInputs():
             if inp.getType() != "surfaceshader":
@@ -190,9 +187,7 @@ class _DocumentWriter:
             return written[key]
         path = parent.AppendChild(_prim_name(node.getName()))
         written[key] = path
-        spec = Sdf.CreatePrimInLayer(self.layer, path)
-        spec.specifier = Sdf.SpecifierDef
-        spec.typeName = "Shader"
+        spec = self.prim(path, "Shader")
         nd = node.getNodeDef()
         node_id = nd.getName() if nd is not None else f"ND_{node.getCategory()}_{node.getType()}"
         attr = Sdf.AttributeSpec(spec, "info:id", Sdf.ValueTypeNames.Token, Sdf.VariabilityUniform)
@@ -202,12 +197,17 @@ class _DocumentWriter:
         for out_name in names:
             Sdf.AttributeSpec(spec, f"outputs:{out_name}", Sdf.ValueTypeNames.Token)
         for inp in node.getInputs():
-            self.input(inp, spec, path, parent, written, graph)
+            self.input(inp, spec, parent, written, graph)
         return path
 
-    def input(self, inp, spec, path, parent, written, graph):
-        value_type = _VALUE_TYPES.get(inp.getType(), Sdf.ValueTypeNames.Token)
-        attr = Sdf.AttributeSpec(spec, "inputs:" + inp.getName(), value_type)
+    def prim(self, path, type_name):
+        spec = Sdf.CreatePrimInLayer(self.layer, path)
+        spec.specifier = Sdf.SpecifierDef
+        spec.typeName = type_name
+        return spec
+
+    def input(self, inp, spec, parent, written, graph):
+        attr = _attribute(spec, "inputs:" + inp.getName(), inp.getType())
         upstream_graph = inp.getNodeGraphString()
         if inp.getNodeName():
             owner = graph if graph is not None else self.doc
@@ -228,6 +228,11 @@ class _DocumentWriter:
             attr.connectionPathList.explicitItems = [
                 parent.AppendProperty("inputs:" + inp.getInterfaceName())]
             return
+        self.value(inp, attr)
+
+    def value(self, inp, attr):
+        """Sets `attr` to the value `inp` states, if any: file names resolved and with their
+        colour space."""
         if not inp.hasValueString():
             return
         if inp.getType() == "filename":
@@ -239,7 +244,7 @@ class _DocumentWriter:
         try:
             attr.default = _usd_value(inp.getValue(), inp.getType())
         except (TypeError, ValueError):
-            pass
+            pass  # a value MaterialX cannot parse: the input keeps its default
 
     def graph(self, ng, parent, written):
         key = ("graph", ng.getName())
@@ -247,24 +252,11 @@ class _DocumentWriter:
             return written[key]
         path = parent.AppendChild(_prim_name(ng.getName()))
         written[key] = path
-        spec = Sdf.CreatePrimInLayer(self.layer, path)
-        spec.specifier = Sdf.SpecifierDef
-        spec.typeName = "NodeGraph"
+        spec = self.prim(path, "NodeGraph")
         for inp in ng.getInputs():
-            attr = Sdf.AttributeSpec(spec, "inputs:" + inp.getName(),
-                                     _VALUE_TYPES.get(inp.getType(), Sdf.ValueTypeNames.Token))
-            if inp.hasValueString():
-                try:
-                    if inp.getType() == "filename":
-                        attr.default = Sdf.AssetPath(self.resolve(inp.getResolvedValueString(),
-                                                                  inp.getValueString()))
-                    else:
-                        attr.default = _usd_value(inp.getValue(), inp.getType())
-                except (TypeError, ValueError):
-                    pass
+            self.value(inp, _attribute(spec, "inputs:" + inp.getName(), inp.getType()))
         for out in ng.getOutputs():
-            attr = Sdf.AttributeSpec(spec, "outputs:" + out.getName(),
-                                      _VALUE_TYPES.get(out.getType(), Sdf.ValueTypeNames.Token))
+            attr = _attribute(spec, "outputs:" + out.getName(), out.getType())
             node = ng.getNode(out.getNodeName()) if out.getNodeName() else None
             if node is not None:
                 target = self.node(node, path, written, ng)
@@ -284,6 +276,10 @@ class _DocumentWriter:
         if path != absolute(unprefixed) and not os.path.exists(path) and os.path.exists(absolute(unprefixed)):
             return absolute(unprefixed)
         return path
+
+
+def _attribute(spec, name, mtlx_type):
+    return Sdf.AttributeSpec(spec, name, _VALUE_TYPES.get(mtlx_type, Sdf.ValueTypeNames.Token))
 
 
 def _prim_name(name):

@@ -198,97 +198,73 @@ class Reader:
         return out
 
     # ---- MaterialX ----------------------------------------------------------------------
-    def standard_surface(self, shader, material, node_id, names=None):
-        """Autodesk Standard Surface (`names` maps its input names to another shader's,
+    def standard_surface(self, shader, material, node_id, rename=None):
+        """Autodesk Standard Surface (`rename` maps its input names to another shader's,
         for OmniSurface)."""
         defaults = {**_STANDARD_SURFACE_DEFAULTS, **mtlx.defaults(node_id)}
-        names = names or {}
-        s = {k: self.net.source(shader, names.get(k, k), v) for k, v in defaults.items()}
-        out = Surface()
-        base = self.scaled(s["base_color"], self.number(s["base"], "base", material)) \
-            if s["base"][0] == "value" else self._product(s["base_color"], s["base"], "base", material)
-        subsurface = self.number(s["subsurface"], "subsurface", material)
-        if subsurface > 0.0:
-            self.warn(material, "subsurface scattering is approximated by diffuse reflection of "
-                      "subsurface_color")
-            sss = fit(self.color(s["subsurface_color"], "subsurface_color", material), 3)
-            base = self._lerp_color(base, sss, subsurface)
-        out.base_color = base
-        out.metallic = s["metalness"]
-        out.roughness = s["specular_roughness"]
-        out.specular_weight = self.number(s["specular"], "specular", material)
-        out.specular_color = self.color(s["specular_color"], "specular_color", material)
-        out.ior = self.number(s["specular_IOR"], "specular_IOR", material)
-        self._transmission(out, s["transmission"], s["transmission_color"],
-                           self.number(s["transmission_depth"], "transmission_depth", material),
-                           bool(self.net.value(shader, names.get("thin_walled", "thin_walled"), False)), material)
-        scatter = fit(self.color(s["transmission_scatter"], "transmission_scatter", material), 3)
-        if out.transmission != ("value", 0.0) and scatter.max() > 0.0:
-            self.warn(material, "transmission_scatter (volume scattering) is not supported: "
-                      "the volume only absorbs")
-        self._coat(out, s["coat"], s["coat_roughness"], s["coat_color"], s["coat_IOR"], material)
-        sheen = self.number(s["sheen"], "sheen", material)
-        if sheen > 0.0:
-            out.sheen_color = tuple(sheen * c for c in self.color(s["sheen_color"], "sheen_color", material))
-            out.sheen_roughness = self.number(s["sheen_roughness"], "sheen_roughness", material)
-        out.emissive = self._product(s["emission_color"], s["emission"], "emission", material)
-        self._opacity(out, s["opacity"], material)
-        anisotropy = self.number(s["specular_anisotropy"], "specular_anisotropy", material)
-        if anisotropy > 0.0:
-            out.anisotropy = (anisotropy, 2.0 * math.pi * self.number(
-                s["specular_rotation"], "specular_rotation", material))
-        thickness = self.number(s["thin_film_thickness"], "thin_film_thickness", material)
-        if thickness > 0.0:
-            out.iridescence = (1.0, self.number(s["thin_film_IOR"], "thin_film_IOR", material), thickness)
-        if self.number(s["diffuse_roughness"], "diffuse_roughness", material) > 0.0:
-            self.warn(material, "diffuse_roughness (Oren-Nayar) is approximated by Lambertian diffuse")
-        out.normal = self.normal(self.net.source(shader, names.get("normal", "normal"), None), material)
-        return out
+        return self._layered(shader, material, defaults, _STANDARD_SURFACE_ROLES, rename or {}, 1.0)
 
     def open_pbr(self, shader, material, node_id):
         defaults = {**_OPEN_PBR_DEFAULTS, **mtlx.defaults(node_id)}
-        s = {k: self.net.source(shader, k, v) for k, v in defaults.items()}
+        return self._layered(shader, material, defaults, _OPEN_PBR_ROLES, {}, 1000.0)
+
+    def _layered(self, shader, material, defaults, roles, rename, film_nm):
+        """The layered uber-shaders (Standard Surface, OpenPBR, OmniSurface): `roles` maps
+        each part of the model to the shader's input name, `defaults` holds the inputs'
+        defaults, `rename` maps names to another shader's spelling of them; `film_nm` is
+        nanometres per unit of thin-film thickness (Standard Surface nm, OpenPBR µm)."""
+        def name(role):
+            return rename.get(roles[role], roles[role])
+
+        def source(role):
+            return self.net.source(shader, name(role), defaults.get(roles[role]))
+
+        def number(role):
+            return self.number(source(role), name(role), material)
+
+        def color(role):
+            return self.color(source(role), name(role), material)
+
         out = Surface()
-        base = self._product(s["base_color"], s["base_weight"], "base_weight", material)
-        subsurface = self.number(s["subsurface_weight"], "subsurface_weight", material)
+        base = self._product(source("base_color"), source("base"), name("base"), material)
+        subsurface = number("subsurface")
         if subsurface > 0.0:
             self.warn(material, "subsurface scattering is approximated by diffuse reflection of "
-                      "subsurface_color")
-            sss = fit(self.color(s["subsurface_color"], "subsurface_color", material), 3)
-            base = self._lerp_color(base, sss, subsurface)
+                      f"{name('subsurface_color')}")
+            base = self._lerp_color(base, fit(color("subsurface_color"), 3), subsurface)
         out.base_color = base
-        out.metallic = s["base_metalness"]
-        out.roughness = s["specular_roughness"]
-        out.specular_weight = self.number(s["specular_weight"], "specular_weight", material)
-        out.specular_color = self.color(s["specular_color"], "specular_color", material)
-        out.ior = self.number(s["specular_ior"], "specular_ior", material)
-        thin = bool(self.net.value(shader, "geometry_thin_walled", False))
-        self._transmission(out, s["transmission_weight"], s["transmission_color"],
-                           self.number(s["transmission_depth"], "transmission_depth", material),
-                           thin, material)
-        scatter = fit(self.color(s["transmission_scatter"], "transmission_scatter", material), 3)
-        if out.transmission != ("value", 0.0) and scatter.max() > 0.0:
-            self.warn(material, "transmission_scatter (volume scattering) is not supported: "
-                      "the volume only absorbs")
-        self._coat(out, s["coat_weight"], s["coat_roughness"], s["coat_color"], s["coat_ior"], material)
-        fuzz = self.number(s["fuzz_weight"], "fuzz_weight", material)
-        if fuzz > 0.0:
-            out.sheen_color = tuple(fuzz * c for c in self.color(s["fuzz_color"], "fuzz_color", material))
-            out.sheen_roughness = self.number(s["fuzz_roughness"], "fuzz_roughness", material)
-        out.emissive = self._product(s["emission_color"], s["emission_luminance"], "emission_luminance", material)
-        self._opacity(out, s["geometry_opacity"], material)
-        anisotropy = self.number(s["specular_roughness_anisotropy"], "specular_roughness_anisotropy", material)
+        out.metallic = source("metalness")
+        out.roughness = source("specular_roughness")
+        out.specular_weight = number("specular")
+        out.specular_color = color("specular_color")
+        out.ior = number("specular_ior")
+        self._transmission(out, source("transmission"), source("transmission_color"),
+                           number("transmission_depth"),
+                           bool(self.net.value(shader, name("thin_walled"), False)), material)
+        if out.transmission != ("value", 0.0) and fit(color("transmission_scatter"), 3).max() > 0.0:
+            self.warn(material, f"{name('transmission_scatter')} (volume scattering) is not "
+                      "supported: the volume only absorbs")
+        self._coat(out, source("coat"), source("coat_roughness"), source("coat_color"),
+                   source("coat_ior"), material)
+        sheen = number("sheen")
+        if sheen > 0.0:
+            out.sheen_color = tuple(sheen * c for c in color("sheen_color"))
+            out.sheen_roughness = number("sheen_roughness")
+        out.emissive = self._product(source("emission_color"), source("emission"), name("emission"), material)
+        self._opacity(out, source("opacity"), material)
+        anisotropy = number("anisotropy")
         if anisotropy > 0.0:
-            out.anisotropy = (anisotropy, 0.0)
-        film = self.number(s["thin_film_weight"], "thin_film_weight", material)
-        if film > 0.0:
-            out.iridescence = (film, self.number(s["thin_film_ior"], "thin_film_ior", material),
-                               1000.0 * self.number(s["thin_film_thickness"], "thin_film_thickness", material))
-        if self.number(s["base_diffuse_roughness"], "base_diffuse_roughness", material) > 0.0:
-            self.warn(material, "base_diffuse_roughness (Oren-Nayar) is approximated by "
+            # Standard Surface's rotation: 0 to 1 is a full turn; OpenPBR has none.
+            rotation = 2.0 * math.pi * number("rotation") if "rotation" in roles else 0.0
+            out.anisotropy = (anisotropy, rotation)
+        film = number("film_weight") if "film_weight" in roles else 1.0
+        thickness = number("film_thickness") * film_nm
+        if film > 0.0 and thickness > 0.0:
+            out.iridescence = (film, number("film_ior"), thickness)
+        if number("diffuse_roughness") > 0.0:
+            self.warn(material, f"{name('diffuse_roughness')} (Oren-Nayar) is approximated by "
                       "Lambertian diffuse")
-        out.normal = self.normal(self.net.source(shader, "geometry_normal", None), material,
-                                 "geometry_normal")
+        out.normal = self.normal(self.net.source(shader, name("normal"), None), material, name("normal"))
         return out
 
     def gltf_pbr(self, shader, material, node_id):
@@ -567,6 +543,37 @@ class Reader:
                 out.alpha = ("value", alpha)
                 out.alpha_mode = "blend"
 
+
+#: The inputs of each part of the layered models (`_layered`).
+_STANDARD_SURFACE_ROLES = {
+    "base": "base", "base_color": "base_color", "diffuse_roughness": "diffuse_roughness",
+    "metalness": "metalness", "specular": "specular", "specular_color": "specular_color",
+    "specular_roughness": "specular_roughness", "specular_ior": "specular_IOR",
+    "anisotropy": "specular_anisotropy", "rotation": "specular_rotation",
+    "transmission": "transmission", "transmission_color": "transmission_color",
+    "transmission_depth": "transmission_depth", "transmission_scatter": "transmission_scatter",
+    "thin_walled": "thin_walled", "subsurface": "subsurface", "subsurface_color": "subsurface_color",
+    "coat": "coat", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
+    "coat_ior": "coat_IOR", "sheen": "sheen", "sheen_color": "sheen_color",
+    "sheen_roughness": "sheen_roughness", "emission": "emission", "emission_color": "emission_color",
+    "opacity": "opacity", "normal": "normal", "film_thickness": "thin_film_thickness",
+    "film_ior": "thin_film_IOR",
+}
+_OPEN_PBR_ROLES = {
+    "base": "base_weight", "base_color": "base_color", "diffuse_roughness": "base_diffuse_roughness",
+    "metalness": "base_metalness", "specular": "specular_weight", "specular_color": "specular_color",
+    "specular_roughness": "specular_roughness", "specular_ior": "specular_ior",
+    "anisotropy": "specular_roughness_anisotropy", "transmission": "transmission_weight",
+    "transmission_color": "transmission_color", "transmission_depth": "transmission_depth",
+    "transmission_scatter": "transmission_scatter", "thin_walled": "geometry_thin_walled",
+    "subsurface": "subsurface_weight", "subsurface_color": "subsurface_color",
+    "coat": "coat_weight", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
+    "coat_ior": "coat_ior", "sheen": "fuzz_weight", "sheen_color": "fuzz_color",
+    "sheen_roughness": "fuzz_roughness", "emission": "emission_luminance",
+    "emission_color": "emission_color", "opacity": "geometry_opacity", "normal": "geometry_normal",
+    "film_weight": "thin_film_weight", "film_thickness": "thin_film_thickness",
+    "film_ior": "thin_film_ior",
+}
 
 #: OmniSurface's parameter names for Standard Surface's (its base).
 _OMNI_SURFACE_NAMES = {

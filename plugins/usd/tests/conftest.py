@@ -71,6 +71,26 @@ def converted(tmp_path):
     return run
 
 
+def write_image(path, pixels, fmt=None):
+    """Writes an image file (8-bit unless `fmt` is another OpenImageIO type)."""
+    import OpenImageIO as oiio
+
+    fmt = oiio.UINT8 if fmt is None else fmt
+    pixels = np.asarray(pixels, dtype=np.uint8 if fmt == oiio.UINT8 else np.float32)
+    out = oiio.ImageOutput.create(str(path))
+    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt))
+    out.write_image(pixels)
+    out.close()
+
+
+def texels(scene, ref):
+    """The texels of the texture a material slot refers to, (H, W, 4)."""
+    t = scene["textures"][ref["texture"]]
+    if t["encoding"] == "rgba8":
+        return scene.array(t["texels"], "<u1", 4).reshape(t["height"], t["width"], 4)
+    return scene.array(t["texels"], "<f4", 4).reshape(t["height"], t["width"], 4)
+
+
 def lucerna_bin():
     """The renderer binary (LUCERNA_BIN, else the release build)."""
     path = os.environ.get("LUCERNA_BIN") or str(PLUGIN.parent.parent / "target" / "release" / "lucerna")

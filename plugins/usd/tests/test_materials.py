@@ -5,6 +5,8 @@ import numpy as np
 import OpenImageIO as oiio
 import pytest
 
+from conftest import texels, write_image
+
 QUAD = '''
     def Mesh "Quad" (prepend apiSchemas = ["MaterialBindingAPI"]) {
         int[] faceVertexCounts = [4]
@@ -44,23 +46,10 @@ def texture(name, file, outputs, extra=""):
         }}'''
 
 
-def write_image(path, pixels, fmt=oiio.UINT8):
-    pixels = np.asarray(pixels, dtype=np.uint8 if fmt == oiio.UINT8 else np.float32)
-    out = oiio.ImageOutput.create(str(path))
-    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt))
-    out.write_image(pixels)
-    out.close()
-
 
 def material(s):
     return s["materials"][s.mesh("/World/Quad")["material"]]
 
-
-def texels(s, ref):
-    t = s["textures"][ref["texture"]]
-    if t["encoding"] == "rgba8":
-        return s.array(t["texels"], "<u1", 4).reshape(t["height"], t["width"], 4)
-    return s.array(t["texels"], "<f4", 4).reshape(t["height"], t["width"], 4)
 
 
 def test_constants(stage_file, converted):

@@ -2,8 +2,9 @@
 RenderMan; render-context choice; what is approximated is warned about."""
 
 import numpy as np
-import OpenImageIO as oiio
 import pytest
+
+from conftest import texels, write_image
 
 QUAD = '''
     def Mesh "Quad" (prepend apiSchemas = ["MaterialBindingAPI"]) {
@@ -25,19 +26,6 @@ def material(s):
     return s["materials"][s.mesh("/World/Quad")["material"]]
 
 
-def write_image(path, pixels):
-    pixels = np.asarray(pixels, dtype=np.uint8)
-    out = oiio.ImageOutput.create(str(path))
-    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], oiio.UINT8))
-    out.write_image(pixels)
-    out.close()
-
-
-def texels(s, ref):
-    t = s["textures"][ref["texture"]]
-    if t["encoding"] == "rgba8":
-        return s.array(t["texels"], "<u4", 1).view(np.uint8).reshape(t["height"], t["width"], 4)
-    return s.array(t["texels"], "<f4", 4).reshape(t["height"], t["width"], 4)
 
 
 def test_omni_pbr_by_parameter_names(stage_file, converted, tmp_path):
