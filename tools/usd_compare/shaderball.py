@@ -120,9 +120,10 @@ bpy.ops.render.render(write_still=True)
 
 
 def open_pbr_inputs(stage, material_path):
-    """The open_pbr_surface inputs of the material (MaterialX defaults where unauthored)."""
+    """The ball's MaterialX surface inputs (open_pbr_surface or standard_surface; MaterialX
+    defaults where unauthored), by the parts of the model lucerna's reader names."""
     from pxr import UsdShade
-    from lucerna_usd import mtlx
+    from lucerna_usd import mtlx, surfaces
 
     material = UsdShade.Material(stage.GetPrimAtPath(material_path))
     out = material.GetSurfaceOutput("mtlx")
@@ -135,28 +136,24 @@ def open_pbr_inputs(stage, material_path):
         if value is not None:
             values[inp.GetBaseName()] = value
 
-    def c(key):
-        return [float(x) for x in values[key]]
+    roles = (surfaces._STANDARD_SURFACE_ROLES if mtlx.node_family(node_id) == "standard_surface"
+             else surfaces._OPEN_PBR_ROLES)
 
-    if mtlx.node_family(node_id) == "standard_surface":
-        return {"base_color": [values["base"] * x for x in c("base_color")],
-                "metallic": float(values["metalness"]), "roughness": float(values["specular_roughness"]),
-                "ior": float(values["specular_IOR"]), "specular_weight": float(values["specular"]),
-                "specular_color": c("specular_color"), "transmission": float(values["transmission"]),
-                "transmission_color": c("transmission_color"), "coat": float(values["coat"]),
-                "coat_roughness": float(values["coat_roughness"]), "coat_ior": float(values["coat_IOR"]),
-                "fuzz": float(values["sheen"]), "fuzz_color": c("sheen_color"),
-                "emission": float(values["emission"]), "emission_color": c("emission_color"),
-                "subsurface": float(values["subsurface"]), "subsurface_color": c("subsurface_color")}
-    return {"base_color": [values["base_weight"] * x for x in c("base_color")],
-            "metallic": float(values["base_metalness"]), "roughness": float(values["specular_roughness"]),
-            "ior": float(values["specular_ior"]), "specular_weight": float(values["specular_weight"]),
-            "specular_color": c("specular_color"), "transmission": float(values["transmission_weight"]),
-            "transmission_color": c("transmission_color"), "coat": float(values["coat_weight"]),
-            "coat_roughness": float(values["coat_roughness"]), "coat_ior": float(values["coat_ior"]),
-            "fuzz": float(values["fuzz_weight"]), "fuzz_color": c("fuzz_color"),
-            "emission": float(values["emission_luminance"]), "emission_color": c("emission_color"),
-            "subsurface": float(values["subsurface_weight"]), "subsurface_color": c("subsurface_color")}
+    def number(role):
+        return float(values[roles[role]])
+
+    def color(role):
+        return [float(x) for x in values[roles[role]]]
+
+    return {"base_color": [number("base") * x for x in color("base_color")],
+            "metallic": number("metalness"), "roughness": number("specular_roughness"),
+            "ior": number("specular_ior"), "specular_weight": number("specular"),
+            "specular_color": color("specular_color"), "transmission": number("transmission"),
+            "transmission_color": color("transmission_color"), "coat": number("coat"),
+            "coat_roughness": number("coat_roughness"), "coat_ior": number("coat_ior"),
+            "fuzz": number("sheen"), "fuzz_color": color("sheen_color"),
+            "emission": number("emission"), "emission_color": color("emission_color"),
+            "subsurface": number("subsurface"), "subsurface_color": color("subsurface_color")}
 
 
 def flatten(stage_path, variant, out):
