@@ -308,3 +308,77 @@ def test_a_mesh_light_emits_its_radiance(stage_file, converted):
         ' float inputs:intensity = 8\n bool inputs:normalize = 1\n}')))
     material = s["materials"][s.mesh("/World/Panel")["material"]]
     assert material["emissive"] == pytest.approx([2, 2, 2])  # 8 over 4 square units
+
+
+def test_a_shaped_spot_renders_its_analytic_falloff(stage_file, converted, tmp_path):
+    """A ShapingAPI spot 1 m above a white Lambertian floor (ior 1: no specular), seen by
+    an orthographic camera from above: each pixel of the direct light is
+    I falloff(theta) cos^3(theta) / (pi h^2), falloff the squared ramp in cos theta between
+    the cone angle and angle (1 - softness) (docs: lights.py), averaged over the pixel."""
+    stage = stage_file(world('''
+    def SphereLight "Spot" (prepend apiSchemas = ["ShapingAPI"]) {
+        float inputs:intensity = 10
+        float inputs:radius = 0.1
+        bool treatAsPoint = 1
+        float inputs:shaping:cone:angle = 30
+        float inputs:shaping:cone:softness = 0.5
+        double3 xformOp:translate = (0, 1, 0)
+        float3 xformOp:rotateXYZ = (-90, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }
+    def Mesh "Floor" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points = [(-3, 0, -3), (-3, 0, 3), (3, 0, 3), (3, 0, -3)]
+        uniform token subdivisionScheme = "none"
+        rel material:binding = </World/White>
+    }
+    def Material "White" {
+        token outputs:surface.connect = </World/White/S.outputs:surface>
+        def Shader "S" {
+            uniform token info:id = "UsdPreviewSurface"
+            color3f inputs:diffuseColor = (1, 1, 1)
+            float inputs:roughness = 1
+            float inputs:ior = 1
+            token outputs:surface
+        }
+    }
+    def Camera "Top" {
+        token projection = "orthographic"
+        float horizontalAperture = 20
+        float verticalAperture = 20
+        double3 xformOp:translate = (0, 5, 0)
+        float3 xformOp:rotateXYZ = (-90, 0, 0)
+        uniform token[] xformOpOrder = ["xformOp:translate", "xformOp:rotateXYZ"]
+    }'''))
+    s = converted(stage)
+    spot = s["lights"][0]["kind"]["spot"]
+    intensity = spot["intensity"][0]
+    size = 64
+    out = tmp_path / "spot.exr"
+    done = subprocess.run([lucerna_bin(), "render", str(stage), "-o", str(out), "--spp", "16",
+                           "--resolution", f"{size}x{size}", "--filter", "box", "--aov", "direct",
+                           "--max-depth", "1", "--rr", "off", "-q"], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    buf = oiio.ImageBuf(str(out))
+    names = list(buf.spec().channelnames)
+    image = buf.get_pixels(oiio.FLOAT)[..., names.index("direct.G")]
+
+    cos_outer, cos_inner = math.cos(math.radians(30)), math.cos(math.radians(15))
+    sub = (np.arange(8) + 0.5) / 8
+
+    def expected(i, j):
+        """The analytic radiance averaged over pixel (row i, column j) of the 2 m view."""
+        x = -1 + (j + sub[None, :]) * 2 / size
+        z = -1 + (i + sub[:, None]) * 2 / size
+        cos_t = 1 / np.sqrt(1 + x * x + z * z)
+        ramp = np.clip((cos_t - cos_outer) / (cos_inner - cos_outer), 0, 1) ** 2
+        return float(np.mean(intensity * ramp * cos_t ** 3 / math.pi))
+
+    row = size // 2
+    want = np.array([expected(row, j) for j in range(size)])
+    got = image[row].astype(float)
+    # The peak, the ramp and the dark outside: within 2 % of the peak everywhere.
+    assert want.max() > 0 and np.abs(got - want).max() < 0.02 * want.max(), (got, want)
+    ramp = (want > 0.05 * want.max()) & (want < 0.95 * want.max())
+    assert ramp.sum() >= 6  # the test sees the falloff, not just the core
