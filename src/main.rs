@@ -110,6 +110,9 @@ struct LoadArgs {
     /// renderSettingsPrimPath, else its first RenderSettings prim).
     #[arg(long, value_name = "PRIM")]
     render_settings: Option<String>,
+    /// Render glTF KHR_materials_variants variant NAME (default: the default materials).
+    #[arg(long, value_name = "NAME")]
+    material_variant: Option<String>,
     /// Seconds the USD plugin may take to convert a stage before it is stopped.
     #[arg(long, default_value_t = ingest::DEFAULT_PLUGIN_TIMEOUT.as_secs_f64(), value_parser = parse_timeout)]
     usd_timeout: f64,
@@ -126,6 +129,7 @@ impl LoadArgs {
             purpose: self.purpose.clone(),
             payloads: !self.no_payloads,
             render_settings: self.render_settings.clone(),
+            material_variant: self.material_variant.clone(),
             plugin_timeout: std::time::Duration::from_secs_f64(self.usd_timeout),
         }
     }
@@ -176,9 +180,13 @@ struct RenderArgs {
     /// Constant environment radiance, e.g. 0.5,0.6,0.8.
     #[arg(long, value_parser = parse_rgb, conflicts_with = "env_map")]
     env: Option<Vec3>,
-    /// Lat-long environment map (OpenEXR, PNG or JPEG).
+    /// Lat-long environment map (OpenEXR, Radiance HDR, TIFF, PNG, JPEG or WebP).
     #[arg(long)]
     env_map: Option<PathBuf>,
+    /// Refine every subdivision surface N levels (0: the control cage; at most 6).
+    /// Default: by size on screen, until the cage's mean edge spans about 2 pixels.
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(0..=6))]
+    subdiv_level: Option<u32>,
     /// Multiplier of the environment map.
     #[arg(long, default_value = "1", value_parser = parse_rgb)]
     env_scale: Vec3,
@@ -719,6 +727,13 @@ fn render_view(
     if let Some(path) = &args.env_map {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
+    // Subdivision surfaces are refined for this view before the memory estimate counts them.
+    scene.subdivision_level = args.subdiv_level;
+    lucerna::world::refine_subdivision_surfaces(
+        &mut scene,
+        view.camera.as_deref(),
+        view.resolution,
+    )?;
     if options.plan != PlanMode::General {
         plan::strip_unused_attributes(&mut scene);
     }

@@ -219,6 +219,83 @@ pub struct Objects {
     first_quadric: u32,
 }
 
+/// Pixels a refined subdivision edge spans on screen when chosen by size (the dicing rate
+/// Cycles calls 1 px; 2 px keeps uniform refinement's face count in check).
+const SUBDIVISION_EDGE_PIXELS: f64 = 2.0;
+
+/// Replaces each subdivision surface's placeholder mesh by the surface refined to
+/// `scene.subdivision_level`, or to the level that brings its mean cage edge to
+/// [`SUBDIVISION_EDGE_PIXELS`] where its nearest instance is seen by the render camera;
+/// refuses a refinement the memory limit cannot hold. Does nothing once refined.
+pub fn refine_subdivision_surfaces(
+    scene: &mut Scene,
+    camera_name: Option<&str>,
+    resolution: Option<(u32, u32)>,
+) -> Result<()> {
+    use crate::geometry::subdivision;
+    let (lo, hi) = scene.bounds().unwrap_or((DVec3::ZERO, DVec3::ONE));
+    let view = camera_name
+        .and_then(|n| scene.camera(n))
+        .or(scene.cameras.first())
+        .cloned()
+        .unwrap_or_else(|| camera::framing_camera(lo, hi));
+    let (_, height) = camera::resolve_resolution(resolution, Some(&view));
+    let eye = view.transform.transform_point3(DVec3::ZERO);
+    // Pixels a world unit spans at distance d: height / (2 tan(fov/2) d), or per unit of
+    // an orthographic view's height.
+    let pixels_per_unit = |distance: f64| match view.projection {
+        crate::scene::Projection::Perspective { yfov, .. } => {
+            height as f64 / (2.0 * (yfov as f64 / 2.0).tan() * distance.max(1e-6))
+        }
+        crate::scene::Projection::Orthographic { ymag, .. } => height as f64 / (2.0 * ymag as f64),
+    };
+    let surfaces = std::mem::take(&mut scene.subdivision_surfaces);
+    for surface in &surfaces {
+        let placeholder = &scene.meshes[surface.mesh as usize];
+        let level = match scene.subdivision_level {
+            Some(level) => level.min(subdivision::MAX_LEVEL),
+            None => {
+                // The nearest instance decides: its scale and distance.
+                let edge = subdivision::mean_edge_length(surface);
+                scene
+                    .instances
+                    .iter()
+                    .filter(|i| i.mesh == surface.mesh)
+                    .map(|i| {
+                        let scale =
+                            i.transform.transform_vector3(DVec3::ONE).length() / 3f64.sqrt();
+                        let (plo, phi) = placeholder.positions.iter().fold(
+                            (DVec3::INFINITY, DVec3::NEG_INFINITY),
+                            |(a, b), p| {
+                                let w = i.transform.transform_point3(p.as_dvec3());
+                                (a.min(w), b.max(w))
+                            },
+                        );
+                        let distance = eye.clamp(plo, phi).distance(eye);
+                        subdivision::level_for(
+                            edge * scale,
+                            pixels_per_unit(distance),
+                            SUBDIVISION_EDGE_PIXELS,
+                        )
+                    })
+                    .max()
+                    .unwrap_or(1)
+            }
+        };
+        // Bytes per refined face: four corners' positions, normals and attributes, and
+        // two triangles, plus the refinement's working copies.
+        let faces = subdivision::refined_face_count(surface, level);
+        crate::memory::check_allocation(
+            faces.saturating_mul(200),
+            &format!("subdivision surface {} at level {level}", placeholder.name),
+        )
+        .map_err(|r| Error::bad_input(&scene.source, &placeholder.name, r))?;
+        let refined = subdivision::refine(surface, level, &placeholder.name, placeholder.material);
+        scene.meshes[surface.mesh as usize] = refined;
+    }
+    Ok(())
+}
+
 fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
     let linear = DMat3::from_mat4(*to_render);
     let mirrored = linear.determinant() < 0.0;
@@ -819,6 +896,9 @@ impl World {
         resolution: Option<(u32, u32)>,
         light_select: LightSelect,
     ) -> Result<Self> {
+        if !scene.subdivision_surfaces.is_empty() {
+            refine_subdivision_surfaces(&mut scene, camera_name, resolution)?;
+        }
         let (lo, hi) = scene
             .bounds()
             .ok_or_else(|| Error::bad_input(&scene.source, "scene", "contains no geometry"))?;

@@ -7,6 +7,7 @@ pub mod instances;
 pub mod quadric;
 pub mod ray;
 pub mod sphere;
+pub mod subdivision;
 pub mod triangle;
 pub mod wide;
 

@@ -10,7 +10,7 @@
 
 use super::animation::{Interpolation, Track};
 use super::image as img;
-use super::{tangents, uri};
+use super::{gltf_delivery, skinning, tangents, uri};
 use crate::error::{Error, Result};
 use crate::scene::{
     self, AlphaMode, BsdfModel, Camera, Instance, Light, LightKind, Material, Mesh, Projection,
@@ -26,6 +26,10 @@ use std::sync::Arc;
 /// Extensions lucerna implements; a required extension outside this list is an error, a
 /// used one a warning.
 pub const SUPPORTED_EXTENSIONS: &[&str] = &[
+    "EXT_mesh_gpu_instancing",
+    "EXT_meshopt_compression",
+    "EXT_texture_webp",
+    "KHR_draco_mesh_compression",
     "KHR_lights_punctual",
     "KHR_materials_anisotropy",
     "KHR_materials_clearcoat",
@@ -36,7 +40,10 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_materials_specular",
     "KHR_materials_transmission",
     "KHR_materials_unlit",
+    "KHR_materials_variants",
     "KHR_materials_volume",
+    "KHR_mesh_quantization",
+    "KHR_meshopt_compression",
     "KHR_texture_transform",
 ];
 
@@ -44,14 +51,21 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
 const MAX_NODE_DEPTH: usize = 1024;
 
 /// Reads and converts the glTF file at `path`, posed at `time` seconds of its animations
-/// (`None`: the nodes' own transforms).
-pub fn load(path: &Path, time: Option<f64>) -> Result<Scene> {
+/// (`None`: the nodes' own transforms), with KHR_materials_variants variant
+/// `material_variant` (`None`: the default materials).
+pub fn load(path: &Path, time: Option<f64>, material_variant: Option<&str>) -> Result<Scene> {
     let bytes = crate::files::read_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     let base = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    import_at(&bytes, &path.display().to_string(), Some(base), time)
+    import_with(
+        &bytes,
+        &path.display().to_string(),
+        Some(base),
+        time,
+        material_variant,
+    )
 }
 
 /// Converts glTF bytes; `source` names the file in messages, `base` is its directory
@@ -67,13 +81,25 @@ pub fn import_at(
     base: Option<&Path>,
     time: Option<f64>,
 ) -> Result<Scene> {
+    import_with(bytes, source, base, time, None)
+}
+
+/// [`import_at`] with the KHR_materials_variants variant `material_variant` (by name).
+pub fn import_with(
+    bytes: &[u8],
+    source: &str,
+    base: Option<&Path>,
+    time: Option<f64>,
+    material_variant: Option<&str>,
+) -> Result<Scene> {
     let gltf = parse(bytes, source)?;
+    let mut buffers = load_buffers(&gltf.document, gltf.blob.as_deref(), source, base)?;
+    let document = gltf_delivery::decode(gltf.document, &mut buffers, source)?;
     let mut importer = Importer {
         source: source.to_string(),
         base,
-        doc: &gltf.document,
-        blob: gltf.blob.as_deref(),
-        buffers: Vec::new(),
+        doc: &document,
+        buffers,
         scene: Scene {
             source: source.to_string(),
             ..Default::default()
@@ -83,10 +109,62 @@ pub fn import_at(
         materials: HashMap::new(),
         meshes: HashMap::new(),
         pose: HashMap::new(),
+        morph_weights: HashMap::new(),
+        world_of: HashMap::new(),
+        skinned: Vec::new(),
+        variant: None,
         unsupported_material_extensions: Default::default(),
     };
+    importer.select_variant(material_variant)?;
     importer.run(time)?;
     Ok(importer.scene)
+}
+
+/// Reads the document's buffers: the GLB binary chunk, data URIs and files beside it. A
+/// meshopt fallback buffer has no data of its own; it is allocated for the decoder to fill.
+fn load_buffers(
+    doc: &gltf::Document,
+    blob: Option<&[u8]>,
+    source: &str,
+    base: Option<&Path>,
+) -> Result<Vec<Vec<u8>>> {
+    let err = |element: String, reason: String| Error::bad_input(source, element, reason);
+    let mut buffers = Vec::new();
+    for buffer in doc.buffers() {
+        let element = format!("buffers[{}]", buffer.index());
+        let json = &doc.as_json().buffers[buffer.index()];
+        let data = if gltf_delivery::is_meshopt_fallback(json) {
+            crate::memory::check_allocation(buffer.length() as u64, &element)
+                .map_err(|r| err(element.clone(), r))?;
+            vec![0; buffer.length()]
+        } else {
+            match buffer.source() {
+                gltf::buffer::Source::Bin => blob
+                    .ok_or_else(|| {
+                        err(
+                            element.clone(),
+                            "refers to the GLB binary chunk, which is missing".into(),
+                        )
+                    })?
+                    .to_vec(),
+                gltf::buffer::Source::Uri(u) => {
+                    uri::read(u, base).map_err(|r| err(format!("{element}.uri"), r))?
+                }
+            }
+        };
+        if data.len() < buffer.length() {
+            return Err(err(
+                element,
+                format!(
+                    "has {} bytes but byteLength is {} (truncated?)",
+                    data.len(),
+                    buffer.length()
+                ),
+            ));
+        }
+        buffers.push(data);
+    }
+    Ok(buffers)
 }
 
 /// Parses and validates the document. gltf-json's validation indexes a primitive's POSITION
@@ -175,6 +253,10 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
             }
         }
     }
+    let draco = root
+        .extensions_used
+        .iter()
+        .any(|e| e == "KHR_draco_mesh_compression");
     let mut errors = Vec::new();
     root.validate(root, gltf::json::Path::new, &mut |path, error| {
         let path = path();
@@ -184,7 +266,13 @@ fn parse(bytes: &[u8], source: &str) -> Result<gltf::Gltf> {
         // that from the extensions it implements (below).
         let required = path.0.starts_with("extensionsRequired")
             && matches!(error, gltf::json::validation::Error::Unsupported);
-        if !bounds && !required {
+        // A Draco primitive's accessors have no bufferView: their data is decoded
+        // (gltf_delivery), and the importer's checks refuse any still without data.
+        let draco_data = draco
+            && path.0.starts_with("accessors[")
+            && path.0.ends_with("].bufferView")
+            && matches!(error, gltf::json::validation::Error::Missing);
+        if !bounds && !required && !draco_data {
             errors.push((path, error));
         }
     });
@@ -262,7 +350,6 @@ struct Importer<'a> {
     source: String,
     base: Option<&'a Path>,
     doc: &'a gltf::Document,
-    blob: Option<&'a [u8]>,
     buffers: Vec<Vec<u8>>,
     scene: Scene,
     /// glTF image index → decoded size and texels (shared by the textures that use it).
@@ -275,6 +362,14 @@ struct Importer<'a> {
     meshes: HashMap<(usize, usize), Option<u32>>,
     /// Animated nodes' translation, rotation and scale at the render's time.
     pose: HashMap<usize, NodePose>,
+    /// Animated nodes' morph target weights at the render's time.
+    morph_weights: HashMap<usize, Vec<f32>>,
+    /// World transforms of the nodes visited so far (skins read their joints' from here).
+    world_of: HashMap<usize, DMat4>,
+    /// Skinned nodes (index, name), converted once every joint's transform is known.
+    skinned: Vec<(usize, String)>,
+    /// The KHR_materials_variants variant to render (index into the file's variants).
+    variant: Option<usize>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
 }
@@ -329,7 +424,6 @@ impl<'a> Importer<'a> {
                 format!("glTF 2.{minor} is newer than the 2.0 lucerna reads; its additions are not rendered"),
             );
         }
-        self.load_buffers()?;
         match time {
             Some(t) => self.pose_at(t)?,
             None if self.doc.animations().next().is_some() => self.warn(
@@ -350,6 +444,9 @@ impl<'a> Importer<'a> {
         for node in gltf_scene.nodes() {
             self.visit(node, DMat4::IDENTITY, &mut path)?;
         }
+        for (node, name) in std::mem::take(&mut self.skinned) {
+            self.skinned_node(node, &name)?;
+        }
         self.warn_unsupported_extensions();
         if self.scene.instanced_triangle_count() == 0 && self.scene.spheres.is_empty() {
             return Err(self.err(
@@ -360,41 +457,15 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
-    fn load_buffers(&mut self) -> Result<()> {
-        for buffer in self.doc.buffers() {
-            let element = format!("buffers[{}]", buffer.index());
-            let data = match buffer.source() {
-                gltf::buffer::Source::Bin => self
-                    .blob
-                    .ok_or_else(|| {
-                        self.err(&element, "refers to the GLB binary chunk, which is missing")
-                    })?
-                    .to_vec(),
-                gltf::buffer::Source::Uri(u) => {
-                    uri::read(u, self.base).map_err(|r| self.err(format!("{element}.uri"), r))?
-                }
-            };
-            if data.len() < buffer.length() {
-                return Err(self.err(
-                    &element,
-                    format!(
-                        "has {} bytes but byteLength is {} (truncated?)",
-                        data.len(),
-                        buffer.length()
-                    ),
-                ));
-            }
-            self.buffers.push(data);
-        }
-        Ok(())
-    }
-
     /// Samples every animation channel at `time` seconds into [`Importer::pose`]. All the
     /// file's animations play together; a property animated twice takes the last.
     fn pose_at(&mut self, time: f64) -> Result<()> {
         use gltf::animation::Property;
         use gltf::animation::util::ReadOutputs;
         let mut animated: HashMap<(usize, &str), usize> = HashMap::new();
+        // Animations that animate what an earlier one does: clips of one character (a
+        // walk, a run); the earlier one plays.
+        let mut clips = std::collections::BTreeSet::new();
         for animation in self.doc.animations() {
             for channel in animation.channels() {
                 let element = format!(
@@ -426,19 +497,28 @@ impl<'a> Importer<'a> {
                         ][..],
                     ),
                     Property::MorphTargetWeights => {
-                        self.warn(
-                            &element,
-                            "morph target weights are not supported; the channel is ignored",
-                        );
+                        let node = channel.target().node().index();
+                        match animated.get(&(node, "weights")) {
+                            Some(&earlier) if earlier != animation.index() => {
+                                clips.insert(animation.index());
+                            }
+                            _ => {
+                                animated.insert((node, "weights"), animation.index());
+                                self.sample_weights(&channel, &element, interpolation, time)?;
+                            }
+                        }
                         continue;
                     }
                 };
                 let node = channel.target().node().index();
-                if let Some(earlier) = animated.insert((node, name), animation.index()) {
-                    self.warn(
-                        &element,
-                        format!("nodes[{node}].{name} is also animated by animations[{earlier}]; the later one is used"),
-                    );
+                match animated.get(&(node, name)) {
+                    Some(&earlier) if earlier != animation.index() => {
+                        clips.insert(animation.index());
+                        continue;
+                    }
+                    _ => {
+                        animated.insert((node, name), animation.index());
+                    }
                 }
                 self.check_accessor(
                     &sampler.input(),
@@ -499,6 +579,97 @@ impl<'a> Importer<'a> {
                 }
             }
         }
+        if !clips.is_empty() {
+            let name = |i: usize| {
+                let a = self.doc.animations().nth(i).expect("animation index");
+                a.name()
+                    .map_or_else(|| format!("animations[{i}]"), |n| format!("{n:?}"))
+            };
+            let skipped: Vec<String> = clips.iter().map(|&i| name(i)).collect();
+            let first = (0..self.doc.animations().count())
+                .find(|i| !clips.contains(i))
+                .map_or_else(String::new, name);
+            self.warn(
+                "animations",
+                format!(
+                    "{} animate the same nodes as {first} (clips of one animation); {first} is rendered",
+                    skipped.join(", ")
+                ),
+            );
+        }
+        Ok(())
+    }
+
+    /// Samples a morph target weights channel at `time` into [`Importer::morph_weights`].
+    fn sample_weights(
+        &mut self,
+        channel: &gltf::animation::Channel,
+        element: &str,
+        interpolation: Interpolation,
+        time: f64,
+    ) -> Result<()> {
+        let sampler = channel.sampler();
+        self.check_accessor(
+            &sampler.input(),
+            &format!("{element} input"),
+            &[Dimensions::Scalar],
+            &[DataType::F32],
+            false,
+        )?;
+        self.check_accessor(
+            &sampler.output(),
+            &format!("{element} output"),
+            &[Dimensions::Scalar],
+            &[
+                DataType::F32,
+                DataType::I8,
+                DataType::U8,
+                DataType::I16,
+                DataType::U16,
+            ],
+            true,
+        )?;
+        let buffers = &self.buffers;
+        let reader = channel.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        let unreadable = || self.err(element, "the sampler's data cannot be read");
+        let times: Vec<f32> = reader.read_inputs().ok_or_else(unreadable)?.collect();
+        let values: Vec<f32> = match reader.read_outputs().ok_or_else(unreadable)? {
+            gltf::animation::util::ReadOutputs::MorphTargetWeights(w) => w.into_f32().collect(),
+            _ => return Err(unreadable()),
+        };
+        let per_key = if interpolation == Interpolation::CubicSpline {
+            3
+        } else {
+            1
+        };
+        if times.is_empty() || !values.len().is_multiple_of(times.len() * per_key) {
+            return Err(self.err(
+                element,
+                format!(
+                    "{} weights do not divide into {} keys",
+                    values.len(),
+                    times.len()
+                ),
+            ));
+        }
+        let targets = values.len() / (times.len() * per_key);
+        let mut weights = Vec::with_capacity(targets);
+        for t in 0..targets {
+            // Output element k × targets + t is target t's value in slot k (a key, or an
+            // in-tangent, value and out-tangent of one for cubic splines).
+            let track_values: Vec<[f32; 1]> = (0..times.len() * per_key)
+                .map(|k| [values[k * targets + t]])
+                .collect();
+            let track = Track {
+                times: &times,
+                values: &track_values,
+                interpolation,
+            };
+            track.check().map_err(|e| self.err(element, e))?;
+            weights.push(track.sample(time).x as f32);
+        }
+        let node = channel.target().node().index();
+        self.morph_weights.insert(node, weights);
         Ok(())
     }
 
@@ -537,17 +708,31 @@ impl<'a> Importer<'a> {
         if let Some(group) = self.light_group(&node, &element)? {
             self.scene.add_to_light_group(&group, &name);
         }
+        self.world_of.insert(node.index(), world);
         if let Some(mesh) = node.mesh() {
-            if self.is_sphere(&mesh)? {
+            let weights = self.node_weights(&node, &mesh);
+            if node.skin().is_some() {
+                // Skinned vertices are placed by their joints, whose transforms are known
+                // once the whole scene has been visited.
+                self.skinned.push((node.index(), name.clone()));
+            } else if self.is_sphere(&mesh)? {
                 self.sphere(&mesh, world, &name)?;
             } else {
+                let transforms = self.instance_transforms(&node, world)?;
                 for primitive in mesh.primitives() {
-                    if let Some(m) = self.primitive(&mesh, &primitive)? {
-                        self.scene.instances.push(Instance {
-                            name: name.clone(),
-                            mesh: m,
-                            transform: world,
-                        });
+                    let m = if weights.iter().any(|&w| w != 0.0) {
+                        self.deformed(&node, &mesh, &primitive, &weights, None)?
+                    } else {
+                        self.primitive(&mesh, &primitive)?
+                    };
+                    if let Some(m) = m {
+                        for &transform in &transforms {
+                            self.scene.instances.push(Instance {
+                                name: name.clone(),
+                                mesh: m,
+                                transform,
+                            });
+                        }
                     }
                 }
             }
@@ -782,6 +967,363 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
+    /// Selects KHR_materials_variants variant `name`; without one, a file with variants gets
+    /// a warning naming them.
+    fn select_variant(&mut self, name: Option<&str>) -> Result<()> {
+        let names: Vec<String> = self
+            .doc
+            .extension_value("KHR_materials_variants")
+            .and_then(|e| e.get("variants"))
+            .and_then(serde_json::Value::as_array)
+            .map(|v| {
+                v.iter()
+                    .map(|v| {
+                        v.get("name")
+                            .and_then(serde_json::Value::as_str)
+                            .unwrap_or("")
+                            .to_string()
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        match name {
+            Some(name) => match names.iter().position(|n| n == name) {
+                Some(i) => self.variant = Some(i),
+                None if names.is_empty() => {
+                    return Err(self.err(
+                        "extensions.KHR_materials_variants",
+                        format!("material variant {name:?} requested, but the file has no variants"),
+                    ));
+                }
+                None => {
+                    return Err(self.err(
+                        "extensions.KHR_materials_variants",
+                        format!(
+                            "has no material variant {name:?} (it has {})",
+                            names.join(", ")
+                        ),
+                    ));
+                }
+            },
+            None if !names.is_empty() => self.warn(
+                "extensions.KHR_materials_variants",
+                format!(
+                    "the file has material variants {}; the default materials are rendered (--material-variant NAME)",
+                    names.join(", ")
+                ),
+            ),
+            None => {}
+        }
+        Ok(())
+    }
+
+    /// The material the selected variant maps `primitive` to, if it maps it.
+    fn variant_material(&self, primitive: &gltf::Primitive) -> Option<gltf::Material<'a>> {
+        let variant = self.variant? as u64;
+        let mappings = primitive
+            .extensions()?
+            .get("KHR_materials_variants")?
+            .get("mappings")?
+            .as_array()?;
+        let material = mappings.iter().find_map(|m| {
+            let listed = m.get("variants")?.as_array()?;
+            listed
+                .iter()
+                .any(|v| v.as_u64() == Some(variant))
+                .then(|| m.get("material")?.as_u64())?
+        })?;
+        self.doc.materials().nth(material as usize)
+    }
+
+    /// The morph target weights of `node`'s mesh at the render's time: animated, else the
+    /// node's, else the mesh's (empty: no targets).
+    fn node_weights(&self, node: &gltf::Node, mesh: &gltf::Mesh) -> Vec<f32> {
+        if let Some(w) = self.morph_weights.get(&node.index()) {
+            return w.clone();
+        }
+        node.weights()
+            .or_else(|| mesh.weights())
+            .map(<[f32]>::to_vec)
+            .unwrap_or_default()
+    }
+
+    /// The world transforms a node's mesh is drawn at: `world`, or one for each instance of
+    /// its EXT_mesh_gpu_instancing attributes (TRANSLATION, ROTATION, SCALE; float or, with
+    /// KHR_mesh_quantization, normalized integers), each applied before the node's own.
+    fn instance_transforms(&self, node: &gltf::Node, world: DMat4) -> Result<Vec<DMat4>> {
+        let Some(ext) = node
+            .extensions()
+            .and_then(|e| e.get("EXT_mesh_gpu_instancing"))
+        else {
+            return Ok(vec![world]);
+        };
+        let element = format!("nodes[{}].extensions.EXT_mesh_gpu_instancing", node.index());
+        let attributes = ext.get("attributes").and_then(serde_json::Value::as_object);
+        let read = |name: &str, width: usize| -> Result<Option<Vec<f32>>> {
+            let Some(a) = attributes.and_then(|a| a.get(name)) else {
+                return Ok(None);
+            };
+            let e = format!("{element}.attributes.{name}");
+            let a = a
+                .as_u64()
+                .ok_or_else(|| self.err(&e, "is not an accessor index"))?;
+            let values = gltf_delivery::read_floats(self.doc.as_json(), &self.buffers, a as usize)
+                .map_err(|r| self.err(&e, r))?;
+            let ty = self.doc.as_json().accessors[a as usize].type_;
+            let expected = if width == 4 {
+                gltf::json::accessor::Type::Vec4
+            } else {
+                gltf::json::accessor::Type::Vec3
+            };
+            if ty != gltf::json::validation::Checked::Valid(expected) {
+                return Err(self.err(&e, format!("must be a {expected:?} accessor")));
+            }
+            if values.iter().any(|v| !v.is_finite()) {
+                return Err(self.err(&e, "holds a value that is not finite"));
+            }
+            Ok(Some(values))
+        };
+        let translation = read("TRANSLATION", 3)?;
+        let rotation = read("ROTATION", 4)?;
+        let scale = read("SCALE", 3)?;
+        let counts: Vec<usize> = [(&translation, 3), (&rotation, 4), (&scale, 3)]
+            .iter()
+            .filter_map(|(v, w)| v.as_ref().map(|v| v.len() / w))
+            .collect();
+        let Some(&count) = counts.first() else {
+            return Err(self.err(&element, "has no TRANSLATION, ROTATION or SCALE attribute"));
+        };
+        if counts.iter().any(|&c| c != count) {
+            return Err(self.err(
+                &element,
+                format!("its attributes have different counts {counts:?}"),
+            ));
+        }
+        let v3 = |v: &Option<Vec<f32>>, i: usize, default: DVec3| {
+            v.as_ref().map_or(default, |v| {
+                DVec3::new(v[3 * i] as f64, v[3 * i + 1] as f64, v[3 * i + 2] as f64)
+            })
+        };
+        Ok((0..count)
+            .map(|i| {
+                let r = rotation.as_ref().map_or(DQuat::IDENTITY, |r| {
+                    DQuat::from_xyzw(
+                        r[4 * i] as f64,
+                        r[4 * i + 1] as f64,
+                        r[4 * i + 2] as f64,
+                        r[4 * i + 3] as f64,
+                    )
+                    .normalize()
+                });
+                world
+                    * DMat4::from_scale_rotation_translation(
+                        v3(&scale, i, DVec3::ONE),
+                        r,
+                        v3(&translation, i, DVec3::ZERO),
+                    )
+            })
+            .collect())
+    }
+
+    /// Converts skinned node `index` (named `name`): its mesh posed by its joints' world
+    /// transforms at the render's time, placed in world space.
+    fn skinned_node(&mut self, index: usize, name: &str) -> Result<()> {
+        let doc = self.doc;
+        let node = doc.nodes().nth(index).expect("visited node");
+        let (Some(skin), Some(mesh)) = (node.skin(), node.mesh()) else {
+            return Ok(());
+        };
+        let element = format!("skins[{}]", skin.index());
+        let joints: Vec<usize> = skin.joints().map(|j| j.index()).collect();
+        let inverse_bind: Vec<DMat4> = match skin.inverse_bind_matrices() {
+            Some(acc) => {
+                self.check_accessor(
+                    &acc,
+                    &format!("{element}.inverseBindMatrices"),
+                    &[Dimensions::Mat4],
+                    &[DataType::F32],
+                    false,
+                )?;
+                if acc.count() < joints.len() {
+                    return Err(self.err(
+                        format!("{element}.inverseBindMatrices"),
+                        format!("has {} matrices for {} joints", acc.count(), joints.len()),
+                    ));
+                }
+                let buffers = &self.buffers;
+                let reader = skin.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+                reader
+                    .read_inverse_bind_matrices()
+                    .ok_or_else(|| self.err(&element, "inverseBindMatrices cannot be read"))?
+                    .map(|m| DMat4::from_cols_array_2d(&m.map(|c| c.map(f64::from))))
+                    .collect()
+            }
+            None => vec![DMat4::IDENTITY; joints.len()],
+        };
+        let mut joint_matrices = Vec::with_capacity(joints.len());
+        for (j, &joint) in joints.iter().enumerate() {
+            let world = match self.world_of.get(&joint) {
+                Some(w) => *w,
+                None => {
+                    return Err(self.err(
+                        format!("{element}.joints[{j}]"),
+                        format!("node {joint} is not in the rendered scene"),
+                    ));
+                }
+            };
+            joint_matrices.push(world * inverse_bind[j]);
+        }
+        if joint_matrices.iter().any(|m| !m.is_finite()) {
+            return Err(self.err(&element, "a joint matrix is not finite"));
+        }
+        let weights = self.node_weights(&node, &mesh);
+        for primitive in mesh.primitives() {
+            if let Some(m) =
+                self.deformed(&node, &mesh, &primitive, &weights, Some(&joint_matrices))?
+            {
+                self.scene.instances.push(Instance {
+                    name: name.to_string(),
+                    mesh: m,
+                    transform: DMat4::IDENTITY,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// A primitive converted for one node: morphed by `weights` and, with `joints` (the
+    /// skin's joint matrices), skinned to world space. Not shared with other nodes.
+    fn deformed(
+        &mut self,
+        node: &gltf::Node,
+        mesh: &gltf::Mesh,
+        primitive: &gltf::Primitive,
+        weights: &[f32],
+        joints: Option<&[DMat4]>,
+    ) -> Result<Option<u32>> {
+        if !matches!(
+            primitive.mode(),
+            Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+        ) {
+            return self.primitive(mesh, primitive); // Warned and skipped there.
+        }
+        let element = format!(
+            "nodes[{}] meshes[{}].primitives[{}]",
+            node.index(),
+            mesh.index(),
+            primitive.index()
+        );
+        let Some(mut out) = self.convert_primitive(mesh, primitive, &element)? else {
+            return Ok(None);
+        };
+        let vertices = out.positions.len();
+        let mut notes: Vec<String> = Vec::new();
+        let buffers = &self.buffers;
+        let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
+        if weights.iter().any(|&w| w != 0.0) {
+            for (t, target) in primitive.morph_targets().enumerate() {
+                for (name, acc) in [
+                    ("POSITION", target.positions()),
+                    ("NORMAL", target.normals()),
+                    ("TANGENT", target.tangents()),
+                ] {
+                    if let Some(acc) = acc {
+                        let e = format!("{element}.targets[{t}].{name}");
+                        self.check_accessor(
+                            &acc,
+                            &e,
+                            &[Dimensions::Vec3],
+                            &[DataType::F32],
+                            false,
+                        )?;
+                        if acc.count() != vertices {
+                            return Err(self.err(
+                                e,
+                                format!("has {} elements for {vertices} vertices", acc.count()),
+                            ));
+                        }
+                    }
+                }
+            }
+            let targets: Vec<skinning::MorphTarget> = reader
+                .read_morph_targets()
+                .map(|(p, n, t)| skinning::MorphTarget {
+                    positions: p.map(|it| it.map(Vec3::from_array).collect()),
+                    normals: n.map(|it| it.map(Vec3::from_array).collect()),
+                    tangents: t.map(|it| it.map(Vec3::from_array).collect()),
+                })
+                .collect();
+            if targets.len() != weights.len() {
+                notes.push(format!(
+                    "{} morph targets but {} weights; the missing weights are 0",
+                    targets.len(),
+                    weights.len()
+                ));
+            }
+            skinning::morph(&mut out, &targets, weights);
+        }
+        if let Some(joints) = joints {
+            let mut influences: Vec<skinning::Influences> = vec![Vec::new(); vertices];
+            let mut set = 0;
+            while let (Some(j), Some(w)) = (
+                primitive.get(&gltf::Semantic::Joints(set)),
+                primitive.get(&gltf::Semantic::Weights(set)),
+            ) {
+                let je = format!("{element}.attributes.JOINTS_{set}");
+                let we = format!("{element}.attributes.WEIGHTS_{set}");
+                self.check_accessor(
+                    &j,
+                    &je,
+                    &[Dimensions::Vec4],
+                    &[DataType::U8, DataType::U16],
+                    false,
+                )?;
+                self.check_accessor(
+                    &w,
+                    &we,
+                    &[Dimensions::Vec4],
+                    &[DataType::F32, DataType::U8, DataType::U16],
+                    true,
+                )?;
+                for (e, acc) in [(&je, &j), (&we, &w)] {
+                    if acc.count() != vertices {
+                        return Err(self.err(
+                            e,
+                            format!("has {} elements for {vertices} vertices", acc.count()),
+                        ));
+                    }
+                }
+                let js = reader
+                    .read_joints(set)
+                    .ok_or_else(|| self.err(&je, "cannot be read"))?;
+                let ws = reader
+                    .read_weights(set)
+                    .ok_or_else(|| self.err(&we, "cannot be read"))?;
+                for ((inf, j), w) in influences.iter_mut().zip(js.into_u16()).zip(ws.into_f32()) {
+                    inf.extend(
+                        (0..4).map(|k| (j[k], if w[k].is_finite() { w[k].max(0.0) } else { 0.0 })),
+                    );
+                }
+                set += 1;
+            }
+            if set == 0 {
+                notes.push("the node has a skin but the primitive has no JOINTS_0/WEIGHTS_0; it is placed by the skin's first joint".into());
+                influences.iter_mut().for_each(|i| i.push((0, 1.0)));
+            }
+            let bad = skinning::skin(&mut out, &influences, joints);
+            if bad > 0 {
+                notes.push(format!(
+                    "{bad} joint influences name a joint the skin does not have and are ignored"
+                ));
+            }
+        }
+        for note in notes {
+            self.warn(&element, note);
+        }
+        self.scene.meshes.push(out);
+        Ok(Some((self.scene.meshes.len() - 1) as u32))
+    }
+
     fn primitive(&mut self, mesh: &gltf::Mesh, primitive: &gltf::Primitive) -> Result<Option<u32>> {
         let key = (mesh.index(), primitive.index());
         if let Some(m) = self.meshes.get(&key) {
@@ -922,7 +1464,10 @@ impl<'a> Importer<'a> {
             self.warn(element, "has no non-degenerate triangles and is skipped");
             return Ok(None);
         }
-        let material = self.material(primitive.material())?;
+        let material = match self.variant_material(primitive) {
+            Some(m) => self.material(m)?,
+            None => self.material(primitive.material())?,
+        };
         let mut out = Mesh {
             name: mesh
                 .name()
@@ -1383,7 +1928,7 @@ impl<'a> Importer<'a> {
         if let Some(&index) = self.textures.get(&texture.index()) {
             return Ok(index);
         }
-        let image = texture.source();
+        let image = self.texture_image(texture)?;
         let element = format!("images[{}]", image.index());
         let decoded = match self.images.get(&image.index()) {
             Some(d) => d.clone(),
@@ -1431,6 +1976,45 @@ impl<'a> Importer<'a> {
         let index = (self.scene.textures.len() - 1) as u32;
         self.textures.insert(texture.index(), index);
         Ok(index)
+    }
+
+    /// The image a texture shows: its EXT_texture_webp image where it has one, else its
+    /// core `source` (a KHR_texture_basisu texture's PNG/JPEG fallback; KTX2 itself cannot be
+    /// transcoded).
+    fn texture_image(&mut self, texture: &gltf::Texture) -> Result<gltf::Image<'a>> {
+        let element = format!("textures[{}]", texture.index());
+        let extension_source = |name: &str| {
+            texture
+                .extensions()
+                .and_then(|e| e.get(name))
+                .and_then(|e| e.get("source"))
+                .and_then(serde_json::Value::as_u64)
+        };
+        if let Some(i) = extension_source("EXT_texture_webp") {
+            return self.doc.images().nth(i as usize).ok_or_else(|| {
+                self.err(
+                    format!("{element}.extensions.EXT_texture_webp.source"),
+                    format!("image {i} does not exist"),
+                )
+            });
+        }
+        let basisu = extension_source("KHR_texture_basisu").is_some();
+        match texture.source().and_then(|i| self.doc.images().nth(i.index())) {
+            Some(image) => {
+                if basisu {
+                    self.warn(
+                        &element,
+                        "KHR_texture_basisu: KTX2 textures cannot be transcoded; the fallback image is used",
+                    );
+                }
+                Ok(image)
+            }
+            None if basisu => Err(self.err(
+                &element,
+                "KHR_texture_basisu: the texture is KTX2 (Basis Universal) only, which lucerna cannot transcode; export PNG, JPEG or WebP textures (e.g. gltf-transform png/webp)",
+            )),
+            None => Err(self.err(&element, "has no image (no source)")),
+        }
     }
 
     fn camera(&self, camera: &gltf::Camera, world: DMat4, node_name: &str) -> Result<Camera> {

@@ -1,5 +1,8 @@
-//! Image decoding for textures (PNG, JPEG) and environment maps (also OpenEXR), into
-//! lucerna's texel storage.
+//! Image decoding for textures and environment maps, into lucerna's texel storage: PNG and
+//! JPEG (the glTF core formats), WebP (EXT_texture_webp), and the formats production
+//! textures and HDRIs come in: OpenEXR, Radiance HDR and TIFF (8-bit, 16-bit and float).
+//! Every decoder reads the image's header first and checks its size against the pixel and
+//! memory limits before it allocates the pixels.
 
 use crate::scene::Texels;
 use std::io::Cursor;
@@ -34,15 +37,101 @@ fn check_size(width: u32, height: u32, bytes_per_pixel: u64) -> Result<(), Strin
     )
 }
 
-/// Decodes PNG or JPEG bytes (recognised by their signature).
+/// Decodes image bytes, recognised by their signature.
 pub fn decode(bytes: &[u8]) -> Result<DecodedImage, String> {
     if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
         decode_png(bytes)
     } else if bytes.starts_with(&[0xff, 0xd8]) {
         decode_jpeg(bytes)
+    } else if bytes.len() >= 12 && bytes.starts_with(b"RIFF") && &bytes[8..12] == b"WEBP" {
+        decode_webp(bytes)
+    } else if bytes.starts_with(&EXR_MAGIC) {
+        decode_exr(bytes)
+    } else if bytes.starts_with(b"#?RADIANCE") || bytes.starts_with(b"#?RGBE") {
+        decode_with_image(bytes, image::ImageFormat::Hdr, "Radiance HDR")
+    } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        decode_with_image(bytes, image::ImageFormat::Tiff, "TIFF")
+    } else if bytes.starts_with(b"\xabKTX 20\xbb") {
+        Err(
+            "KTX2 (Basis Universal) images cannot be decoded: lucerna has no Basis \
+             Universal transcoder; export PNG, JPEG or WebP textures"
+                .into(),
+        )
     } else {
-        Err("unsupported image format (PNG and JPEG are supported)".into())
+        Err(
+            "unsupported image format (PNG, JPEG, WebP, OpenEXR, Radiance HDR and TIFF are \
+             supported)"
+                .into(),
+        )
     }
+}
+
+const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];
+
+/// WebP (lossy or lossless, with or without alpha) with the `image-webp` decoder.
+fn decode_webp(bytes: &[u8]) -> Result<DecodedImage, String> {
+    let mut decoder = image_webp::WebPDecoder::new(Cursor::new(bytes))
+        .map_err(|e| format!("invalid WebP: {e}"))?;
+    let (width, height) = decoder.dimensions();
+    let channels = if decoder.has_alpha() { 4 } else { 3 };
+    check_size(width, height, channels as u64 + 4)?;
+    let size = decoder
+        .output_buffer_size()
+        .ok_or("invalid WebP: image too large")?;
+    let mut buf = vec![0u8; size];
+    decoder
+        .read_image(&mut buf)
+        .map_err(|e| format!("invalid WebP: {e}"))?;
+    let texels = buf
+        .chunks_exact(channels)
+        .map(|p| expand(channels, |c| p[c], 255))
+        .collect();
+    Ok(DecodedImage {
+        width,
+        height,
+        texels: Texels::Rgba8(texels),
+    })
+}
+
+/// Radiance HDR and TIFF through the `image` crate: 8-bit images stay 8-bit, 16-bit ones
+/// 16-bit, float ones become linear floats.
+fn decode_with_image(
+    bytes: &[u8],
+    format: image::ImageFormat,
+    name: &str,
+) -> Result<DecodedImage, String> {
+    use image::ImageDecoder;
+    let invalid = |e: image::ImageError| format!("invalid {name}: {e}");
+    let mut reader = image::ImageReader::with_format(Cursor::new(bytes), format);
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(1 << 34);
+    reader.limits(limits);
+    let decoder = reader.into_decoder().map_err(invalid)?;
+    let (width, height) = decoder.dimensions();
+    let colour = decoder.color_type();
+    let float = matches!(colour, image::ColorType::Rgb32F | image::ColorType::Rgba32F);
+    let sixteen = colour.bytes_per_pixel() / colour.channel_count() == 2;
+    let texel_bytes = if float {
+        16
+    } else if sixteen {
+        8
+    } else {
+        4
+    };
+    check_size(width, height, colour.bytes_per_pixel() as u64 + texel_bytes)?;
+    let image = image::DynamicImage::from_decoder(decoder).map_err(invalid)?;
+    let texels = if float {
+        Texels::RgbaF32(image.into_rgba32f().pixels().map(|p| p.0).collect())
+    } else if sixteen {
+        Texels::Rgba16(image.into_rgba16().pixels().map(|p| p.0).collect())
+    } else {
+        Texels::Rgba8(image.into_rgba8().pixels().map(|p| p.0).collect())
+    };
+    Ok(DecodedImage {
+        width,
+        height,
+        texels,
+    })
 }
 
 fn decode_png(bytes: &[u8]) -> Result<DecodedImage, String> {
@@ -54,9 +143,9 @@ fn decode_png(bytes: &[u8]) -> Result<DecodedImage, String> {
         .map_err(|e| format!("invalid PNG: {e}"))?;
     let (width, height) = (reader.info().width, reader.info().height);
     let size = reader.output_buffer_size().ok_or("PNG too large")?;
-    // The decoded buffer, then RGBA texels: 8-bit, or float for 16-bit samples.
+    // The decoded buffer, then RGBA texels of 8 or 16 bits a channel.
     let texel_bytes = if reader.info().bit_depth == png::BitDepth::Sixteen {
-        16
+        8
     } else {
         4
     };
@@ -73,11 +162,10 @@ fn decode_png(bytes: &[u8]) -> Result<DecodedImage, String> {
     let n = (width * height) as usize;
     let texels = match info.bit_depth {
         png::BitDepth::Sixteen => {
-            let value =
-                |i: usize| u16::from_be_bytes([buf[2 * i], buf[2 * i + 1]]) as f32 / 65535.0;
-            Texels::RgbaF32(
+            let value = |i: usize| u16::from_be_bytes([buf[2 * i], buf[2 * i + 1]]);
+            Texels::Rgba16(
                 (0..n)
-                    .map(|p| expand(channels, |c| value(p * channels + c), 1.0))
+                    .map(|p| expand(channels, |c| value(p * channels + c), u16::MAX))
                     .collect(),
             )
         }
@@ -136,19 +224,16 @@ fn decode_jpeg(bytes: &[u8]) -> Result<DecodedImage, String> {
     })
 }
 
-/// Reads an image file for an environment map: OpenEXR (linear), or PNG/JPEG.
+/// Reads an image file (an environment map), in any format [`decode`] reads.
 pub fn read_file(path: &Path) -> Result<DecodedImage, String> {
-    let bytes = crate::files::read_input(path)?;
-    if bytes.starts_with(&[0x76, 0x2f, 0x31, 0x01]) {
-        return decode_exr(path);
-    }
-    decode(&bytes)
+    decode(&crate::files::read_input(path)?)
 }
 
-fn decode_exr(path: &Path) -> Result<DecodedImage, String> {
+/// OpenEXR: the first RGBA layer, as linear floats.
+fn decode_exr(bytes: &[u8]) -> Result<DecodedImage, String> {
     use exr::prelude::*;
     // The header first: the data window decides what decoding allocates.
-    let meta = exr::meta::MetaData::read_from_file(path, false)
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false)
         .map_err(|e| format!("invalid OpenEXR: {e}"))?;
     for header in &meta.headers {
         let size = header.layer_size;
@@ -161,17 +246,22 @@ fn decode_exr(path: &Path) -> Result<DecodedImage, String> {
         // Float RGBA texels, and the decoder's lines of up to 4 float channels.
         check_size(w as u32, h as u32, 32)?;
     }
-    let image = read_first_rgba_layer_from_file(
-        path,
-        |resolution, _| {
-            let (w, h) = (resolution.width(), resolution.height());
-            (w, vec![[0.0f32, 0.0, 0.0, 1.0]; w * h])
-        },
-        |(w, pixels): &mut (usize, Vec<[f32; 4]>), pos, (r, g, b, a): (f32, f32, f32, f32)| {
-            pixels[pos.y() * *w + pos.x()] = [r, g, b, a];
-        },
-    )
-    .map_err(|e| format!("invalid OpenEXR: {e}"))?;
+    let image = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |resolution, _| {
+                let (w, h) = (resolution.width(), resolution.height());
+                (w, vec![[0.0f32, 0.0, 0.0, 1.0]; w * h])
+            },
+            |(w, pixels): &mut (usize, Vec<[f32; 4]>), pos, (r, g, b, a): (f32, f32, f32, f32)| {
+                pixels[pos.y() * *w + pos.x()] = [r, g, b, a];
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| format!("invalid OpenEXR: {e}"))?;
     let size = image.layer_data.size;
     let (width, height) = (size.width() as u32, size.height() as u32);
     let texels = image.layer_data.channel_data.pixels.1;

@@ -3,7 +3,9 @@
 
 pub mod animation;
 pub mod gltf;
+pub mod gltf_delivery;
 pub mod image;
+pub mod skinning;
 pub mod tangents;
 pub mod uri;
 pub mod usd;
@@ -48,6 +50,8 @@ pub struct LoadOptions {
     /// The USD RenderSettings prim to render by (default: the stage's
     /// `renderSettingsPrimPath`, else its first RenderSettings prim).
     pub render_settings: Option<String>,
+    /// The glTF KHR_materials_variants variant to render (by name).
+    pub material_variant: Option<String>,
     /// How long the USD plugin may take to convert a stage before it is stopped.
     pub plugin_timeout: std::time::Duration,
 }
@@ -67,6 +71,7 @@ impl Default for LoadOptions {
             purpose: "render".into(),
             payloads: true,
             render_settings: None,
+            material_variant: None,
             plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }
@@ -80,7 +85,11 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         .map(str::to_ascii_lowercase)
         .unwrap_or_default();
     match ext.as_str() {
-        "gltf" | "glb" => gltf::load(path, options.frame.map(|f| f / options.fps)),
+        "gltf" | "glb" => gltf::load(
+            path,
+            options.frame.map(|f| f / options.fps),
+            options.material_variant.as_deref(),
+        ),
         scene::file::EXTENSION => scene::file::read(path),
         e if usd::EXTENSIONS.contains(&e) => usd::load(path, options),
         _ => Err(Error::bad_input(
@@ -97,29 +106,33 @@ pub fn set_constant_environment(scene: &mut Scene, radiance: Vec3) {
     scene.environment = Some(scene::Environment::Constant(radiance));
 }
 
-/// Replaces the scene's environment with a lat-long map read from `path` (OpenEXR, PNG or
-/// JPEG; 8-bit images are taken as sRGB-encoded) times `scale`.
+/// Replaces the scene's environment with a lat-long map read from `path` (OpenEXR, Radiance
+/// HDR, TIFF, PNG, JPEG or WebP; integer images are taken as sRGB-encoded, float ones as
+/// linear) times `scale`.
 pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Result<()> {
     let decoded =
         image::read_file(path).map_err(|r| Error::bad_input(path, "environment map", r))?;
+    // Decode to linear floats once: the environment is sampled as linear radiance, and
+    // integer images are sRGB-encoded.
     let texels = match decoded.texels {
-        scene::Texels::Rgba8(t) => {
-            // Decode to linear once: the environment is sampled as linear radiance.
-            let lut = &*crate::color::SRGB8_TO_LINEAR;
+        f @ scene::Texels::RgbaF32(_) => f,
+        integer => {
+            let texture = Texture {
+                name: String::new(),
+                width: decoded.width,
+                height: decoded.height,
+                texels: Arc::new(integer),
+                wrap_u: Wrap::Repeat,
+                wrap_v: Wrap::ClampToEdge,
+                nearest: true,
+            };
             scene::Texels::RgbaF32(
-                t.iter()
-                    .map(|p| {
-                        [
-                            lut[p[0] as usize],
-                            lut[p[1] as usize],
-                            lut[p[2] as usize],
-                            p[3] as f32 / 255.0,
-                        ]
-                    })
+                (0..decoded.height)
+                    .flat_map(|y| (0..decoded.width).map(move |x| (x, y)))
+                    .map(|(x, y)| texture.texel_linear(x, y, true).to_array())
                     .collect(),
             )
         }
-        f => f,
     };
     scene.textures.push(Texture {
         name: path.display().to_string(),

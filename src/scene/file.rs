@@ -13,6 +13,7 @@
 //! against the buffer, every count, index and range, and that every number is finite,
 //! before anything uses the scene.
 
+use super::{BoundaryInterpolation, SubdivisionScheme, SubdivisionSurface};
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
 use super::{Cylinder, Disk, Instance, LightGroup, RenderSettings, Sphere, Texels, Texture, Wrap};
 use crate::error::{Error, Result};
@@ -55,6 +56,32 @@ struct Manifest {
     warnings: Vec<String>,
     #[serde(default)]
     render_settings: Option<RenderSettings>,
+    #[serde(default)]
+    subdivision_surfaces: Vec<SubdivisionEntry>,
+}
+
+/// A subdivision surface: its cage (points f32×3, face counts and indices u32), creases
+/// (point, point, sharpness: u32, u32, f32), corners (point, sharpness: u32, f32), per-corner
+/// texture coordinates (f32×2) and colours (f32×4), and the faces rendered (u32 indices).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SubdivisionEntry {
+    mesh: u32,
+    scheme: SubdivisionScheme,
+    boundary: BoundaryInterpolation,
+    points: View,
+    face_counts: View,
+    face_indices: View,
+    #[serde(default)]
+    creases: Option<View>,
+    #[serde(default)]
+    corners: Option<View>,
+    #[serde(default)]
+    uvs: Option<View>,
+    #[serde(default)]
+    colors: Option<View>,
+    #[serde(default)]
+    keep: Option<View>,
 }
 
 /// `count` elements starting `offset` bytes into the buffer.
@@ -82,6 +109,9 @@ struct MeshEntry {
 #[serde(rename_all = "snake_case")]
 enum Encoding {
     Rgba8,
+    /// Two words a texel: R | G << 16, B | A << 16.
+    Rgba16,
+    /// Linear floats (never sRGB-decoded).
     Rgba32f,
 }
 
@@ -177,6 +207,12 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
                             Encoding::Rgba8,
                             buffer.push(p.iter().map(|p| [u32::from_le_bytes(*p)])),
                         ),
+                        Texels::Rgba16(p) => (
+                            Encoding::Rgba16,
+                            buffer.push(p.iter().map(|[r, g, b, a]| {
+                                [*r as u32 | (*g as u32) << 16, *b as u32 | (*a as u32) << 16]
+                            })),
+                        ),
                         Texels::RgbaF32(p) => (Encoding::Rgba32f, buffer.floats(p)),
                     });
             TextureEntry {
@@ -210,6 +246,29 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         light_groups: scene.light_groups.clone(),
         warnings: scene.warnings.clone(),
         render_settings: scene.render_settings.clone(),
+        subdivision_surfaces: scene
+            .subdivision_surfaces
+            .iter()
+            .map(|s| SubdivisionEntry {
+                mesh: s.mesh,
+                scheme: s.scheme,
+                boundary: s.boundary,
+                points: buffer.floats(&v3(&s.points)),
+                face_counts: buffer.push(s.face_counts.iter().map(|&c| [c])),
+                face_indices: buffer.push(s.face_indices.iter().map(|&i| [i])),
+                creases: (!s.creases.is_empty()).then(|| {
+                    buffer.push(s.creases.iter().map(|([a, b], w)| [*a, *b, w.to_bits()]))
+                }),
+                corners: (!s.corners.is_empty())
+                    .then(|| buffer.push(s.corners.iter().map(|(v, w)| [*v, w.to_bits()]))),
+                uvs: s.uvs.as_deref().map(|u| buffer.floats(&v2(u))),
+                colors: s.colors.as_deref().map(|c| buffer.floats(&v4(c))),
+                keep: s.keep.as_ref().map(|k| {
+                    let faces: Vec<u32> = (0..k.len() as u32).filter(|&f| k[f as usize]).collect();
+                    buffer.push(faces.iter().map(|&f| [f]))
+                }),
+            })
+            .collect(),
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
@@ -343,6 +402,17 @@ pub fn parse(
                 let words: Vec<[u32; 1]> = buffer.words(t.texels, &element)?;
                 Texels::Rgba8(words.iter().map(|w| w[0].to_le_bytes()).collect())
             }
+            Encoding::Rgba16 => {
+                let words: Vec<[u32; 2]> = buffer.words(t.texels, &element)?;
+                Texels::Rgba16(
+                    words
+                        .iter()
+                        .map(|[rg, ba]| {
+                            [*rg as u16, (rg >> 16) as u16, *ba as u16, (ba >> 16) as u16]
+                        })
+                        .collect(),
+                )
+            }
             Encoding::Rgba32f => Texels::RgbaF32(buffer.floats(t.texels, &element)?),
         };
         let texels = Arc::new(texels);
@@ -364,9 +434,150 @@ pub fn parse(
         light_groups: manifest.light_groups,
         warnings: manifest.warnings,
         render_settings: manifest.render_settings,
+        subdivision_surfaces: Vec::new(),
+        subdivision_level: None,
     };
+    let mut scene = scene;
+    for (i, entry) in manifest.subdivision_surfaces.iter().enumerate() {
+        let surface = read_subdivision(&buffer, entry, &format!("subdivision_surfaces[{i}]"))
+            .map_err(|(element, reason)| bad(&element, reason))?;
+        if surface.mesh as usize >= scene.meshes.len() {
+            return Err(bad(
+                &format!("subdivision_surfaces[{i}].mesh"),
+                format!("mesh {} does not exist", surface.mesh),
+            ));
+        }
+        scene.subdivision_surfaces.push(surface);
+    }
     validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
     Ok(scene)
+}
+
+/// Reads and checks one subdivision surface: polygons of 3 or more points (triangles for
+/// Loop), indices in range, per-corner data for every corner, finite sharpness.
+fn read_subdivision(
+    buffer: &BufferReader,
+    e: &SubdivisionEntry,
+    element: &str,
+) -> std::result::Result<SubdivisionSurface, (String, String)> {
+    let field = |f: &str| format!("{element}.{f}");
+    // The reader's errors name the field already.
+    let lift = |err: Error| (element.to_string(), err.to_string());
+    let points: Vec<Vec3> = buffer.floats(e.points, &field("points")).map_err(lift)?;
+    let counts: Vec<[u32; 1]> = buffer
+        .words(e.face_counts, &field("face_counts"))
+        .map_err(lift)?;
+    let face_counts: Vec<u32> = counts.iter().map(|c| c[0]).collect();
+    let indices: Vec<[u32; 1]> = buffer
+        .words(e.face_indices, &field("face_indices"))
+        .map_err(lift)?;
+    let face_indices: Vec<u32> = indices.iter().map(|i| i[0]).collect();
+    if let Some(f) = face_counts
+        .iter()
+        .position(|&n| n < 3 || (e.scheme == SubdivisionScheme::Loop && n != 3))
+    {
+        return Err((
+            field("face_counts"),
+            format!("face {f} has {} points", face_counts[f]),
+        ));
+    }
+    let corners: u64 = face_counts.iter().map(|&n| n as u64).sum();
+    if corners != face_indices.len() as u64 {
+        return Err((
+            field("face_indices"),
+            format!("{} indices for {corners} face corners", face_indices.len()),
+        ));
+    }
+    let n = points.len() as u32;
+    if face_indices.iter().any(|&i| i >= n) {
+        return Err((field("face_indices"), format!("an index is not below {n}")));
+    }
+    let creases: Vec<([u32; 2], f32)> = match e.creases {
+        Some(v) => buffer
+            .words::<3>(v, &field("creases"))
+            .map_err(lift)?
+            .iter()
+            .map(|w| ([w[0], w[1]], f32::from_bits(w[2])))
+            .collect(),
+        None => Vec::new(),
+    };
+    let sharp_corners: Vec<(u32, f32)> = match e.corners {
+        Some(v) => buffer
+            .words::<2>(v, &field("corners"))
+            .map_err(lift)?
+            .iter()
+            .map(|w| (w[0], f32::from_bits(w[1])))
+            .collect(),
+        None => Vec::new(),
+    };
+    if creases
+        .iter()
+        .any(|(p, s)| p[0] >= n || p[1] >= n || !(s.is_finite() && *s >= 0.0))
+        || sharp_corners
+            .iter()
+            .any(|(p, s)| *p >= n || !(s.is_finite() && *s >= 0.0))
+    {
+        return Err((
+            field("creases"),
+            "a crease or corner names a point out of range or has a sharpness that is not finite and non-negative".into(),
+        ));
+    }
+    let per_corner =
+        |view: Option<View>, f: &str| -> std::result::Result<Option<usize>, (String, String)> {
+            match view {
+                Some(v) if v.count != corners => Err((
+                    field(f),
+                    format!("{} values for {corners} face corners", v.count),
+                )),
+                Some(_) => Ok(Some(0)),
+                None => Ok(None),
+            }
+        };
+    per_corner(e.uvs, "uvs")?;
+    per_corner(e.colors, "colors")?;
+    let uvs = e
+        .uvs
+        .map(|v| buffer.floats::<2, Vec2>(v, &field("uvs")))
+        .transpose()
+        .map_err(lift)?;
+    let colors = e
+        .colors
+        .map(|v| buffer.floats::<4, Vec4>(v, &field("colors")))
+        .transpose()
+        .map_err(lift)?;
+    let keep = match e.keep {
+        Some(v) => {
+            let faces: Vec<[u32; 1]> = buffer.words(v, &field("keep")).map_err(lift)?;
+            let mut mask = vec![false; face_counts.len()];
+            for [f] in faces {
+                *mask
+                    .get_mut(f as usize)
+                    .ok_or_else(|| (field("keep"), format!("face {f} does not exist")))? = true;
+            }
+            Some(mask)
+        }
+        None => None,
+    };
+    let finite_uvs = uvs.as_ref().is_none_or(|u| u.iter().all(|v| v.is_finite()));
+    if !finite_uvs || !points.iter().all(|p| p.is_finite()) {
+        return Err((
+            element.to_string(),
+            "points or texture coordinates are not finite".into(),
+        ));
+    }
+    Ok(SubdivisionSurface {
+        mesh: e.mesh,
+        scheme: e.scheme,
+        boundary: e.boundary,
+        points,
+        face_counts,
+        face_indices,
+        creases,
+        corners: sharp_corners,
+        uvs,
+        colors,
+        keep,
+    })
 }
 
 fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {

@@ -40,6 +40,57 @@ pub struct Scene {
     /// The outputs the scene declares (USD render settings and products), used unless the
     /// command line names an output.
     pub render_settings: Option<RenderSettings>,
+    /// Subdivision surfaces: each replaces its placeholder mesh (the cage, triangulated)
+    /// when the world is built, refined to the level the camera needs.
+    pub subdivision_surfaces: Vec<SubdivisionSurface>,
+    /// A fixed refinement level for every subdivision surface (`--subdiv-level`); `None`
+    /// chooses each surface's level by its size on screen.
+    pub subdivision_level: Option<u32>,
+}
+
+/// A subdivision scheme (USD's subdivisionScheme; `none` meshes are plain meshes).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SubdivisionScheme {
+    CatmullClark,
+    Loop,
+    Bilinear,
+}
+
+/// What happens at a subdivision surface's boundary (USD's interpolateBoundary).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BoundaryInterpolation {
+    /// Boundary edges are sharp, and so are boundary vertices of a single face (USD's
+    /// default).
+    EdgeAndCorner,
+    /// Boundary edges are sharp; boundary vertices follow the boundary curve.
+    EdgeOnly,
+}
+
+/// A subdivision surface's control cage and its sharp features, in the placeholder mesh's
+/// space.
+#[derive(Clone, Debug)]
+pub struct SubdivisionSurface {
+    /// The scene mesh this surface becomes (name and material are taken from it).
+    pub mesh: u32,
+    pub scheme: SubdivisionScheme,
+    pub boundary: BoundaryInterpolation,
+    pub points: Vec<Vec3>,
+    /// Polygons: vertex counts, and their point indices counter-clockwise.
+    pub face_counts: Vec<u32>,
+    pub face_indices: Vec<u32>,
+    /// Creased edges (point pairs) with their sharpness (10 and above: infinitely sharp).
+    pub creases: Vec<([u32; 2], f32)>,
+    /// Sharp vertices with their sharpness.
+    pub corners: Vec<(u32, f32)>,
+    /// Texture coordinates per face corner (in `face_indices` order).
+    pub uvs: Option<Vec<Vec2>>,
+    /// Colours per face corner.
+    pub colors: Option<Vec<Vec4>>,
+    /// Which faces are rendered (a material subset); all when `None`. The other faces
+    /// still shape the surface.
+    pub keep: Option<Vec<bool>>,
 }
 
 /// A scene's declared render: the settings prim it came from and its products.

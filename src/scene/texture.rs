@@ -5,11 +5,14 @@ use glam::{Vec2, Vec4};
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 
-/// Texel storage. 8-bit images stay 8-bit (4 bytes a texel); deeper ones are floats. sRGB
-/// decoding happens per lookup, because one image may serve both colour and data slots.
+/// Texel storage. Integer images keep their stored values (8 or 16 bits a channel) and are
+/// sRGB-decoded per lookup where the material slot says so, because one image may serve
+/// both colour and data slots. Float images (OpenEXR, Radiance HDR, float TIFF) hold linear
+/// values and are read as they are in every slot, as OpenImageIO-based renderers do.
 #[derive(Clone, Debug)]
 pub enum Texels {
     Rgba8(Vec<[u8; 4]>),
+    Rgba16(Vec<[u16; 4]>),
     RgbaF32(Vec<[f32; 4]>),
 }
 
@@ -72,14 +75,15 @@ impl Texture {
                     Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0
                 }
             }
-            Texels::RgbaF32(t) => {
-                let [r, g, b, a] = t[i];
+            Texels::Rgba16(t) => {
+                let [r, g, b, a] = t[i].map(|v| v as f32 / 65535.0);
                 if srgb {
                     Vec4::new(srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a)
                 } else {
                     Vec4::new(r, g, b, a)
                 }
             }
+            Texels::RgbaF32(t) => Vec4::from_array(t[i]),
         }
     }
 
@@ -124,6 +128,7 @@ impl Texture {
     pub fn memory_bytes(&self) -> usize {
         match &*self.texels {
             Texels::Rgba8(t) => t.len() * 4,
+            Texels::Rgba16(t) => t.len() * 8,
             Texels::RgbaF32(t) => t.len() * 16,
         }
     }
