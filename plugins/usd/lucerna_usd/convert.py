@@ -16,16 +16,16 @@ upwards, glTF's v downwards).
 import math
 
 import numpy as np
-from pxr import Usd, UsdGeom, UsdLux, UsdShade
+from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel
 
-from . import lights
+from . import curves, lights
 from .materials import MaterialConverter
 from .mesh import MeshData
+from .skel import Skinning
 from .scene_file import SceneWriter, matrix, mean_scale
 
 # Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
-_SKIPPED_GPRIMS = (UsdGeom.BasisCurves, UsdGeom.NurbsCurves, UsdGeom.NurbsPatch,
-                   UsdGeom.HermiteCurves, UsdGeom.TetMesh)
+_SKIPPED_GPRIMS = (UsdGeom.NurbsCurves, UsdGeom.NurbsPatch, UsdGeom.HermiteCurves, UsdGeom.TetMesh)
 #: Implicit gprims tessellated into meshes (Sphere stays analytic, Points become spheres).
 _TESSELLATED = (UsdGeom.Cube, UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane)
 #: Segments around the axis of a tessellated cylinder, cone or capsule.
@@ -95,6 +95,12 @@ class Converter:
         self.meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
         self._flat = {}
         self._warned = set()
+        self._skel = None
+
+    def _skinning(self):
+        if self._skel is None:
+            self._skel = Skinning(self.stage, self.time, self.warn)
+        return self._skel
 
     def warn(self, element, message):
         text = f"{element}: {message}"
@@ -201,6 +207,8 @@ class Converter:
             groups.append(Group("camera", prim))
         elif prim.HasAPI(UsdLux.LightAPI):
             groups.append(Group("light", prim))
+        elif prim.IsA(UsdGeom.BasisCurves):
+            groups += self._curves(prim, inherited)
         elif any(prim.IsA(t) for t in _SKIPPED_GPRIMS):
             self.warn(path, f"{prim.GetTypeName()} is not supported: skipped")
         if prim.IsInstance():
@@ -282,6 +290,43 @@ class Converter:
         return groups
 
     # ---- implicit gprims -------------------------------------------------------------
+    def _curves(self, prim, inherited):
+        """BasisCurves as round tubes (curves.py), with the prim's material or display colour."""
+        path = str(prim.GetPath())
+        gprim = UsdGeom.Gprim(prim)
+        material = self._material(prim, inherited, True)
+        colors = None
+        if material is None:
+            constant = self._constant_display_color(gprim)
+            material = self.materials.display_color(constant, True,
+                                                    self._constant_display_opacity(gprim))
+            if constant is None:
+                colors = self._curve_colors(gprim)
+        shape = curves.tessellate(UsdGeom.BasisCurves(prim), self.time, self.warn, colors)
+        if isinstance(shape, str):
+            self.warn(path, f"BasisCurves: {shape}: skipped")
+            return []
+        positions, triangles, normals, tube_colors = shape
+        mesh = self.writer.add_mesh(path, material[0], positions, triangles, normals,
+                                    colors=tube_colors)
+        return [Group("mesh", (mesh, path))]
+
+    def _curve_colors(self, gprim):
+        """displayColor per control point of a curves prim (vertex or varying values, or
+        uniform ones repeated over each curve's points), or None."""
+        pv = UsdGeom.PrimvarsAPI(gprim).GetPrimvar("displayColor")
+        if not (pv and pv.HasAuthoredValue()):
+            return None
+        values = np.asarray(pv.ComputeFlattened(self.time) or [], np.float64).reshape(-1, 3)
+        counts = np.asarray(UsdGeom.BasisCurves(gprim.GetPrim()).GetCurveVertexCountsAttr().Get(self.time) or [], np.int64)
+        n = int(counts.sum())
+        if pv.GetInterpolation() == UsdGeom.Tokens.uniform and len(values) == len(counts):
+            return np.repeat(values, counts, axis=0)
+        if len(values) == n and np.isfinite(values).all():
+            return values
+        self.warn(str(gprim.GetPath()), f"displayColor has {len(values)} values for {n} curve points: not used")
+        return None
+
     def _implicit(self, prim, inherited):
         path = str(prim.GetPath())
         gprim = UsdGeom.Gprim(prim)
@@ -379,9 +424,19 @@ class Converter:
         path = str(prim.GetPath())
         mesh = UsdGeom.Mesh(prim)
         double_sided = bool(mesh.GetDoubleSidedAttr().Get(self.time))
-        data = MeshData.read(mesh, self.time, self.warn)
+        skinned = (prim.HasAPI(UsdSkel.BindingAPI) or prim.HasAttribute("primvars:skel:jointIndices")
+                   or prim.HasAttribute("skel:blendShapes"))
+        deform = self._skinning().points if skinned else None
+        data = MeshData.read(mesh, self.time, self.warn, deform)
         if data is None:
             return []
+        subdivided = data.subdivided()
+        if (subdivided and not mesh.GetSubdivisionSchemeAttr().HasAuthoredValue()
+                and (mesh.GetNormalsAttr().HasAuthoredValue()
+                     or UsdGeom.PrimvarsAPI(prim).HasPrimvar("normals"))):
+            self.warn(path, "subdivisionScheme is not authored, so USD's default catmullClark "
+                      "applies and the authored normals are ignored (as in Karma); author "
+                      'subdivisionScheme = "none" if it is a polygonal model')
         # Faces by material: GeomSubsets of the materialBind family, then the rest.
         parts = []
         taken = np.zeros(data.face_count, bool)
@@ -413,6 +468,8 @@ class Converter:
                 continue
             positions, triangles, normals, uvs, colors = built
             mesh_index = self.writer.add_mesh(name, index, positions, triangles, normals, uvs, colors)
+            if subdivided:
+                self.writer.add_subdivision(mesh_index, data.cage(faces, st_name, color_primvar, name))
             groups.append(Group("mesh", (mesh_index, name)))
         return groups
 

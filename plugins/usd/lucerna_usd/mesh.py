@@ -1,7 +1,11 @@
 """UsdGeom.Mesh to triangle meshes: fan triangulation of polygons (as Hydra does), holes,
 orientation, and primvars of every interpolation (constant, uniform, vertex, varying,
 faceVarying; indexed or not). Corners are welded where all their attributes agree, so a
-mesh with only vertex primvars keeps one vertex per point."""
+mesh with only vertex primvars keeps one vertex per point.
+
+A subdivision mesh (any subdivisionScheme but none) also gives its control cage with its
+creases, corners and boundary rule (`Cage`): lucerna refines it to the limit surface when
+it renders (src/geometry/subdivision.rs); the triangulated cage is its placeholder."""
 
 import numpy as np
 from pxr import UsdGeom
@@ -11,11 +15,35 @@ _ORDER = {UsdGeom.Tokens.constant: "constant", UsdGeom.Tokens.uniform: "uniform"
           UsdGeom.Tokens.faceVarying: "faceVarying"}
 
 
+_BOUNDARY = {"edgeAndCorner": "edge_and_corner", "edgeOnly": "edge_only"}
+
+
+class Cage:
+    """A subdivision surface's control cage, as the scene file carries it."""
+
+    def __init__(self, scheme, boundary, points, counts, indices, keep):
+        self.scheme = scheme
+        self.boundary = boundary
+        self.points = points
+        self.counts = counts
+        self.indices = indices
+        self.keep = keep
+        self.creases = np.zeros((0, 2), np.int64)
+        self.crease_sharpness = np.zeros(0)
+        self.corners = np.zeros(0, np.int64)
+        self.corner_sharpness = np.zeros(0)
+        self.uvs = None
+        self.colors = None
+
+
 class MeshData:
     """A mesh's topology, triangulated, with its primvars read on demand."""
 
-    def __init__(self, mesh, time, warn, points, counts, indices, face_keep):
+    def __init__(self, mesh, time, warn, points, counts, indices, face_keep, deformed=False):
         self.mesh = mesh
+        self.deformed = deformed
+        self.counts = counts
+        self.face_keep = face_keep
         self.time = time
         self.warn = warn
         self.path = str(mesh.GetPath())
@@ -34,10 +62,14 @@ class MeshData:
             self.corner_triangles = self.corner_triangles[:, [0, 2, 1]]
 
     @classmethod
-    def read(cls, mesh, time, warn):
-        """The mesh's topology, or None (with a warning) if it cannot be used."""
+    def read(cls, mesh, time, warn, deform=None):
+        """The mesh's topology, or None (with a warning) if it cannot be used. `deform(prim,
+        points)` gives the points at the time when something deforms them (UsdSkel)."""
         path = str(mesh.GetPath())
         points = np.asarray(mesh.GetPointsAttr().Get(time) or [], dtype=np.float64).reshape(-1, 3)
+        rest = points
+        if deform is not None and len(points):
+            points = deform(mesh.GetPrim(), points)
         counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], dtype=np.int64)
         indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], dtype=np.int64)
         if not len(points) or not len(counts):
@@ -70,7 +102,7 @@ class MeshData:
         if not keep.any():
             warn(path, "mesh has no usable faces: skipped")
             return None
-        return cls(mesh, time, warn, points, counts, indices, keep)
+        return cls(mesh, time, warn, points, counts, indices, keep, deformed=points is not rest)
 
     def _primvar(self, name, width):
         """A primvar's values per corner, (corners, width) float64, or None."""
@@ -107,17 +139,16 @@ class MeshData:
             return None
         return per_corner
 
-    def _subdivision_normals(self, name):
-        """Per-corner smooth normals of a subdivision surface (any subdivisionScheme but
-        "none"; catmullClark is USD's default), whose authored normals USD ignores: the
-        area-weighted mean of the faces around each point. lucerna renders the control
-        cage (warned), shaded smooth as the limit surface would be; None for a polygonal
-        mesh."""
+    def subdivided(self):
+        """Whether the mesh is a subdivision surface (any subdivisionScheme but none;
+        catmullClark is USD's default)."""
         scheme = self.mesh.GetSubdivisionSchemeAttr().Get(self.time) or "catmullClark"
-        if scheme == "none":
-            return None
-        self.warn(name, f"subdivision surface ({scheme}): rendered as its control cage, "
-                  "shaded with smooth normals (lucerna does not subdivide)")
+        return scheme != "none"
+
+    def _smooth_normals(self):
+        """Per-corner smooth normals: the area-weighted mean of the faces around each point
+        (a subdivision cage's placeholder, whose authored normals USD ignores, and a
+        deformed mesh, whose authored normals are the rest pose's). None for flat shading."""
         tri_points = self.indices[self.corner_triangles]
         p = self.points[tri_points]
         # Each polygon's area vector (the sum over its fan, outward: corner_triangles are
@@ -134,15 +165,92 @@ class MeshData:
             return None  # a corner with no area around its point: flat shading
         return normals[self.indices] / length[self.indices]
 
+    def cage(self, face_mask, st_name, color_primvar, name):
+        """The subdivision cage (Cage) whose faces in `face_mask` this part renders: faces of
+        fewer than 3 points and faces on NaN points leave the topology; holes and the other
+        parts' faces stay in it (they shape the surface) but are not rendered."""
+        mesh, time = self.mesh, self.time
+        scheme = mesh.GetSubdivisionSchemeAttr().Get(time) or "catmullClark"
+        counts = self.counts
+        finite = np.isfinite(self.points).all(axis=1)
+        usable = counts >= 3
+        if not finite.all():
+            usable &= np.bincount(self.face_of_corner, ~finite[self.indices], len(counts)) == 0
+        corner_usable = usable[self.face_of_corner]
+        scheme = {"catmullClark": "catmull_clark", "loop": "loop", "bilinear": "bilinear"}.get(scheme)
+        if scheme is None:
+            self.warn(name, f"subdivisionScheme {mesh.GetSubdivisionSchemeAttr().Get(time)!r} "
+                      "is unknown: catmullClark is used")
+            scheme = "catmull_clark"
+        if scheme == "loop" and (counts[usable] != 3).any():
+            self.warn(name, "loop subdivision needs triangles: catmullClark is used")
+            scheme = "catmull_clark"
+        boundary = str(mesh.GetInterpolateBoundaryAttr().Get(time) or "edgeAndCorner")
+        if boundary not in _BOUNDARY:
+            self.warn(name, f"interpolateBoundary {boundary!r} is rendered as edgeAndCorner")
+        fvli = mesh.GetFaceVaryingLinearInterpolationAttr().Get(time) or "cornersPlus1"
+        indices = self.indices[corner_usable]
+        face_counts = counts[usable]
+        left = mesh.GetOrientationAttr().Get(time) == UsdGeom.Tokens.leftHanded
+        # Corner order: each face's corners, reversed for a left-handed mesh (lucerna's
+        # faces are counter-clockwise).
+        order = np.flatnonzero(corner_usable)
+        if left:
+            starts = np.concatenate([[0], np.cumsum(face_counts)[:-1]])
+            within = np.arange(len(order)) - np.repeat(starts, face_counts)
+            flipped = np.repeat(starts + face_counts - 1, face_counts) - within
+            order = order[flipped]
+            indices = self.indices[order]
+        c = Cage(scheme, _BOUNDARY.get(boundary, "edge_and_corner"), self.points, face_counts,
+                 indices, (face_mask & self.face_keep)[usable])
+        crease_indices = np.asarray(mesh.GetCreaseIndicesAttr().Get(time) or [], np.int64)
+        lengths = np.asarray(mesh.GetCreaseLengthsAttr().Get(time) or [], np.int64)
+        sharpness = np.asarray(mesh.GetCreaseSharpnessesAttr().Get(time) or [], np.float64)
+        if len(lengths) and lengths.sum() == len(crease_indices) and (lengths >= 2).all():
+            starts = np.concatenate([[0], np.cumsum(lengths)[:-1]])
+            a = np.concatenate([crease_indices[s:s + n - 1] for s, n in zip(starts, lengths)])
+            b = np.concatenate([crease_indices[s + 1:s + n] for s, n in zip(starts, lengths)])
+            if len(sharpness) == len(lengths):
+                per_edge = np.repeat(sharpness, lengths - 1)
+            elif len(sharpness) == len(a):
+                per_edge = sharpness
+            else:
+                per_edge = None
+                self.warn(name, f"{len(sharpness)} creaseSharpnesses for {len(lengths)} creases: "
+                          "creases ignored")
+            if per_edge is not None:
+                ok = (a < len(self.points)) & (b < len(self.points)) & (a >= 0) & (b >= 0)
+                c.creases = np.stack([a[ok], b[ok]], 1)
+                c.crease_sharpness = np.clip(np.nan_to_num(per_edge[ok]), 0.0, None)
+        elif len(crease_indices):
+            self.warn(name, "creaseLengths do not match creaseIndices: creases ignored")
+        corners = np.asarray(mesh.GetCornerIndicesAttr().Get(time) or [], np.int64)
+        corner_sharpness = np.asarray(mesh.GetCornerSharpnessesAttr().Get(time) or [], np.float64)
+        if len(corners) and len(corner_sharpness) == len(corners):
+            ok = (corners >= 0) & (corners < len(self.points))
+            c.corners = corners[ok]
+            c.corner_sharpness = np.clip(np.nan_to_num(corner_sharpness[ok]), 0.0, None)
+        uvs = self._primvar(st_name, 2) if st_name else None
+        if uvs is not None:
+            uvs = uvs[order]
+            c.uvs = np.stack([uvs[:, 0], 1.0 - uvs[:, 1]], 1)
+            if fvli not in ("all", "none"):
+                self.warn(name, f"faceVaryingLinearInterpolation {fvli!r}: texture coordinates "
+                          "are interpolated linearly within each face (as 'all')")
+        colors = self._primvar(color_primvar, 3) if color_primvar else None
+        if colors is not None:
+            c.colors = np.concatenate([colors[order], np.ones((len(order), 1))], 1)
+        return c
+
     def build(self, face_mask, st_name, color_primvar, name):
         """(positions, triangles, normals, uvs, colors) of the faces in `face_mask`, welded,
         or None when no triangle is left."""
         tri = self.corner_triangles[face_mask[self.face_of_triangle]]
         if not len(tri):
             return None
-        normals = self._primvar("normals", 3)
-        if normals is None:
-            normals = self._subdivision_normals(name)
+        normals = None if self.deformed or self.subdivided() else self._primvar("normals", 3)
+        if normals is None and (self.deformed or self.subdivided()):
+            normals = self._smooth_normals()
         uvs = self._primvar(st_name, 2) if st_name else None
         if st_name and uvs is None:
             self.warn(name, f"the material reads primvar {st_name!r}, which the mesh lacks: "

@@ -61,6 +61,7 @@ class SceneWriter:
         self._chunks = []
         self._size = 0
         self.meshes = []
+        self.subdivision_surfaces = []
         self.instances = []
         self.spheres = []
         self.disks = []
@@ -102,6 +103,35 @@ class SceneWriter:
             "triangles": self._view(triangles, "<u4", 3),
         })
         return len(self.meshes) - 1
+
+    def add_subdivision(self, mesh, cage):
+        """Makes mesh `mesh` (its placeholder: the cage triangulated) a subdivision surface
+        that lucerna refines when it renders. `cage` (mesh.Cage) holds the scheme, boundary
+        rule, points, polygons, creases, corners, per-corner uvs/colours and the faces kept."""
+        entry = {
+            "mesh": int(mesh),
+            "scheme": cage.scheme,
+            "boundary": cage.boundary,
+            "points": self._view(cage.points, "<f4", 3),
+            "face_counts": self._view(cage.counts, "<u4", 1),
+            "face_indices": self._view(cage.indices, "<u4", 1),
+            "keep": self._view(np.flatnonzero(cage.keep), "<u4", 1),
+        }
+        if len(cage.creases):
+            words = np.empty((len(cage.creases), 3), "<u4")
+            words[:, :2] = cage.creases
+            words[:, 2] = np.asarray(cage.crease_sharpness, "<f4").view("<u4")
+            entry["creases"] = self._view(words, "<u4", 3)
+        if len(cage.corners):
+            words = np.empty((len(cage.corners), 2), "<u4")
+            words[:, 0] = cage.corners
+            words[:, 1] = np.asarray(cage.corner_sharpness, "<f4").view("<u4")
+            entry["corners"] = self._view(words, "<u4", 2)
+        if cage.uvs is not None:
+            entry["uvs"] = self._view(cage.uvs, "<f4", 2)
+        if cage.colors is not None:
+            entry["colors"] = self._view(cage.colors, "<f4", 4)
+        self.subdivision_surfaces.append(entry)
 
     def add_instances(self, name, mesh, matrices):
         """Places `mesh` once per row-vector matrix in `matrices` (shape (K, 4, 4))."""
@@ -172,6 +202,7 @@ class SceneWriter:
             "light_groups": self.light_groups,
             "warnings": self.warnings,
             "render_settings": self.render_settings,
+            "subdivision_surfaces": self.subdivision_surfaces,
         }
         text = json.dumps(manifest, indent=1, allow_nan=False)
         _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._chunks)

@@ -1,11 +1,12 @@
 """Meshes, primvars, subsets, transforms, instancing, composition, cameras, units."""
 
 import math
+import subprocess
 
 import numpy as np
 import OpenImageIO as oiio
 import pytest
-from conftest import convert
+from conftest import convert, lucerna_bin, write_image
 
 QUAD = '''
     def Mesh "Quad" {{
@@ -87,7 +88,7 @@ def write_png(path, rgb):
 
 def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
     write_png(tmp_path / "checker.png", [[[255, 0, 0], [0, 255, 0]], [[0, 0, 255], [255, 255, 255]]])
-    s = converted(stage_file(world('''
+    text = world('''
     def Mesh "M" (prepend apiSchemas = ["MaterialBindingAPI"]) {
         int[] faceVertexCounts = [4, 4]
         int[] faceVertexIndices = [0, 1, 2, 3, 1, 4, 5, 2]
@@ -96,8 +97,14 @@ def test_primvar_interpolations_and_welding(stage_file, converted, tmp_path):
         texCoord2f[] primvars:st = [(0,0), (1,0), (1,1), (0,1)] (interpolation = "faceVarying")
         int[] primvars:st:indices = [0, 1, 2, 3, 0, 1, 2, 3]
         rel material:binding = </World/Tex>
+        %s
     }
-''' + diffuse_texture_material("checker.png"))))
+''' + diffuse_texture_material("checker.png"))
+    # Without a scheme, USD's default catmullClark applies: the normals are ignored (warned).
+    subdivided = converted(stage_file(text % ""))
+    assert subdivided.warnings_about("subdivisionScheme is not authored")
+    assert len(subdivided["subdivision_surfaces"]) == 1
+    s = converted(stage_file(text % 'uniform token subdivisionScheme = "none"', "polygons.usda"))
     m = s.mesh("/World/M")
     # Uniform normals split the shared edge: 4 + 4 vertices, not 6.
     assert m["positions"]["count"] == 8
@@ -337,28 +344,88 @@ def test_camera(stage_file, converted):
     assert cam["transform"][0] == pytest.approx(1)  # scale removed: an orthonormal frame
 
 
-def test_subdivision_surface_is_shaded_smooth_and_warned(stage_file, converted):
-    """A catmullClark cube (USD's default scheme) without normals: lucerna renders the cage
-    with the area-weighted point normals, each along a cube diagonal, and says so."""
-    cube = '''def Mesh "Cube" {
+CUBE = '''def Mesh "Cube" {
         int[] faceVertexCounts = [4, 4, 4, 4, 4, 4]
         int[] faceVertexIndices = [0, 1, 3, 2, 4, 6, 7, 5, 0, 4, 5, 1, 2, 3, 7, 6, 0, 2, 6, 4, 1, 5, 7, 3]
         point3f[] points = [(-1, -1, -1), (1, -1, -1), (-1, 1, -1), (1, 1, -1), (-1, -1, 1), (1, -1, 1), (-1, 1, 1), (1, 1, 1)]
         %s
     }'''
-    s = converted(stage_file(cube % ""))
-    mesh = s.mesh("/Cube")
-    normals = s.array(mesh["normals"], "<f4", 3)
-    positions = s.positions(mesh)
-    expected = positions / np.linalg.norm(positions, axis=1, keepdims=True)
-    assert np.allclose(np.abs(normals), 1 / np.sqrt(3), atol=1e-5)
-    # Outward: each normal points along its corner's diagonal (the winding decides the sign).
-    signs = np.sign(np.sum(normals * expected, axis=1))
-    assert np.all(signs == signs[0])
-    assert s.warnings_about("subdivision surface (catmullClark): rendered as its control cage")
-    flat = converted(stage_file(cube % 'uniform token subdivisionScheme = "none"', "flat.usda"))
+
+
+def test_subdivision_cage_goes_to_the_renderer(stage_file, converted, tmp_path):
+    """A catmullClark cube (USD's default scheme) passes its cage, creases, corners, boundary
+    rule and face-varying texture coordinates to lucerna, which refines it; its placeholder
+    is the cage shaded smooth. Left-handed faces are reversed; a scheme of none is a mesh."""
+    write_image(tmp_path / "tex.png", np.full((2, 2, 3), 128))
+    s = converted(stage_file(world(CUBE % '''
+        int[] creaseIndices = [0, 1, 3]
+        int[] creaseLengths = [3]
+        float[] creaseSharpnesses = [2.5]
+        int[] cornerIndices = [7]
+        float[] cornerSharpnesses = [10]
+        uniform token interpolateBoundary = "edgeOnly"
+        uniform token orientation = "leftHanded"
+        texCoord2f[] primvars:st = [(0, 0), (1, 0), (1, 1), (0, 1)] (interpolation = "faceVarying")
+        int[] primvars:st:indices = [0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3]
+        rel material:binding = </World/Tex>
+    ''' + diffuse_texture_material("tex.png"))))
+    mesh = s.mesh("/World/Cube")
+    assert mesh["normals"] is not None  # the placeholder, shaded smooth
+    (sub,) = s["subdivision_surfaces"]
+    assert s["meshes"][sub["mesh"]] is mesh
+    assert sub["scheme"] == "catmull_clark" and sub["boundary"] == "edge_only"
+    assert s.array(sub["face_counts"], "<u4", 1).ravel().tolist() == [4] * 6
+    # Left-handed: each face's corners reversed.
+    assert s.array(sub["face_indices"], "<u4", 1).ravel()[:4].tolist() == [2, 3, 1, 0]
+    creases = s.array(sub["creases"], "<u4", 3)
+    assert creases[:, :2].tolist() == [[0, 1], [1, 3]]
+    assert creases[:, 2].view("<f4").tolist() == [2.5, 2.5]
+    corners = s.array(sub["corners"], "<u4", 2)
+    assert corners[0, 0] == 7 and corners[:, 1].view("<f4")[0] == 10
+    uvs = s.array(sub["uvs"], "<f4", 2)
+    assert uvs.shape == (24, 2)
+    assert uvs[:4].tolist() == [[0, 0], [1, 0], [1, 1], [0, 1]]  # (0,1),(1,1),(1,0),(0,0) flipped in v, reversed
+    assert s.array(sub["keep"], "<u4", 1).ravel().tolist() == list(range(6))
+    assert not s.warnings_about("control cage")
+    flat = converted(stage_file(CUBE % 'uniform token subdivisionScheme = "none"', "flat.usda"))
     assert flat.mesh("/Cube")["normals"] is None
-    assert not flat.warnings_about("subdivision surface")
+    assert flat["subdivision_surfaces"] == []
+
+
+def test_subdivision_surface_renders_its_limit_shape(stage_file, tmp_path):
+    """Seen head-on through an orthographic camera, the cube's cage covers its square. The
+    Catmull-Clark limit surface of the cube reaches 68/81 of the half-size at the face
+    centres (its widest points), so its silhouette lies between the circle and the square
+    of that half-width: between 0.554 and 0.705 of the cage's square. --subdiv-level 4 and
+    the default screen-space rule give the same shape."""
+    stage = stage_file(CUBE % "" + '''
+    def Camera "Cam" {
+        token projection = "orthographic"
+        float horizontalAperture = 30
+        float verticalAperture = 30
+        double3 xformOp:translate = (0, 0, 10)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+    def DomeLight "Sky" {
+        float inputs:intensity = 1
+    }''')
+    coverage = {}
+    for label, args in [("cage", ["--subdiv-level", "0"]), ("level4", ["--subdiv-level", "4"]),
+                        ("auto", [])]:
+        out = tmp_path / f"{label}.exr"
+        result = subprocess.run([lucerna_bin(), "render", str(stage), "-o", str(out), "--spp", "1",
+                                 "--resolution", "90x90", "--aov", "beauty", "-q", *args],
+                                capture_output=True, text=True)
+        assert result.returncode == 0, result.stderr
+        buf = oiio.ImageBuf(str(out))
+        alpha = buf.get_pixels(oiio.FLOAT)[..., list(buf.spec().channelnames).index("A")]
+        hit = alpha > 0.5
+        # The square spans 2 of the aperture's 3 units: 60 x 60 pixels.
+        coverage[label] = hit.sum() / 3600.0
+    assert coverage["cage"] == pytest.approx(1.0, abs=0.04)
+    assert coverage["level4"] == pytest.approx(coverage["auto"], abs=0.02)
+    r = 68 / 81
+    assert math.pi * r * r / 4 < coverage["level4"] < r * r, coverage
 
 
 @pytest.mark.parametrize("shape,extent", [
