@@ -252,11 +252,20 @@ fn decode_draco(
                 .get(view.buffer.value())
                 .and_then(|b| b.get(start..start.checked_add(view.byte_length.0 as usize)?))
                 .ok_or_else(|| err("its bufferView runs past the end of its buffer".into()))?;
-            let mut mesh = draco_core::Mesh::new();
-            let mut decoder = draco_core::MeshDecoder::new();
-            decoder
-                .decode(&mut draco_core::DecoderBuffer::new(bytes), &mut mesh)
-                .map_err(|e| err(format!("the Draco data cannot be decoded: {e:?}")))?;
+            // The decoder reads untrusted bytes: a panic in it is a malformed file too.
+            let decoded = std::panic::catch_unwind(|| {
+                let mut mesh = draco_core::Mesh::new();
+                let mut decoder = draco_core::MeshDecoder::new();
+                decoder
+                    .decode(&mut draco_core::DecoderBuffer::new(bytes), &mut mesh)
+                    .map(|_| mesh)
+                    .map_err(|e| format!("{e:?}"))
+            });
+            let mesh = match decoded {
+                Ok(Ok(mesh)) => mesh,
+                Ok(Err(e)) => return Err(err(format!("the Draco data cannot be decoded: {e}"))),
+                Err(_) => return Err(err("the Draco data cannot be decoded (malformed)".into())),
+            };
             let points = mesh.num_points();
             let attributes: Vec<(Checked<json::mesh::Semantic>, usize)> = primitive
                 .attributes

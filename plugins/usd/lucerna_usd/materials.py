@@ -164,9 +164,19 @@ class MaterialConverter:
             st_names.append(source.st_name)
             return {"texture": texture_index, "tex_coord": 0, "transform": source.transform}
 
+        def scalar(pair, what, default):
+            """A scalar input read from a primvar (per gprim) is not supported: its default,
+            warned about."""
+            kind, value = pair
+            if kind == "primvar":
+                self.warn(name, f"{what} read from primvar {value!r} is not supported: "
+                          f"{default} is used")
+                return "value", default
+            return kind, value
+
         # Base colour and coverage.
         kind, base = surface.base_color
-        akind, alpha = surface.alpha
+        akind, alpha = scalar(surface.alpha, "opacity", 1.0)
         rgb = [1.0, 1.0, 1.0] if kind != "value" else [float(c) for c in _fit3(base)]
         if kind == "primvar":
             color_primvar = base
@@ -186,7 +196,7 @@ class MaterialConverter:
             out["alpha_mode"] = "blend"
 
         # Transmission.
-        tkind, transmission = surface.transmission
+        tkind, transmission = scalar(surface.transmission, "transmission", 0.0)
         transmits = tkind == "texture" or (tkind == "value" and float(np.atleast_1d(transmission)[0]) > 0.0)
         if transmits:
             if tkind == "texture":
@@ -200,8 +210,8 @@ class MaterialConverter:
                 out["volume"] = {"absorption": [max(float(c), 0.0) for c in surface.absorption]}
 
         # Metallic and roughness: G and B of one texture.
-        mk, metallic = surface.metallic
-        rk, roughness = surface.roughness
+        mk, metallic = scalar(surface.metallic, "metallic", 0.0)
+        rk, roughness = scalar(surface.roughness, "roughness", 0.5)
         if mk == "texture" or rk == "texture":
             index, src = self._metal_rough_texture(metallic, roughness, name)
             out["metallic_roughness_texture"] = ref(index, src)

@@ -201,7 +201,9 @@ class MeshData:
             flipped = np.repeat(starts + face_counts - 1, face_counts) - within
             order = order[flipped]
             indices = self.indices[order]
-        c = Cage(scheme, _BOUNDARY.get(boundary, "edge_and_corner"), self.points, face_counts,
+        # Points no usable face uses may be NaN (read() warned): zero them for the file.
+        points = np.where(finite[:, None], self.points, 0.0)
+        c = Cage(scheme, _BOUNDARY.get(boundary, "edge_and_corner"), points, face_counts,
                  indices, (face_mask & self.face_keep)[usable])
         crease_indices = np.asarray(mesh.GetCreaseIndicesAttr().Get(time) or [], np.int64)
         lengths = np.asarray(mesh.GetCreaseLengthsAttr().Get(time) or [], np.int64)

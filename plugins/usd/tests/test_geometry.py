@@ -468,3 +468,17 @@ def test_points_are_spheres_of_their_widths(stage_file, converted):
     assert [sp["radius"] for sp in spheres] == pytest.approx([0.25, 0.5, 1.0])
     assert [sp["centre"] for sp in spheres] == [pytest.approx([x, 1, 0]) for x in (0, 2, 4)]
     assert s["materials"][spheres[0]["material"]]["base_color"] == pytest.approx([1, 0, 0, 1])
+
+
+def test_subdivision_mesh_with_a_nan_point_still_renders(stage_file):
+    """Faces on a NaN point leave the cage (warned); the point itself must not reach the
+    renderer, which refuses non-finite cage points."""
+    stage = stage_file(world('''
+    def Mesh "M" {
+        int[] faceVertexCounts = [4, 4]
+        int[] faceVertexIndices = [0, 1, 2, 3, 1, 4, 5, 2]
+        point3f[] points = [(0,0,0), (1,0,0), (1,1,0), (0,1,0), (2,0,0), (inf,1,0)]
+    }'''))
+    result = subprocess.run([lucerna_bin(), "inspect", str(stage)], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert "NaN or infinite" in result.stderr + result.stdout

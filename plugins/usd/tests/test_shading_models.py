@@ -215,3 +215,30 @@ def test_standard_surface_approximations_are_warned(stage_file, converted):
     # Depth 2: the colour is what survives 2 units inside the volume.
     assert m["volume"]["absorption"] == pytest.approx([np.log(2) / 2, 0, 0], abs=1e-6)
     assert m["transmission"] == pytest.approx(0.5)
+
+
+def test_scalar_input_from_a_primvar_falls_back_with_a_warning(stage_file, converted):
+    """OpenUSD's testPreviewSurfaceConnectedScalar: roughness read per gprim through a
+    UsdPrimvarReader_float. lucerna holds roughness per material: the input's default is
+    used, with a warning, and the gprims render (they were skipped before)."""
+    s = converted(stage_file('''
+def Material "M" {
+    token outputs:surface.connect = </M/S.outputs:surface>
+    def Shader "S" {
+        uniform token info:id = "UsdPreviewSurface"
+        float inputs:roughness.connect = </M/R.outputs:result>
+        token outputs:surface
+    }
+    def Shader "R" {
+        uniform token info:id = "UsdPrimvarReader_float"
+        string inputs:varname = "roughness"
+        float outputs:result
+    }
+}
+def Sphere "Ball" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+    rel material:binding = </M>
+    float primvars:roughness = 0.2
+}'''))
+    assert len(s["spheres"]) == 1
+    assert s.warnings_about("roughness read from primvar 'roughness' is not supported: 0.5 is used")
+    assert s["materials"][s["spheres"][0]["material"]]["roughness"] == 0.5
