@@ -425,3 +425,50 @@ fn a_rigged_asset_changes_pose_between_frames() {
     assert!(moved > 0.1, "the pose does not change ({moved})");
     assert_eq!(rest.len(), a.len());
 }
+
+/// A morphed primitive whose normal map needs MikkTSpace tangents: the tangents are made
+/// after the morph (MikkTSpace splits vertices where UVs mirror, which would misalign the
+/// targets' per-vertex displacements).
+#[test]
+fn morph_targets_apply_before_generated_tangents() {
+    let mut b = Builder::new();
+    let png = common::gltf_builder::png_rgba(1, 1, &[[128, 128, 255, 255]]);
+    let view = b.view(&png);
+    b.add(
+        "images",
+        json!({"bufferView": view, "mimeType": "image/png"}),
+    );
+    b.add("textures", json!({"source": 0}));
+    let material = b.add("materials", json!({"normalTexture": {"index": 0}}));
+    let pos = b.floats(
+        "VEC3",
+        &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 1.0, 0.0],
+    );
+    // The second triangle's UVs are mirrored: MikkTSpace splits the shared corners.
+    let uv = b.floats("VEC2", &[0.0, 0.0, 1.0, 0.0, 1.0, 1.0, 2.0, 0.0]);
+    let target = b.floats(
+        "VEC3",
+        &[0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
+    let indices = b.indices(&[0, 1, 2, 0, 2, 3]);
+    let mesh = b.add(
+        "meshes",
+        json!({"primitives": [{"attributes": {"POSITION": pos, "TEXCOORD_0": uv},
+                "indices": indices, "material": material, "targets": [{"POSITION": target}]}],
+               "weights": [1.0]}),
+    );
+    b.root(json!({"mesh": mesh}));
+    let scene = ingest::gltf::import(&b.glb(), "mirrored.glb", None).unwrap();
+    let m = &scene.meshes[scene.instances[0].mesh as usize];
+    assert!(m.tangents.is_some());
+    assert!(
+        m.positions.len() > 4,
+        "MikkTSpace did not split the mirrored corners"
+    );
+    for p in &m.positions {
+        assert!(
+            (p.z - 1.0).abs() < 1e-6,
+            "a vertex missed its displacement: {p}"
+        );
+    }
+}

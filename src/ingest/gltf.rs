@@ -1320,6 +1320,7 @@ impl<'a> Importer<'a> {
         for note in notes {
             self.warn(&element, note);
         }
+        self.complete_tangents(&mut out, &element);
         self.scene.meshes.push(out);
         Ok(Some((self.scene.meshes.len() - 1) as u32))
     }
@@ -1343,7 +1344,8 @@ impl<'a> Importer<'a> {
             return Ok(None);
         }
         let converted = self.convert_primitive(mesh, primitive, &element)?;
-        let index = converted.map(|m| {
+        let index = converted.map(|mut m| {
+            self.complete_tangents(&mut m, &element);
             self.scene.meshes.push(m);
             (self.scene.meshes.len() - 1) as u32
         });
@@ -1480,20 +1482,29 @@ impl<'a> Importer<'a> {
             triangles,
             material,
         };
-        // Tangents only where a normal map or anisotropy needs them: the file's, else
-        // MikkTSpace's.
-        if let Some(uv_set) = self.scene.materials[material as usize].tangent_uv_set() {
-            let valid_tangents = tangents.filter(|t| t.iter().all(|t| t.is_finite()));
-            if let Some(t) = valid_tangents {
-                out.tangents = Some(t);
-            } else if !tangents::generate(&mut out, uv_set) {
-                self.warn(
-                    element,
-                    "normal map and anisotropy ignored: the mesh has no texture coordinates for their tangents",
-                );
-            }
+        // The file's tangents where a normal map or anisotropy needs them (MikkTSpace's
+        // are made by complete_tangents, after any deformation: it splits vertices).
+        if self.scene.materials[material as usize]
+            .tangent_uv_set()
+            .is_some()
+        {
+            out.tangents = tangents.filter(|t| t.iter().all(|t| t.is_finite()));
         }
         Ok(Some(out))
+    }
+
+    /// MikkTSpace tangents for a converted primitive whose material needs tangents and
+    /// whose file gave none.
+    fn complete_tangents(&mut self, out: &mut Mesh, element: &str) {
+        let Some(uv_set) = self.scene.materials[out.material as usize].tangent_uv_set() else {
+            return;
+        };
+        if out.tangents.is_none() && !tangents::generate(out, uv_set) {
+            self.warn(
+                element,
+                "normal map and anisotropy ignored: the mesh has no texture coordinates for their tangents",
+            );
+        }
     }
 
     fn material(&mut self, m: gltf::Material) -> Result<u32> {
