@@ -17,6 +17,7 @@
 
 use crate::scene::{BoundaryInterpolation, Mesh, SubdivisionScheme, SubdivisionSurface};
 use glam::{DVec3, Vec2, Vec3, Vec4};
+use rayon::prelude::*;
 
 /// Deepest uniform refinement: 4⁶ = 4096 faces a quad.
 pub const MAX_LEVEL: u32 = 6;
@@ -68,7 +69,7 @@ fn build_edges(cage: &Cage) -> Edges {
             keyed.push(((lo as u64) << 32 | hi as u64, c as u32));
         }
     }
-    keyed.sort_unstable();
+    keyed.par_sort_unstable();
     let mut ends = Vec::new();
     let mut of_corner = vec![0u32; corners];
     let mut face_start = vec![0u32];
@@ -116,7 +117,7 @@ struct Incidence {
 fn incidence(cage: &Cage, edges: &Edges) -> Incidence {
     let n = cage.points.len();
     let csr = |pairs: &mut Vec<(u32, u32)>| {
-        pairs.sort_unstable();
+        pairs.par_sort_unstable();
         let mut start = vec![0u32; n + 1];
         for &(v, _) in pairs.iter() {
             start[v as usize + 1] += 1;
@@ -216,12 +217,18 @@ fn corner_values(cage: &Cage, c: usize) -> &[f32] {
     &cage.fvar[c * cage.width..(c + 1) * cage.width]
 }
 
-/// One level of refinement.
-fn refine_once(cage: &Cage, scheme: SubdivisionScheme, boundary: BoundaryInterpolation) -> Cage {
-    let edges = build_edges(cage);
-    let inc = incidence(cage, &edges);
+/// One level of refinement of `cage`, whose edges are `edges`; returns the child cage and
+/// its edges.
+fn refine_once(
+    cage: &Cage,
+    edges: &Edges,
+    scheme: SubdivisionScheme,
+    boundary: BoundaryInterpolation,
+) -> (Cage, Edges) {
+    let inc = incidence(cage, edges);
     let (nv, ne, nf) = (cage.points.len(), edges.ends.len(), cage.counts.len());
     let face_points: Vec<DVec3> = (0..nf)
+        .into_par_iter()
         .map(|f| {
             let start = cage.starts[f] as usize;
             let n = cage.counts[f] as usize;
@@ -236,6 +243,7 @@ fn refine_once(cage: &Cage, scheme: SubdivisionScheme, boundary: BoundaryInterpo
     let bilinear = scheme == SubdivisionScheme::Bilinear;
     // Edge points.
     let edge_points: Vec<DVec3> = (0..ne)
+        .into_par_iter()
         .map(|e| {
             let [a, b] = edges.ends[e];
             let (pa, pb) = (cage.points[a as usize], cage.points[b as usize]);
@@ -264,6 +272,7 @@ fn refine_once(cage: &Cage, scheme: SubdivisionScheme, boundary: BoundaryInterpo
         .collect();
     // Vertex points.
     let vertex_points: Vec<DVec3> = (0..nv)
+        .into_par_iter()
         .map(|v| {
             let p = cage.points[v];
             if bilinear || inc.edges(v).is_empty() {
@@ -293,7 +302,7 @@ fn refine_once(cage: &Cage, scheme: SubdivisionScheme, boundary: BoundaryInterpo
                     (q + r * 2.0 + p * (n - 3.0)) / n
                 }
             };
-            match vertex_rule(cage, &edges, &inc, v, boundary) {
+            match vertex_rule(cage, edges, &inc, v, boundary) {
                 VertexRule::Smooth => smooth(),
                 VertexRule::Crease { a, b, sharpness } => {
                     let crease =
@@ -449,7 +458,7 @@ fn refine_once(cage: &Cage, scheme: SubdivisionScheme, boundary: BoundaryInterpo
             }
         })
         .collect();
-    child
+    (child, child_edges)
 }
 
 fn key(a: u32, b: u32) -> u64 {
@@ -485,21 +494,22 @@ fn loop_beta(n: f64) -> f64 {
 /// Moves every vertex of a refined cage to its limit position.
 fn limit_positions(
     cage: &Cage,
+    edges: &Edges,
     scheme: SubdivisionScheme,
     boundary: BoundaryInterpolation,
 ) -> Vec<DVec3> {
     if scheme == SubdivisionScheme::Bilinear {
         return cage.points.clone();
     }
-    let edges = build_edges(cage);
-    let inc = incidence(cage, &edges);
+    let inc = incidence(cage, edges);
     (0..cage.points.len())
+        .into_par_iter()
         .map(|v| {
             let p = cage.points[v];
             if inc.edges(v).is_empty() {
                 return p;
             }
-            match vertex_rule(cage, &edges, &inc, v, boundary) {
+            match vertex_rule(cage, edges, &inc, v, boundary) {
                 VertexRule::Corner { .. } => p,
                 VertexRule::Crease { a, b, .. } => {
                     (p * 4.0 + cage.points[a as usize] + cage.points[b as usize]) / 6.0
@@ -581,7 +591,7 @@ pub fn refine(surface: &SubdivisionSurface, level: u32, name: &str, material: u3
             *x = x.max(s);
         }
     }
-    let edges = build_edges(&cage);
+    let mut edges = build_edges(&cage);
     let creases: std::collections::HashMap<u64, f32> = surface
         .creases
         .iter()
@@ -600,26 +610,26 @@ pub fn refine(surface: &SubdivisionSurface, level: u32, name: &str, material: u3
         })
         .collect();
     for _ in 0..level {
-        cage = refine_once(&cage, surface.scheme, surface.boundary);
+        (cage, edges) = refine_once(&cage, &edges, surface.scheme, surface.boundary);
     }
     let limit = if level > 0 {
-        limit_positions(&cage, surface.scheme, surface.boundary)
+        limit_positions(&cage, &edges, surface.scheme, surface.boundary)
     } else {
         cage.points.clone()
     };
-    triangulate(&cage, &limit, surface, name, material)
+    triangulate(&cage, &edges, &limit, surface, name, material)
 }
 
 /// The kept faces as triangles, with normals that stay apart across sharp edges and
 /// vertices welded where position, normal and face-varying values agree.
 fn triangulate(
     cage: &Cage,
+    edges: &Edges,
     points: &[DVec3],
     surface: &SubdivisionSurface,
     name: &str,
     material: u32,
 ) -> Mesh {
-    let edges = build_edges(cage);
     let corners = cage.indices.len();
     // Face area vectors (Newell).
     let face_normal: Vec<DVec3> = (0..cage.counts.len())
@@ -683,48 +693,48 @@ fn triangulate(
         let root = find(&mut parent, c as u32);
         group_normal[root as usize] += face_normal[face_of_corner[c] as usize];
     }
-    // Weld corners of kept faces.
+    // Weld corners of kept faces: one vertex per smoothing group (all of whose corners sit
+    // at one point), split further only where face-varying values differ (a UV seam).
     let w = cage.width;
-    let mut rows: Vec<(u32, u32, u32)> = Vec::new(); // (vertex, group root, corner)
+    let values = |c: u32| &cage.fvar[c as usize * w..(c as usize + 1) * w];
+    let bits = |c: u32| values(c).iter().map(|x| x.to_bits());
+    let mut vertex_of_group = vec![u32::MAX; corners];
+    let mut seams: std::collections::HashMap<(u32, Vec<u32>), u32> = Default::default();
+    let mut vertex_of_corner = vec![u32::MAX; corners];
+    let mut positions = Vec::new();
+    let mut normals = Vec::new();
+    let mut fv_out: Vec<u32> = Vec::new();
     for f in 0..cage.counts.len() {
         if !cage.keep[f] {
             continue;
         }
         let start = cage.starts[f] as usize;
-        for c in start..start + cage.counts[f] as usize {
-            rows.push((cage.indices[c], find(&mut parent, c as u32), c as u32));
+        for c in (start..start + cage.counts[f] as usize).map(|c| c as u32) {
+            let g = find(&mut parent, c);
+            let first = vertex_of_group[g as usize];
+            let vertex = if first != u32::MAX && bits(fv_out[first as usize]).eq(bits(c)) {
+                first
+            } else if first != u32::MAX && seams.contains_key(&(g, bits(c).collect())) {
+                seams[&(g, bits(c).collect())]
+            } else {
+                let v = positions.len() as u32;
+                positions.push(points[cage.indices[c as usize] as usize].as_vec3());
+                normals.push(
+                    group_normal[g as usize]
+                        .try_normalize()
+                        .unwrap_or(DVec3::Z)
+                        .as_vec3(),
+                );
+                fv_out.push(c);
+                if first == u32::MAX {
+                    vertex_of_group[g as usize] = v;
+                } else {
+                    seams.insert((g, bits(c).collect()), v);
+                }
+                v
+            };
+            vertex_of_corner[c as usize] = vertex;
         }
-    }
-    let bits = |c: u32| -> Vec<u32> {
-        cage.fvar[c as usize * w..(c as usize + 1) * w]
-            .iter()
-            .map(|v| v.to_bits())
-            .collect()
-    };
-    rows.sort_unstable_by(|x, y| {
-        (x.0, x.1)
-            .cmp(&(y.0, y.1))
-            .then_with(|| bits(x.2).cmp(&bits(y.2)))
-    });
-    let mut vertex_of_corner = vec![u32::MAX; corners];
-    let mut positions = Vec::new();
-    let mut normals = Vec::new();
-    let mut fv_out: Vec<u32> = Vec::new();
-    let mut previous: Option<(u32, u32, u32)> = None;
-    for &(v, g, c) in &rows {
-        let same = previous.is_some_and(|(pv, pg, pc)| pv == v && pg == g && bits(pc) == bits(c));
-        if !same {
-            positions.push(points[v as usize].as_vec3());
-            normals.push(
-                group_normal[g as usize]
-                    .try_normalize()
-                    .unwrap_or(DVec3::Z)
-                    .as_vec3(),
-            );
-            fv_out.push(c);
-            previous = Some((v, g, c));
-        }
-        vertex_of_corner[c as usize] = positions.len() as u32 - 1;
     }
     let mut triangles = Vec::new();
     for f in 0..cage.counts.len() {

@@ -227,6 +227,28 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
             }
         })
         .collect();
+    let subdivision_surfaces: Vec<SubdivisionEntry> = scene
+        .subdivision_surfaces
+        .iter()
+        .map(|s| SubdivisionEntry {
+            mesh: s.mesh,
+            scheme: s.scheme,
+            boundary: s.boundary,
+            points: buffer.floats(&v3(&s.points)),
+            face_counts: buffer.push(s.face_counts.iter().map(|&c| [c])),
+            face_indices: buffer.push(s.face_indices.iter().map(|&i| [i])),
+            creases: (!s.creases.is_empty())
+                .then(|| buffer.push(s.creases.iter().map(|([a, b], w)| [*a, *b, w.to_bits()]))),
+            corners: (!s.corners.is_empty())
+                .then(|| buffer.push(s.corners.iter().map(|(v, w)| [*v, w.to_bits()]))),
+            uvs: s.uvs.as_deref().map(|u| buffer.floats(&v2(u))),
+            colors: s.colors.as_deref().map(|c| buffer.floats(&v4(c))),
+            keep: s.keep.as_ref().map(|k| {
+                let faces: Vec<u32> = (0..k.len() as u32).filter(|&f| k[f as usize]).collect();
+                buffer.push(faces.iter().map(|&f| [f]))
+            }),
+        })
+        .collect();
     let manifest = Manifest {
         format: FORMAT.into(),
         version: VERSION,
@@ -246,29 +268,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         light_groups: scene.light_groups.clone(),
         warnings: scene.warnings.clone(),
         render_settings: scene.render_settings.clone(),
-        subdivision_surfaces: scene
-            .subdivision_surfaces
-            .iter()
-            .map(|s| SubdivisionEntry {
-                mesh: s.mesh,
-                scheme: s.scheme,
-                boundary: s.boundary,
-                points: buffer.floats(&v3(&s.points)),
-                face_counts: buffer.push(s.face_counts.iter().map(|&c| [c])),
-                face_indices: buffer.push(s.face_indices.iter().map(|&i| [i])),
-                creases: (!s.creases.is_empty()).then(|| {
-                    buffer.push(s.creases.iter().map(|([a, b], w)| [*a, *b, w.to_bits()]))
-                }),
-                corners: (!s.corners.is_empty())
-                    .then(|| buffer.push(s.corners.iter().map(|(v, w)| [*v, w.to_bits()]))),
-                uvs: s.uvs.as_deref().map(|u| buffer.floats(&v2(u))),
-                colors: s.colors.as_deref().map(|c| buffer.floats(&v4(c))),
-                keep: s.keep.as_ref().map(|k| {
-                    let faces: Vec<u32> = (0..k.len() as u32).filter(|&f| k[f as usize]).collect();
-                    buffer.push(faces.iter().map(|&f| [f]))
-                }),
-            })
-            .collect(),
+        subdivision_surfaces,
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
