@@ -190,6 +190,18 @@ struct RenderArgs {
     /// Multiplier of the environment map.
     #[arg(long, default_value = "1", value_parser = parse_rgb)]
     env_scale: Vec3,
+    /// Render a scene without any light black (default: a warning, and a constant white
+    /// environment of radiance 1, as scene viewers light such scenes).
+    #[arg(long)]
+    no_default_light: bool,
+    /// Store the light layers (beauty, light and lobe layers, light groups) as 16-bit half
+    /// floats; data layers, Cryptomatte, sample counts and variance stay 32-bit.
+    #[arg(long)]
+    exr_half: bool,
+    /// EXR compression: none, rle, zips, zip (default), piz, or lossy pxr24, b44, b44a,
+    /// dwaa[:LEVEL], dwab[:LEVEL] (refused with data or Cryptomatte layers).
+    #[arg(long, value_name = "NAME", value_parser = film::exr::parse_compression)]
+    exr_compression: Option<film::exr::Compression>,
     /// Also write a tone-mapped sRGB PNG of the beauty.
     #[arg(long)]
     preview: Option<PathBuf>,
@@ -727,6 +739,32 @@ fn render_view(
     if let Some(path) = &args.env_map {
         ingest::set_environment_map(&mut scene, path, args.env_scale)?;
     }
+    if !scene.has_light() {
+        if args.no_default_light {
+            eprintln!(
+                "lucerna: warning: {}: the scene has no light: it renders black",
+                scene.source
+            );
+        } else {
+            eprintln!(
+                "lucerna: warning: {}: the scene has no light: it is lit by a constant white environment (--env R,G,B or --env-map to choose one, --no-default-light to render it black)",
+                scene.source
+            );
+            ingest::set_constant_environment(&mut scene, Vec3::ONE);
+        }
+    }
+    if let Some(lossy) = args.exr_compression.filter(|&c| film::exr::is_lossy(c))
+        && let Some(data) = options.aovs.iter().find(|a| !a.is_light())
+    {
+        return Err(Error::bad_input(
+            "",
+            "--exr-compression",
+            format!(
+                "{lossy} is lossy and layer {} holds data that must be stored exactly: use zip or piz, or leave it out of --aov",
+                data.name()
+            ),
+        ));
+    }
     // Subdivision surfaces are refined for this view before the memory estimate counts them.
     scene.subdivision_level = args.subdiv_level;
     lucerna::world::refine_subdivision_surfaces(
@@ -815,6 +853,13 @@ fn render_view(
     // its transpose: exactly Imath's row-vector convention.
     let imath = |m: glam::DMat4| m.as_mat4().to_cols_array();
     let mut header = Header {
+        storage: film::exr::Storage {
+            compression: args
+                .exr_compression
+                .unwrap_or(film::exr::Storage::default().compression),
+            half_light_layers: args.exr_half,
+        },
+        frames_per_second: frame.map(|_| args.load.fps),
         world_to_camera: Some(imath(world.camera.world_to_camera)),
         world_to_ndc: Some(imath(world.camera.world_to_ndc)),
         attributes: vec![

@@ -353,3 +353,57 @@ fn light_groups_come_from_extras_and_the_command_line() {
         sum("G")
     );
 }
+
+/// A scene without any light (most glTF assets ship none) gets a warning and a constant
+/// white environment; `--no-default-light` renders it black, still warned.
+#[test]
+fn a_scene_without_light_gets_a_default_environment() {
+    let dir = temp_dir("no-light");
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/assets/gltf/Avocado/Avocado.gltf"
+    );
+    let mean = |extra: &[&str]| {
+        let out = dir.join("out.exr");
+        let out_s = out.to_str().unwrap();
+        let mut args = vec![
+            "render",
+            scene,
+            "-o",
+            out_s,
+            "--spp",
+            "2",
+            "--resolution",
+            "32x32",
+            "--aov",
+            "beauty",
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        let output = lucerna(&args);
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+        let (planes, _) = lucerna::film::exr::read(&out).unwrap();
+        let r = planes.channel("R").unwrap();
+        (
+            r.iter().map(|&v| v as f64).sum::<f64>() / r.len() as f64,
+            stderr,
+        )
+    };
+    let (lit, warning) = mean(&[]);
+    assert!(lit > 0.2, "{lit}");
+    assert!(
+        warning.contains("has no light") && warning.contains("constant white environment"),
+        "{warning}"
+    );
+    let (dark, warning) = mean(&["--no-default-light"]);
+    assert_eq!(dark, 0.0);
+    assert!(warning.contains("renders black"), "{warning}");
+    let (chosen, warning) = mean(&["--env", "0.5,0.5,0.5"]);
+    assert!(chosen > 0.1 && chosen < lit, "{chosen}");
+    assert!(!warning.contains("has no light"), "{warning}");
+}

@@ -1,9 +1,18 @@
-//! Writes a film as ONE single-part, multi-layer, 32-bit float OpenEXR file (channels
-//! `layer.C`, the beauty unprefixed), with lucerna's metadata and Nuke's camera matrices.
+//! Writes a film as ONE single-part, multi-layer OpenEXR file (channels `layer.C`, the
+//! beauty unprefixed), with lucerna's metadata and Nuke's camera matrices. Pixels are
+//! 32-bit floats, ZIP-compressed, unless [`Storage`] says otherwise: light layers may be
+//! half floats (data layers, Cryptomatte, sample counts and variance stay float, as their
+//! values must survive exactly), and any OpenEXR compression may be chosen, lossy ones only
+//! for files without data layers. The working colour space is stated as OpenEXR's
+//! `chromaticities` (Rec.709 primaries, D65 white) and the Color Interop Forum's
+//! `colorInteropID` `lin_rec709_scene`; `owner` and `capDate` are set, `framesPerSecond`
+//! for frames of an animation.
 
 use super::aov::Aov;
 use super::{Film, Window};
 use crate::error::{Error, Result};
+pub use exr::compression::Compression;
+use exr::meta::attribute::{Chromaticities, Rational};
 use exr::prelude::*;
 use std::path::Path;
 
@@ -16,9 +25,91 @@ pub enum Attribute {
     Double(f64),
 }
 
+/// How pixels are stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Storage {
+    pub compression: Compression,
+    /// Light layers as 16-bit half floats (values beyond half's range clamp to ±65504).
+    pub half_light_layers: bool,
+}
+
+impl Default for Storage {
+    fn default() -> Self {
+        Self {
+            compression: Compression::ZIP16,
+            half_light_layers: false,
+        }
+    }
+}
+
+/// The compressions `--exr-compression` names: none, rle, zips, zip, piz (lossless), pxr24,
+/// b44, b44a, dwaa[:LEVEL], dwab[:LEVEL] (lossy; DWA's level 45 by default).
+pub fn parse_compression(text: &str) -> std::result::Result<Compression, String> {
+    let (name, level) = match text.split_once(':') {
+        Some((n, l)) => (n, Some(l)),
+        None => (text, None),
+    };
+    let level = level
+        .map(|l| match l.parse::<f32>() {
+            Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+            _ => Err(format!("DWA level {l:?} is not a positive number")),
+        })
+        .transpose()?;
+    let compression = match name {
+        "none" => Compression::Uncompressed,
+        "rle" => Compression::RLE,
+        "zips" => Compression::ZIP1,
+        "zip" => Compression::ZIP16,
+        "piz" => Compression::PIZ,
+        "pxr24" => Compression::PXR24,
+        "b44" => Compression::B44,
+        "b44a" => Compression::B44A,
+        "dwaa" => Compression::DWAA(level),
+        "dwab" => Compression::DWAB(level),
+        other => {
+            return Err(format!(
+                "unknown compression {other:?} (none, rle, zips, zip, piz, pxr24, b44, b44a, dwaa[:LEVEL], dwab[:LEVEL])"
+            ));
+        }
+    };
+    if level.is_some() && !matches!(compression, Compression::DWAA(_) | Compression::DWAB(_)) {
+        return Err(format!("{name} takes no level"));
+    }
+    Ok(compression)
+}
+
+/// Whether `compression` changes values (PXR24 rounds floats to 24 bits, B44 and DWA are
+/// lossy).
+pub fn is_lossy(compression: Compression) -> bool {
+    matches!(
+        compression,
+        Compression::PXR24
+            | Compression::B44
+            | Compression::B44A
+            | Compression::DWAA(_)
+            | Compression::DWAB(_)
+    )
+}
+
+/// Whether channel `name` holds data rather than light: normals, depth, positions,
+/// albedos, sample counts, variance and Cryptomatte must be stored exactly.
+pub fn is_data_channel(name: &str) -> bool {
+    let Some((layer, _)) = name.rsplit_once('.') else {
+        return false; // The beauty: R, G, B, A.
+    };
+    if layer.starts_with("Crypto") {
+        return true;
+    }
+    Aov::parse(layer).is_some_and(|aov| !aov.is_light())
+}
+
 /// What goes into the EXR header besides the channels.
 #[derive(Clone, Debug, Default)]
 pub struct Header {
+    /// How the pixels are stored.
+    pub storage: Storage,
+    /// OpenEXR's `framesPerSecond`, for a frame of an animation.
+    pub frames_per_second: Option<f64>,
     /// OpenEXR's standard `worldToCamera` and `worldToNDC` matrices (Nuke reads them), in
     /// the Imath row-vector convention: the 16 values row by row.
     pub world_to_camera: Option<[f32; 16]>,
@@ -203,18 +294,52 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         );
     }
     let header = &header;
+    let mut compression = header.storage.compression;
+    if is_lossy(compression)
+        && let Some((name, _)) = planes.channels.iter().find(|(n, _)| is_data_channel(n))
+    {
+        // A checkpoint's sample counts, or a data layer: never stored lossily.
+        eprintln!(
+            "lucerna: note: {}: written with ZIP compression: channel {name} holds data that {} would change",
+            path.display(),
+            compression
+        );
+        compression = Compression::ZIP16;
+    }
+    let half = header.storage.half_light_layers;
     let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = planes
         .channels
         .into_iter()
-        .map(|(name, plane)| AnyChannel::new(text(&name), FlatSamples::F32(plane)))
+        .map(|(name, plane)| {
+            let samples = if half && !is_data_channel(&name) {
+                let max = exr::prelude::f16::MAX.to_f32();
+                FlatSamples::F16(
+                    plane
+                        .iter()
+                        .map(|v| exr::prelude::f16::from_f32(v.clamp(-max, max)))
+                        .collect(),
+                )
+            } else {
+                FlatSamples::F32(plane)
+            };
+            AnyChannel::new(text(&name), samples)
+        })
         .collect();
     let mut layer_attributes = LayerAttributes {
         software_name: Some(text(crate::RENDERER)),
         world_to_camera: header.world_to_camera,
         world_to_normalized_device: header.world_to_ndc,
         layer_position: Vec2(window.x as i32, window.y as i32),
+        owner: owner().map(|o| text(&o)),
+        capture_date: Some(text(&capture_date(std::time::SystemTime::now()))),
+        utc_offset: Some(0.0),
+        frames_per_second: header.frames_per_second.and_then(rational),
         ..Default::default()
     };
+    layer_attributes.other.insert(
+        text("colorInteropID"),
+        AttributeValue::Text(text("lin_rec709_scene")),
+    );
     for (name, value) in &header.attributes {
         let value = match value {
             Attribute::Text(s) => AttributeValue::Text(text(s)),
@@ -224,14 +349,20 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         };
         layer_attributes.other.insert(text(name), value);
     }
+    let encoding = Encoding {
+        compression,
+        ..Encoding::SMALL_LOSSLESS
+    };
     let layer = Layer::new(
         (window.width as usize, window.height as usize),
         layer_attributes,
-        Encoding::SMALL_LOSSLESS,
+        encoding,
         AnyChannels::sort(channels),
     );
     let display = IntegerBounds::new((0, 0), (display.0 as usize, display.1 as usize));
-    let image = Image::new(ImageAttributes::new(display), layer);
+    let mut image_attributes = ImageAttributes::new(display);
+    image_attributes.chromaticities = Some(REC709_D65);
+    let image = Image::new(image_attributes, layer);
     super::write_atomically(path, |file| {
         image
             .write()
@@ -240,9 +371,56 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
     })
 }
 
+/// lucerna's working colour space: Rec.709 (sRGB) primaries, D65 white point.
+pub const REC709_D65: Chromaticities = Chromaticities {
+    red: Vec2(0.64, 0.33),
+    green: Vec2(0.30, 0.60),
+    blue: Vec2(0.15, 0.06),
+    white: Vec2(0.3127, 0.3290),
+};
+
+/// The user running the render, for OpenEXR's `owner`.
+fn owner() -> Option<String> {
+    ["USER", "LOGNAME", "USERNAME"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok())
+        .filter(|o| !o.is_empty())
+}
+
+/// OpenEXR's `capDate` format, "YYYY:MM:DD hh:mm:ss", in UTC (`utcOffset` 0).
+pub fn capture_date(time: std::time::SystemTime) -> String {
+    let secs = time
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs() as i64);
+    let (days, rem) = (secs.div_euclid(86_400), secs.rem_euclid(86_400));
+    // Days since 1970-01-01 to a civil date (Howard Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + (month <= 2) as i64;
+    format!(
+        "{year:04}:{month:02}:{day:02} {:02}:{:02}:{:02}",
+        rem / 3600,
+        rem / 60 % 60,
+        rem % 60
+    )
+}
+
+/// Frames per second as OpenEXR's rational (thousandths: 23.976 is 23976/1000).
+fn rational(fps: f64) -> Option<Rational> {
+    (fps.is_finite() && fps > 0.0 && fps < 1e6).then(|| (((fps * 1000.0).round()) as i32, 1000))
+}
+
 /// The attributes lucerna reads back from a layer's header.
 fn header_of(attributes: &LayerAttributes) -> Header {
     Header {
+        storage: Storage::default(),
+        frames_per_second: None,
         world_to_camera: attributes.world_to_camera,
         world_to_ndc: attributes.world_to_normalized_device,
         attributes: attributes
@@ -356,4 +534,42 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
         },
         header,
     ))
+}
+
+#[cfg(test)]
+mod storage_tests {
+    use super::*;
+    use std::time::{Duration, UNIX_EPOCH};
+
+    #[test]
+    fn capture_dates_are_civil_utc() {
+        assert_eq!(capture_date(UNIX_EPOCH), "1970:01:01 00:00:00");
+        // 2000-02-29 12:34:56 UTC (a leap day) and 2026-12-03 19:19:40 UTC.
+        assert_eq!(
+            capture_date(UNIX_EPOCH + Duration::from_secs(951_827_696)),
+            "2000:02:29 12:34:56"
+        );
+        assert_eq!(
+            capture_date(UNIX_EPOCH + Duration::from_secs(1_796_325_580)),
+            "2026:12:03 19:19:40"
+        );
+    }
+
+    #[test]
+    fn compressions_parse_and_classify() {
+        assert_eq!(parse_compression("zip"), Ok(Compression::ZIP16));
+        assert_eq!(
+            parse_compression("dwaa:45"),
+            Ok(Compression::DWAA(Some(45.0)))
+        );
+        assert!(parse_compression("zip:3").is_err());
+        assert!(parse_compression("dwaa:-1").is_err());
+        assert!(parse_compression("jpeg").unwrap_err().contains("piz"));
+        assert!(is_lossy(Compression::PXR24) && !is_lossy(Compression::PIZ));
+        assert!(is_data_channel("normal.X") && is_data_channel("CryptoObject00.R"));
+        assert!(is_data_channel("spp.Y") && is_data_channel("variance.R"));
+        assert!(
+            !is_data_channel("R") && !is_data_channel("direct.G") && !is_data_channel("lg_key.B")
+        );
+    }
 }

@@ -133,6 +133,25 @@ pub struct LightGroup {
 }
 
 impl Scene {
+    /// Whether anything lights the scene: a light, an environment, or an emissive surface
+    /// some geometry uses.
+    pub fn has_light(&self) -> bool {
+        let emissive = |m: u32| {
+            self.materials
+                .get(m as usize)
+                .is_some_and(|m| m.is_emissive())
+        };
+        !self.lights.is_empty()
+            || self.environment.is_some()
+            || self
+                .instances
+                .iter()
+                .any(|i| emissive(self.meshes[i.mesh as usize].material))
+            || self.spheres.iter().any(|s| emissive(s.material))
+            || self.disks.iter().any(|d| emissive(d.material))
+            || self.cylinders.iter().any(|c| emissive(c.material))
+    }
+
     /// Puts emitter `member` into light group `group`, creating the group.
     pub fn add_to_light_group(&mut self, group: &str, member: &str) {
         match self.light_groups.iter_mut().find(|g| g.name == group) {

@@ -94,3 +94,49 @@ def test_aov_selection_writes_only_what_was_asked(tmp_path):
     assert sorted(ch) == sorted(["R", "G", "B", "A", "direct.R", "direct.G", "direct.B",
                                  "albedo.R", "albedo.G", "albedo.B"])
     assert (spec.width, spec.height) == (32, 24)
+
+
+def test_storage_options_and_colour_space(tmp_path):
+    """--exr-half stores light layers as half floats and keeps data layers and Cryptomatte
+    float; --exr-compression sets the compression (lossy ones refused with data layers);
+    every file states its colour space (Rec.709 primaries, D65; colorInteropID) and carries
+    owner, capDate and, for a frame, framesPerSecond."""
+    out = tmp_path / "half.exr"
+    env = dict(os.environ, USER="artist")
+    subprocess.run([BIN, "render", "-o", str(out), "--spp", "2", "--resolution", "64x64",
+                    "--aov", "beauty,direct,albedo,normal,depth,crypto", "--exr-half",
+                    "--exr-compression", "piz", "--frame", "3", "--fps", "25", "-q"],
+                   check=True, env=env)
+    inp = oiio.ImageInput.open(str(out))
+    spec = inp.spec()
+    inp.close()
+    formats = {name: str(spec.channelformat(k)) for k, name in enumerate(spec.channelnames)}
+    assert all(formats[c] == "half" for c in ["R", "G", "B", "A", "direct.R", "direct.B"])
+    assert all(formats[c] == "float" for c in ["albedo.R", "normal.X", "depth.Z", "CryptoObject00.R"])
+    assert spec.getattribute("compression") == "piz"
+    chroma = np.array(spec.getattribute("chromaticities"))
+    assert np.allclose(chroma, [0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290], atol=1e-6)
+    assert spec.getattribute("colorInteropID") == "lin_rec709_scene"
+    assert spec.getattribute("Copyright") == "artist"  # OpenEXR owner, as OpenImageIO names it
+    assert len(spec.getattribute("DateTime")) == 19  # capDate "YYYY:MM:DD hh:mm:ss"
+    assert tuple(spec.getattribute("framesPerSecond")) == (25000, 1000)
+    # Half and float agree to half's precision.
+    full = tmp_path / "full.exr"
+    subprocess.run([BIN, "render", "-o", str(full), "--spp", "2", "--resolution", "64x64",
+                    "--aov", "beauty", "-q"], check=True)
+    a, b = read(out)[1], read(full)[1]
+    assert np.allclose(a["R"], b["R"], rtol=2e-3, atol=1e-4)
+    assert os.path.getsize(out) > 0
+    # Lossy compression: refused with data layers, accepted without.
+    bad = subprocess.run([BIN, "render", "-o", str(tmp_path / "bad.exr"), "--spp", "1",
+                          "--resolution", "32x32", "--aov", "beauty,normal", "--exr-compression",
+                          "dwaa:45", "-q"], capture_output=True, text=True)
+    assert bad.returncode == 2 and "normal holds data" in bad.stderr, bad.stderr
+    assert not (tmp_path / "bad.exr").exists()
+    dwa = tmp_path / "dwa.exr"
+    subprocess.run([BIN, "render", "-o", str(dwa), "--spp", "1", "--resolution", "32x32",
+                    "--aov", "beauty", "--exr-compression", "dwaa:60", "-q"], check=True)
+    inp = oiio.ImageInput.open(str(dwa))
+    assert inp.spec().getattribute("compression") == "dwaa"
+    assert inp.spec().getattribute("openexr:dwaCompressionLevel") == 60
+    inp.close()
