@@ -135,7 +135,7 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
         settings.extend(render.settings.clone());
         let settings_text =
             toml::to_string(&settings).map_err(|e| bad("settings", e.to_string()))?;
-        RenderOptions::default()
+        RenderOptions::command_line()
             .load_settings(&settings_text)
             .map_err(|e| bad("settings", e))?;
         let frames = match (&render.frames, render.frame) {
@@ -287,8 +287,8 @@ fn output_state(task: &Task) -> OutputState {
         Ok(read) => read,
         Err(e) => return OutputState::Stale(format!("the existing file is unreadable ({e})")),
     };
-    let mut job = RenderOptions::default();
-    let mut made = RenderOptions::default();
+    let mut job = RenderOptions::command_line();
+    let mut made = RenderOptions::command_line();
     if job.load_settings(&task.settings).is_err()
         || made
             .load_settings(header.text("lucerna/settings").unwrap_or_default())

@@ -161,8 +161,11 @@ struct RenderArgs {
     /// Time budget in seconds: render passes until it is spent.
     #[arg(long)]
     time: Option<String>,
-    /// AOV layers to write, comma-separated (e.g. `direct,indirect,albedo`), `all`, or
-    /// per-depth layers `nee_dK`, `bsdf_dK`. The beauty is always written.
+    /// AOV layers to write besides the beauty, comma-separated (e.g.
+    /// `direct,indirect,albedo`), or presets: `comp` (what a compositor usually wants:
+    /// emission, the lobe layers and colours, light groups, albedo, normal, depth,
+    /// position, Cryptomatte), `all`, `lobes`, `lightgroups`, `crypto`; per-depth layers
+    /// `nee_dK`, `bsdf_dK`. [default: beauty]
     #[arg(long)]
     aov: Option<String>,
     /// Image size, e.g. 640x480 (default: from the camera's aspect ratio, long side 512).
@@ -279,7 +282,7 @@ impl RenderArgs {
     fn options(&self) -> Result<RenderOptions> {
         let mut options = RenderOptions {
             progress: !self.quiet,
-            ..Default::default()
+            ..RenderOptions::command_line()
         };
         if let Some(path) = &self.settings {
             let text = lucerna::files::read_input(path)

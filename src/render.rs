@@ -84,6 +84,15 @@ impl Default for RenderOptions {
 }
 
 impl RenderOptions {
+    /// What `lucerna render` (and each render of a batch job) starts from before its
+    /// settings file and flags: the defaults, writing the beauty only.
+    pub fn command_line() -> Self {
+        Self {
+            aovs: AovSet::parse("beauty").expect("the beauty parses"),
+            ..Default::default()
+        }
+    }
+
     /// Sets `name` (a render or integrator setting) from its textual value: the one path
     /// for the command line and settings files.
     pub fn set(&mut self, name: &str, value: &str) -> Result<(), String> {

@@ -269,13 +269,30 @@ impl AovSet {
                 aovs.extend(ALL);
                 continue;
             }
+            if name == "comp" {
+                // A compositor's usual set: light by lobe and by light group, the data
+                // layers a comp uses, and Cryptomatte.
+                aovs.extend(LOBES);
+                aovs.extend([
+                    Aov::Emission,
+                    Aov::Albedo,
+                    Aov::Normal,
+                    Aov::Depth,
+                    Aov::Position,
+                ]);
+                for kind in [crypto::Kind::Object, crypto::Kind::Material] {
+                    aovs.extend((0..crypto::LAYERS).map(|k| Aov::Crypto(kind, k)));
+                }
+                light_groups = true;
+                continue;
+            }
             if name == "lobes" {
                 aovs.extend(LOBES);
                 continue;
             }
             let aov = Aov::parse(name).ok_or_else(|| {
                 let known: Vec<String> = ALL.iter().map(|a| a.name()).collect();
-                format!("unknown AOV {name:?} (known: all, lobes, lightgroups, crypto, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
+                format!("unknown AOV {name:?} (known: comp, all, lobes, lightgroups, crypto, {}, nee_dK, bsdf_dK for K up to {MAX_DEPTH_AOV})", known.join(", "))
             })?;
             aovs.push(aov);
         }

@@ -42,11 +42,30 @@ def default_render(tmp_path_factory):
     return read(cwd / "render.exr")
 
 
-def test_readme_command_writes_every_core_layer(default_render):
+@pytest.fixture(scope="module")
+def all_render(tmp_path_factory):
+    """`lucerna render --aov all`: every core layer."""
+    out = tmp_path_factory.mktemp("all") / "all.exr"
+    subprocess.run([BIN, "render", "--aov", "all", "--spp", "16", "--resolution", "256x256",
+                    "-o", str(out), "-q"], check=True)
+    return read(out)
+
+
+def test_readme_command_writes_the_beauty(default_render):
+    """Without --aov a render writes the beauty only (RGBA), at the default 512x512."""
     spec, ch = default_render
+    assert sorted(ch) == ["A", "B", "G", "R"]
+    assert (spec.width, spec.height) == (512, 512)
+    for name, plane in ch.items():
+        assert np.isfinite(plane).all(), name
+        assert plane.dtype == np.float32
+
+
+def test_aov_all_writes_every_core_layer(all_render):
+    spec, ch = all_render
     missing = [c for c in CORE_CHANNELS if c not in ch]
     assert not missing, f"missing channels: {missing}"
-    assert (spec.width, spec.height) == (512, 512)
+    assert (spec.width, spec.height) == (256, 256)
     for name, plane in ch.items():
         assert np.isfinite(plane).all(), name
         assert plane.dtype == np.float32
@@ -65,9 +84,9 @@ def test_header_metadata(default_render):
         assert np.isfinite(m).all() and abs(np.linalg.det(m)) > 0
 
 
-def test_world_to_ndc_projects_the_scene_into_the_frame(default_render):
+def test_world_to_ndc_projects_the_scene_into_the_frame(all_render):
     """Nuke's convention: row vector times matrix, divide by w, (0,0) top-left."""
-    spec, ch = default_render
+    spec, ch = all_render
     to_ndc = np.array(spec.getattribute("worldToNDC"), dtype=np.float64).reshape(4, 4)
     # The world position of the centre pixel projects back onto the centre of the image.
     y, x = spec.height // 2, spec.width // 2
@@ -77,8 +96,8 @@ def test_world_to_ndc_projects_the_scene_into_the_frame(default_render):
     assert np.allclose(ndc, [(x + 0.5) / spec.width, (y + 0.5) / spec.height], atol=2.0 / spec.width)
 
 
-def test_layer_sums(default_render):
-    _, ch = default_render
+def test_layer_sums(all_render):
+    _, ch = all_render
     for c in "RGB":
         beauty = ch[c]
         parts = ch[f"emission.{c}"] + ch[f"direct.{c}"] + ch[f"indirect.{c}"]
