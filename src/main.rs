@@ -193,6 +193,14 @@ struct RenderArgs {
     /// Multiplier of the environment map.
     #[arg(long, default_value = "1", value_parser = parse_rgb)]
     env_scale: Vec3,
+    /// Progress display: auto (a bar on a terminal, lines otherwise), bar, lines (plain
+    /// lines for logs), alfred (Tractor's ALF_PROGRESS lines), none. `--quiet` drops the
+    /// bar, not the lines a log reads. [default: auto]
+    #[arg(long, value_name = "MODE", value_parser = ["auto", "bar", "lines", "alfred", "none"])]
+    progress: Option<String>,
+    /// Seconds between progress lines. [default: 5]
+    #[arg(long, value_name = "SECONDS", default_value_t = 5.0, value_parser = parse_interval)]
+    progress_interval: f64,
     /// Render a scene without any light black (default: a warning, and a constant white
     /// environment of radiance 1, as scene viewers light such scenes).
     #[arg(long)]
@@ -280,8 +288,23 @@ struct RenderArgs {
 impl RenderArgs {
     /// The render options: defaults, then the settings file, then the flags.
     fn options(&self) -> Result<RenderOptions> {
+        use std::io::IsTerminal;
+        let terminal = std::io::stderr().is_terminal();
+        let mode = self.progress.as_deref().unwrap_or("auto");
+        let lines = |alfred| {
+            Some(render::ProgressLines {
+                interval: std::time::Duration::from_secs_f64(self.progress_interval),
+                alfred,
+            })
+        };
         let mut options = RenderOptions {
-            progress: !self.quiet,
+            progress: !self.quiet && matches!(mode, "auto" | "bar"),
+            progress_lines: match mode {
+                "lines" => lines(false),
+                "alfred" => lines(true),
+                "auto" if !terminal => lines(false),
+                _ => None,
+            },
             ..RenderOptions::command_line()
         };
         if let Some(path) = &self.settings {
@@ -327,6 +350,15 @@ impl RenderArgs {
             .validate()
             .map_err(|e| Error::bad_input("", "settings", e))?;
         Ok(options)
+    }
+}
+
+fn parse_interval(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.05..=86_400.0).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "{s:?} is not a number of seconds from 0.05 to 86400"
+        )),
     }
 }
 

@@ -59,8 +59,47 @@ pub struct RenderOptions {
     pub pass: Option<(u32, u32)>,
     /// Show a progress bar (only drawn when stderr is a terminal).
     pub progress: bool,
+    /// Plain progress lines on stderr for logs (farm tasks, batch children), every
+    /// `interval`: `None` prints none.
+    pub progress_lines: Option<ProgressLines>,
     /// Set (by a signal handler) to stop the render early: what has accumulated is kept.
     pub interrupt: Option<std::sync::Arc<AtomicBool>>,
+}
+
+/// Progress lines for logs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressLines {
+    pub interval: std::time::Duration,
+    /// Pixar Tractor's `ALF_PROGRESS n%` lines (which Tractor-style managers parse) instead
+    /// of lucerna's own.
+    pub alfred: bool,
+}
+
+impl ProgressLines {
+    /// The line for fraction `done` of the render after `elapsed` seconds, having taken
+    /// `samples` samples (when counted).
+    pub fn line(
+        &self,
+        done: f64,
+        elapsed: f64,
+        samples: Option<u64>,
+        spp: Option<(f64, u32)>,
+    ) -> String {
+        let percent = (100.0 * done).clamp(0.0, 100.0);
+        if self.alfred {
+            return format!("ALF_PROGRESS {}%", percent.floor() as u32);
+        }
+        let eta = if done > 0.0 {
+            format!("{:.0} s", elapsed * (1.0 - done) / done)
+        } else {
+            "unknown".into()
+        };
+        let rate = samples.map_or_else(String::new, |s| {
+            format!(", {:.2} M samples/s", s as f64 / elapsed.max(1e-9) / 1e6)
+        });
+        let spp = spp.map_or_else(String::new, |(have, of)| format!(", {have:.1} of {of} spp"));
+        format!("lucerna: progress {percent:.1}%{spp}, elapsed {elapsed:.0} s, eta {eta}{rate}")
+    }
 }
 
 impl Default for RenderOptions {
@@ -78,6 +117,7 @@ impl Default for RenderOptions {
             crop: None,
             pass: None,
             progress: false,
+            progress_lines: None,
             interrupt: None,
         }
     }
@@ -556,7 +596,8 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
     };
     let mut learned_split = None;
     let pixels = film.width as u64 * film.height as u64;
-    let bar = (options.progress && std::io::stderr().is_terminal()).then(|| {
+    let terminal_bar = options.progress && std::io::stderr().is_terminal();
+    let bar = (terminal_bar || options.progress_lines.is_some()).then(|| {
         let (length, template) = match (options.time, adaptive) {
             (Some(t), _) => (
                 (t * 1000.0) as u64,
@@ -575,6 +616,10 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         bar.set_style(
             indicatif::ProgressStyle::with_template(template).expect("the template is valid"),
         );
+        if !terminal_bar {
+            // Counted, not drawn: the progress lines read it.
+            bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+        }
         bar
     });
     // A resumed render's samples so far (the other bars count time and pixels).
@@ -584,6 +629,32 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
     let learning_pixels = LearningPixels::new(film.display.0, film.display.1);
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
+    // Progress lines: a thread that reads the (hidden) bar every interval.
+    let reporting = std::sync::Arc::new(AtomicBool::new(true));
+    let reporter = match (&bar, options.progress_lines) {
+        (Some(bar), Some(lines)) => {
+            let (bar, reporting) = (bar.clone(), reporting.clone());
+            let counts_samples = options.time.is_none() && !adaptive;
+            let before = bar.position();
+            Some(std::thread::spawn(move || {
+                let mut next = lines.interval;
+                while reporting.load(Ordering::Relaxed) {
+                    std::thread::sleep(std::time::Duration::from_millis(20).min(lines.interval));
+                    let elapsed = start.elapsed();
+                    if elapsed < next {
+                        continue;
+                    }
+                    next += lines.interval;
+                    let done = bar.position() as f64 / bar.length().unwrap_or(1).max(1) as f64;
+                    let samples = counts_samples.then(|| bar.position() - before);
+                    let spp =
+                        counts_samples.then(|| (bar.position() as f64 / pixels as f64, target));
+                    eprintln!("{}", lines.line(done, elapsed.as_secs_f64(), samples, spp));
+                }
+            }))
+        }
+        _ => None,
+    };
     let resumed = film.min_samples().min(uniform_spp);
     let mut done = resumed;
     // What a time budget has rendered: the samples since the start, per pixel.
@@ -683,6 +754,22 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         if let PassSamples::UpTo(total) = pass {
             done = total;
         }
+    }
+    reporting.store(false, Ordering::Relaxed);
+    if let Some(reporter) = reporter {
+        let _ = reporter.join();
+    }
+    if let (Some(lines), Some(bar)) = (options.progress_lines, &bar)
+        && !interrupted()
+    {
+        let _ = bar;
+        let samples = film.total_samples() - samples_before;
+        let spp = (options.time.is_none() && !adaptive)
+            .then(|| (film.total_samples() as f64 / pixels as f64, target));
+        eprintln!(
+            "{}",
+            lines.line(1.0, start.elapsed().as_secs_f64(), Some(samples), spp)
+        );
     }
     if let Some(bar) = bar {
         bar.finish_and_clear();

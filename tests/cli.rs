@@ -407,3 +407,51 @@ fn a_scene_without_light_gets_a_default_environment() {
     assert!(chosen > 0.1 && chosen < lit, "{chosen}");
     assert!(!warning.contains("has no light"), "{warning}");
 }
+
+/// Off a terminal (a farm log, a batch child's log), progress comes as plain lines every
+/// `--progress-interval` seconds, with or without `--quiet`; `--progress alfred` prints
+/// Tractor's ALF_PROGRESS lines; `--progress none` prints none.
+#[test]
+fn progress_lines_off_a_terminal() {
+    let dir = temp_dir("progress");
+    let out = dir.join("p.exr");
+    let stderr = |extra: &[&str]| {
+        let mut args = vec![
+            "render",
+            "-o",
+            out.to_str().unwrap(),
+            "--spp",
+            "16",
+            "--resolution",
+            "96x96",
+            "-q",
+        ];
+        args.extend_from_slice(extra);
+        let output = lucerna(&args);
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        String::from_utf8_lossy(&output.stderr).to_string()
+    };
+    let text = stderr(&["--progress-interval", "0.05"]);
+    let lines: Vec<&str> = text
+        .lines()
+        .filter(|l| l.starts_with("lucerna: progress"))
+        .collect();
+    assert!(!lines.is_empty(), "{text}");
+    let last = lines.last().unwrap();
+    assert!(
+        last.contains("100.0%") && last.contains("of 16 spp") && last.contains("M samples/s"),
+        "{last}"
+    );
+    let alfred = stderr(&["--progress", "alfred", "--progress-interval", "0.05"]);
+    assert!(alfred.lines().any(|l| l == "ALF_PROGRESS 100%"), "{alfred}");
+    assert!(!alfred.contains("lucerna: progress"), "{alfred}");
+    let none = stderr(&["--progress", "none"]);
+    assert!(
+        !none.contains("lucerna: progress") && !none.contains("ALF_PROGRESS"),
+        "{none}"
+    );
+}
