@@ -16,7 +16,7 @@
 //! target length on screen, capped by [`MAX_LEVEL`] and the memory limit.
 
 use crate::scene::{BoundaryInterpolation, Mesh, SubdivisionScheme, SubdivisionSurface};
-use glam::{DVec3, Vec2, Vec3, Vec4};
+use glam::{DVec3, Vec2, Vec4};
 use rayon::prelude::*;
 
 /// Deepest uniform refinement: 4⁶ = 4096 faces a quad.
@@ -808,14 +808,10 @@ pub fn mean_edge_length(surface: &SubdivisionSurface) -> f64 {
     if count == 0 { 0.0 } else { sum / count as f64 }
 }
 
-/// Positions as `Vec3` for callers that compare with the cage.
-pub fn as_vec3(points: &[DVec3]) -> Vec<Vec3> {
-    points.iter().map(|p| p.as_vec3()).collect()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3;
 
     fn cube(creases: Vec<([u32; 2], f32)>) -> SubdivisionSurface {
         let points = (0..8)
