@@ -193,6 +193,11 @@ struct RenderArgs {
     /// Multiplier of the environment map.
     #[arg(long, default_value = "1", value_parser = parse_rgb)]
     env_scale: Vec3,
+    /// Write the render's figures as JSON to FILE (counts as integers): image size, spp,
+    /// samples, rays, NaN/Inf discarded, seconds, samples/s, peak memory, outputs. Frame
+    /// tokens expand as in -o.
+    #[arg(long, value_name = "FILE")]
+    stats_json: Option<PathBuf>,
     /// Progress display: auto (a bar on a terminal, lines otherwise), bar, lines (plain
     /// lines for logs), alfred (Tractor's ALF_PROGRESS lines), none. `--quiet` drops the
     /// bar, not the lines a log reads. [default: auto]
@@ -902,7 +907,7 @@ fn render_view(
                 "lucerna/renderer".into(),
                 Attribute::Text(lucerna::RENDERER.into()),
             ),
-            ("lucerna/scene".into(), Attribute::Text(source)),
+            ("lucerna/scene".into(), Attribute::Text(source.clone())),
             (
                 "lucerna/settings".into(),
                 Attribute::Text(options.to_toml(stats.spp)),
@@ -965,6 +970,40 @@ fn render_view(
                 own.contains(aov) || (matches!(aov, Aov::LightGroup(_)) && own.wants_light_groups())
             })?,
         }
+    }
+    if let Some(pattern) = &args.stats_json {
+        let stem = args
+            .scene
+            .as_deref()
+            .and_then(Path::file_stem)
+            .map_or("default".into(), |s| s.to_string_lossy().into_owned());
+        let path = output_path(pattern, frame, &stem, "")
+            .map_err(|e| Error::bad_input("", "--stats-json", e))?;
+        let json = serde_json::json!({
+            "outputs": view.outputs.iter().map(|o| o.path.display().to_string()).collect::<Vec<_>>(),
+            "scene": source,
+            "frame": frame,
+            "width": film.width,
+            "height": film.height,
+            "spp": stats.spp,
+            "samples": stats.samples,
+            "rays_closest": stats.rays.closest,
+            "rays_shadow": stats.rays.shadow,
+            "nan_inf_discarded": stats.discarded,
+            "prepare_seconds": build_seconds,
+            "render_seconds": stats.seconds,
+            "samples_per_second": (stats.samples as f64 / stats.seconds.max(1e-9)).round() as u64,
+            "peak_memory_bytes": render::peak_memory_bytes(),
+            "threads": pool.current_num_threads(),
+            "interrupted": stats.interrupted,
+        });
+        film::write_atomically(&path, |w| {
+            use std::io::Write;
+            serde_json::to_writer_pretty(&mut *w, &json)
+                .map_err(|e| Error::other(&path, "write", e.to_string()))?;
+            w.write_all(b"\n")
+                .map_err(|e| Error::other(&path, "write", e.to_string()))
+        })?;
     }
     if stats.interrupted {
         eprintln!(

@@ -455,3 +455,77 @@ fn progress_lines_off_a_terminal() {
         "{none}"
     );
 }
+
+/// `--stats-json` writes the render's figures, counts as integers, one file per frame
+/// (frame tokens expand as in `-o`).
+#[test]
+fn stats_json_has_the_figures_as_integers() {
+    let dir = temp_dir("stats-json");
+    let out = dir.join("s.exr");
+    let stats = dir.join("s.json");
+    lucerna_ok(&[
+        "render",
+        "-o",
+        out.to_str().unwrap(),
+        "--spp",
+        "4",
+        "--resolution",
+        "40x30",
+        "--stats-json",
+        stats.to_str().unwrap(),
+        "-q",
+        "--progress",
+        "none",
+    ]);
+    let v: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    for key in [
+        "width",
+        "height",
+        "spp",
+        "samples",
+        "rays_closest",
+        "rays_shadow",
+        "nan_inf_discarded",
+        "samples_per_second",
+        "threads",
+    ] {
+        assert!(v[key].is_u64(), "{key} is not an integer: {}", v[key]);
+    }
+    assert_eq!(
+        (v["width"].as_u64(), v["height"].as_u64()),
+        (Some(40), Some(30))
+    );
+    assert_eq!(v["samples"].as_u64(), Some(40 * 30 * 4));
+    assert_eq!(v["outputs"][0].as_str(), out.to_str());
+    assert!(v["render_seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(v["interrupted"], false);
+    let scene = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/assets/gltf/RiggedSimple/RiggedSimple.gltf"
+    );
+    let frames = dir.join("f.{frame}.exr");
+    let per_frame = dir.join("f.{frame}.json");
+    lucerna_ok(&[
+        "render",
+        scene,
+        "--frames",
+        "1-2",
+        "-o",
+        frames.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--resolution",
+        "16x16",
+        "--stats-json",
+        per_frame.to_str().unwrap(),
+        "-q",
+        "--progress",
+        "none",
+    ]);
+    for f in ["0001", "0002"] {
+        let v: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join(format!("f.{f}.json"))).unwrap())
+                .unwrap();
+        assert_eq!(v["frame"].as_f64(), Some(f.parse::<f64>().unwrap()));
+    }
+}
