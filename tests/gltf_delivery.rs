@@ -5,6 +5,8 @@
 
 mod common;
 
+use common::scenes::world_positions;
+
 use common::gltf_builder::Builder;
 use common::scenes::{rel_mse, render};
 use glam::{DMat4, DQuat, DVec3, Vec3};
@@ -22,19 +24,6 @@ fn asset(path: &str) -> PathBuf {
 
 fn load(path: &Path) -> Scene {
     ingest::load(path, &Default::default()).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn world_positions(scene: &Scene) -> Vec<DVec3> {
-    scene
-        .instances
-        .iter()
-        .flat_map(|i| {
-            scene.meshes[i.mesh as usize]
-                .positions
-                .iter()
-                .map(|p| i.transform.transform_point3(p.as_dvec3()))
-        })
-        .collect()
 }
 
 fn bounds(scene: &Scene) -> (DVec3, DVec3) {

@@ -3,6 +3,8 @@
 
 mod common;
 
+use common::scenes::world_positions;
+
 use common::gltf_builder::{Builder, png_rgba};
 use common::scenes::render;
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
@@ -43,19 +45,6 @@ mod tempdir {
 
 fn load(path: &Path) -> Scene {
     ingest::load(path, &Default::default()).unwrap_or_else(|e| panic!("{e}"))
-}
-
-fn world_positions(scene: &Scene) -> Vec<DVec3> {
-    scene
-        .instances
-        .iter()
-        .flat_map(|i| {
-            scene.meshes[i.mesh as usize]
-                .positions
-                .iter()
-                .map(|p| i.transform.transform_point3(p.as_dvec3()))
-        })
-        .collect()
 }
 
 #[test]

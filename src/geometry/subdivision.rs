@@ -446,19 +446,25 @@ fn refine_once(
         }
     }
     let child_edges = build_edges(&child);
-    child.edge_sharpness = child_edges
+    child.edge_sharpness = edge_sharpness(&child_edges, &half_sharpness);
+    (child, child_edges)
+}
+
+/// Each edge's sharpness: infinite on a boundary (or non-manifold) edge, else the value
+/// `creases` gives its endpoints' key, else smooth.
+fn edge_sharpness(edges: &Edges, creases: &std::collections::HashMap<u64, f32>) -> Vec<f32> {
+    edges
         .ends
         .iter()
         .enumerate()
         .map(|(e, [a, b])| {
-            if child_edges.faces(e).len() != 2 {
+            if edges.faces(e).len() != 2 {
                 INFINITELY_SHARP
             } else {
-                half_sharpness.get(&key(*a, *b)).copied().unwrap_or(0.0)
+                creases.get(&key(*a, *b)).copied().unwrap_or(0.0)
             }
         })
-        .collect();
-    (child, child_edges)
+        .collect()
 }
 
 fn key(a: u32, b: u32) -> u64 {
@@ -597,18 +603,7 @@ pub fn refine(surface: &SubdivisionSurface, level: u32, name: &str, material: u3
         .iter()
         .map(|&([a, b], s)| (key(a, b), s))
         .collect();
-    cage.edge_sharpness = edges
-        .ends
-        .iter()
-        .enumerate()
-        .map(|(e, [a, b])| {
-            if edges.faces(e).len() != 2 {
-                INFINITELY_SHARP
-            } else {
-                creases.get(&key(*a, *b)).copied().unwrap_or(0.0)
-            }
-        })
-        .collect();
+    cage.edge_sharpness = edge_sharpness(&edges, &creases);
     for _ in 0..level {
         (cage, edges) = refine_once(&cage, &edges, surface.scheme, surface.boundary);
     }

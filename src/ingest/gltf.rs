@@ -47,6 +47,15 @@ pub const SUPPORTED_EXTENSIONS: &[&str] = &[
     "KHR_texture_transform",
 ];
 
+/// Component types of rotation and morph-weight outputs: floats or normalized integers.
+const FLOAT_OR_NORMALIZED: &[DataType] = &[
+    DataType::F32,
+    DataType::I8,
+    DataType::U8,
+    DataType::I16,
+    DataType::U16,
+];
+
 /// Deepest node hierarchy accepted (deeper ones are almost certainly malicious).
 const MAX_NODE_DEPTH: usize = 1024;
 
@@ -485,17 +494,7 @@ impl<'a> Importer<'a> {
                         ("translation", Dimensions::Vec3, &[DataType::F32][..])
                     }
                     Property::Scale => ("scale", Dimensions::Vec3, &[DataType::F32][..]),
-                    Property::Rotation => (
-                        "rotation",
-                        Dimensions::Vec4,
-                        &[
-                            DataType::F32,
-                            DataType::I8,
-                            DataType::U8,
-                            DataType::I16,
-                            DataType::U16,
-                        ][..],
-                    ),
+                    Property::Rotation => ("rotation", Dimensions::Vec4, FLOAT_OR_NORMALIZED),
                     Property::MorphTargetWeights => {
                         let node = channel.target().node().index();
                         match animated.get(&(node, "weights")) {
@@ -520,20 +519,7 @@ impl<'a> Importer<'a> {
                         animated.insert((node, name), animation.index());
                     }
                 }
-                self.check_accessor(
-                    &sampler.input(),
-                    &format!("{element} input"),
-                    &[Dimensions::Scalar],
-                    &[DataType::F32],
-                    false,
-                )?;
-                self.check_accessor(
-                    &sampler.output(),
-                    &format!("{element} output"),
-                    &[dims],
-                    types,
-                    true,
-                )?;
+                self.check_sampler(&sampler, &element, dims, types)?;
                 let buffers = &self.buffers;
                 let reader = channel.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
                 let unreadable = || self.err(&element, "the sampler's data cannot be read");
@@ -600,15 +586,15 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
-    /// Samples a morph target weights channel at `time` into [`Importer::morph_weights`].
-    fn sample_weights(
-        &mut self,
-        channel: &gltf::animation::Channel,
+    /// Checks an animation sampler's accessors: float key times, and outputs of `dims` and
+    /// one of `types` (integers normalized).
+    fn check_sampler(
+        &self,
+        sampler: &gltf::animation::Sampler,
         element: &str,
-        interpolation: Interpolation,
-        time: f64,
+        dims: Dimensions,
+        types: &[DataType],
     ) -> Result<()> {
-        let sampler = channel.sampler();
         self.check_accessor(
             &sampler.input(),
             &format!("{element} input"),
@@ -619,16 +605,22 @@ impl<'a> Importer<'a> {
         self.check_accessor(
             &sampler.output(),
             &format!("{element} output"),
-            &[Dimensions::Scalar],
-            &[
-                DataType::F32,
-                DataType::I8,
-                DataType::U8,
-                DataType::I16,
-                DataType::U16,
-            ],
+            &[dims],
+            types,
             true,
-        )?;
+        )
+    }
+
+    /// Samples a morph target weights channel at `time` into [`Importer::morph_weights`].
+    fn sample_weights(
+        &mut self,
+        channel: &gltf::animation::Channel,
+        element: &str,
+        interpolation: Interpolation,
+        time: f64,
+    ) -> Result<()> {
+        let sampler = channel.sampler();
+        self.check_sampler(&sampler, element, Dimensions::Scalar, FLOAT_OR_NORMALIZED)?;
         let buffers = &self.buffers;
         let reader = channel.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
         let unreadable = || self.err(element, "the sampler's data cannot be read");

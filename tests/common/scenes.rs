@@ -305,3 +305,17 @@ pub fn make_the_light_a_screen(scene: &mut Scene) {
         transform: None,
     });
 }
+
+/// Every instanced vertex in world space.
+pub fn world_positions(scene: &Scene) -> Vec<glam::DVec3> {
+    scene
+        .instances
+        .iter()
+        .flat_map(|i| {
+            scene.meshes[i.mesh as usize]
+                .positions
+                .iter()
+                .map(|p| i.transform.transform_point3(p.as_dvec3()))
+        })
+        .collect()
+}

@@ -185,6 +185,15 @@ def flatten(stage_path, variant, out):
     return principled
 
 
+def write_sheet(tiles, path):
+    """Rows of display-encoded tiles, stacked, as an 8-bit PNG."""
+    import OpenImageIO as oiio
+    sheet = np.concatenate(tiles, 0).astype(np.float32)
+    buf = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
+    buf.set_pixels(oiio.ROI(), sheet)
+    buf.write(str(path))
+
+
 def read_exr(path):
     import OpenImageIO as oiio
     return oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
@@ -220,8 +229,6 @@ def main():
 
 
 def report(rows, out):
-    import OpenImageIO as oiio
-
     lines = ["| variant | luminance lucerna/Cycles (image) | (ball) | relMSE (ball) |", "|---|---|---|---|"]
     tiles = []
     w = np.array([0.2126, 0.7152, 0.0722])
@@ -235,10 +242,7 @@ def report(rows, out):
         rel = float(np.mean((ba - bb) ** 2 / (bb ** 2 + 1e-2)))
         lines.append(f"| {variant} | {la / lb:.3f} | {(ba @ w).mean() / (bb @ w).mean():.3f} | {rel:.4f} |")
         tiles.append(np.concatenate([np.clip(a, 0, 1), np.clip(b, 0, 1)], 1) ** (1 / 2.2))
-    sheet = np.concatenate(tiles, 0).astype(np.float32)
-    buf = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
-    buf.set_pixels(oiio.ROI(), sheet)
-    buf.write(str(out / "shaderball_contact_sheet.png"))
+    write_sheet(tiles, out / "shaderball_contact_sheet.png")
     (out / "shaderball.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

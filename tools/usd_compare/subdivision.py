@@ -21,6 +21,7 @@ import subprocess
 from pathlib import Path
 
 import numpy as np
+from shaderball import read_exr, write_sheet
 
 ROOT = Path(__file__).resolve().parents[2]
 RES = 256
@@ -114,11 +115,6 @@ def wrap(stage_path, out):
     stage.GetRootLayer().Save()
 
 
-def read_exr(path):
-    import OpenImageIO as oiio
-    return oiio.ImageBuf(str(path)).get_pixels(oiio.FLOAT)[..., :3].astype(np.float64)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("stages", nargs="+")
@@ -158,8 +154,6 @@ def object_mask(exr):
 
 
 def report(rows, out):
-    import OpenImageIO as oiio
-
     lines = ["| stage | luminance lucerna/Cycles (object) | relMSE (object) |", "|---|---|---|"]
     tiles = []
     w = np.array([0.2126, 0.7152, 0.0722])
@@ -170,10 +164,7 @@ def report(rows, out):
         rel = float(np.mean((oa - ob) ** 2 / (ob ** 2 + 1e-2)))
         lines.append(f"| {name} | {(oa @ w).mean() / (ob @ w).mean():.3f} | {rel:.4f} |")
         tiles.append(np.concatenate([np.clip(a, 0, 1), np.clip(b, 0, 1)], 1) ** (1 / 2.2))
-    sheet = np.concatenate(tiles, 0).astype(np.float32)
-    buf = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
-    buf.set_pixels(oiio.ROI(), sheet)
-    buf.write(str(out / "subdivision_contact_sheet.png"))
+    write_sheet(tiles, out / "subdivision_contact_sheet.png")
     (out / "subdivision.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 
