@@ -22,9 +22,11 @@
 
 use crate::error::{Error, Result};
 use crate::film::exr;
+use crate::job::RenderJob;
 use crate::render::RenderOptions;
 use crate::sequence::{FrameList, output_path};
 use serde::{Deserialize, Serialize};
+use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -87,9 +89,9 @@ pub struct FrameReport {
     pub output: PathBuf,
     pub status: Status,
     pub seconds: f64,
-    pub samples: Option<f64>,
-    pub spp: Option<f64>,
-    pub nan_inf_discarded: Option<f64>,
+    pub samples: Option<u64>,
+    pub spp: Option<u32>,
+    pub nan_inf_discarded: Option<u64>,
     pub exit_code: Option<i32>,
     pub error: Option<String>,
     /// Why an existing output was rendered again (settings changed, unreadable, ...).
@@ -135,7 +137,24 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
         settings.extend(render.settings.clone());
         let settings_text =
             toml::to_string(&settings).map_err(|e| bad("settings", e.to_string()))?;
-        RenderOptions::command_line()
+        for key in [
+            "scene",
+            "output",
+            "frames",
+            "frame",
+            "camera",
+            "resolution",
+            "fps",
+            "resume",
+        ] {
+            if settings.contains_key(key) {
+                return Err(bad(
+                    "settings",
+                    format!("{key} is a key of the [[render]] entry, not of its settings"),
+                ));
+            }
+        }
+        RenderJob::default()
             .load_settings(&settings_text)
             .map_err(|e| bad("settings", e))?;
         let frames = match (&render.frames, render.frame) {
@@ -176,7 +195,8 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
         for frame in frames {
             let output =
                 output_path(&pattern, frame, &stem, &camera).map_err(|e| bad("output", e))?;
-            let mut args: Vec<String> = vec!["render".into(), "--quiet".into()];
+            let mut args: Vec<String> =
+                vec!["render".into(), "--quiet".into(), "--log-timestamps".into()];
             if let Some(s) = &scene {
                 args.push(s.to_string_lossy().into_owned());
             }
@@ -287,15 +307,17 @@ fn output_state(task: &Task) -> OutputState {
         Ok(read) => read,
         Err(e) => return OutputState::Stale(format!("the existing file is unreadable ({e})")),
     };
-    let mut job = RenderOptions::command_line();
+    let mut asked = RenderJob::default();
     let mut made = RenderOptions::command_line();
-    if job.load_settings(&task.settings).is_err()
+    if asked.load_settings(&task.settings).is_err()
+        || asked.finish().is_err()
         || made
             .load_settings(header.text("lucerna/settings").unwrap_or_default())
             .is_err()
     {
         return OutputState::Stale("its settings cannot be read".into());
     }
+    let job = asked.options;
     let complete = header.number("lucerna/complete") == Some(1.0);
     if let Some(what) = job.differs_from(&made) {
         return OutputState::Stale(format!("its {what} differ from the job's"));
@@ -334,9 +356,10 @@ fn output_state(task: &Task) -> OutputState {
     }
 }
 
-/// Runs `task` with the `lucerna` binary `exe`; `stop` (set by a signal) forwards SIGTERM
+/// Runs `task` with the `lucerna` command `exe` (program and leading arguments); `stop`
+/// (set by a signal) forwards SIGTERM
 /// to the child, which writes its checkpoint.
-fn run_task(exe: &Path, task: &Task, stop: &AtomicBool) -> FrameReport {
+fn run_task(exe: &[OsString], task: &Task, stop: &AtomicBool) -> FrameReport {
     let scene = task
         .scene
         .as_ref()
@@ -363,10 +386,7 @@ fn run_task(exe: &Path, task: &Task, stop: &AtomicBool) -> FrameReport {
         match state {
             OutputState::Checkpoint => args.push("--resume".into()),
             OutputState::Stale(why) => {
-                eprintln!(
-                    "lucerna: batch: rendering {} again: {why}",
-                    task.output.display()
-                );
+                log::info!("batch: rendering {} again: {why}", task.output.display());
                 report.note = Some(format!("rendered again: {why}"));
             }
             _ => {}
@@ -391,9 +411,9 @@ fn run_task(exe: &Path, task: &Task, stop: &AtomicBool) -> FrameReport {
     if report.status != Status::Failed
         && let Ok(header) = exr::read_header(&task.output)
     {
-        report.samples = header.number("lucerna/samples");
-        report.spp = header.number("lucerna/spp");
-        report.nan_inf_discarded = header.number("lucerna/nan_inf_discarded");
+        report.samples = header.number("lucerna/samples").map(|n| n as u64);
+        report.spp = header.number("lucerna/spp").map(|n| n as u32);
+        report.nan_inf_discarded = header.number("lucerna/nan_inf_discarded").map(|n| n as u64);
     }
     report
 }
@@ -401,7 +421,7 @@ fn run_task(exe: &Path, task: &Task, stop: &AtomicBool) -> FrameReport {
 /// Starts `exe args` with its output in `log` and waits for it, passing SIGTERM on when
 /// `stop` is set.
 fn spawn_and_wait(
-    exe: &Path,
+    exe: &[OsString],
     args: &[String],
     log: &Path,
     stop: &AtomicBool,
@@ -410,17 +430,22 @@ fn spawn_and_wait(
     let mut file =
         std::fs::File::create(log).map_err(|e| format!("cannot write {}: {e}", log.display()))?;
     let quoted: Vec<String> = args.iter().map(|a| format!("{a:?}")).collect();
-    let _ = writeln!(file, "$ {} {}", exe.display(), quoted.join(" "));
+    let program: Vec<String> = exe
+        .iter()
+        .map(|a| a.to_string_lossy().into_owned())
+        .collect();
+    let _ = writeln!(file, "$ {} {}", program.join(" "), quoted.join(" "));
     let err = file
         .try_clone()
         .map_err(|e| format!("cannot write {}: {e}", log.display()))?;
-    let mut child = Command::new(exe)
+    let mut child = Command::new(&exe[0])
+        .args(&exe[1..])
         .args(args)
         .stdin(Stdio::null())
         .stdout(file)
         .stderr(err)
         .spawn()
-        .map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
+        .map_err(|e| format!("cannot start {}: {e}", program.join(" ")))?;
     let mut forwarded = false;
     loop {
         if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
@@ -440,13 +465,21 @@ fn last_error_line(log: &Path) -> Option<String> {
     let text = std::fs::read_to_string(log).ok()?;
     text.lines()
         .rev()
-        .find_map(|l| l.strip_prefix("error: "))
+        .find_map(|l| {
+            // After the timestamp `--log-timestamps` puts first.
+            let l = match l.split_once(' ') {
+                Some((stamp, rest)) if stamp.ends_with('Z') && stamp.contains('T') => rest,
+                _ => l,
+            };
+            l.strip_prefix("error: ")
+        })
         .map(str::to_string)
 }
 
-/// Runs every task in order with the `lucerna` binary `exe`, printing a line per frame;
+/// Runs every task in order with the `lucerna` command `exe` (the binary, or a Python
+/// running the package's CLI, with its leading arguments), printing a line per frame;
 /// stops launching frames once `stop` is set.
-pub fn run(job: &Path, exe: &Path, tasks: &[Task], stop: &AtomicBool) -> Summary {
+pub fn run(job: &Path, exe: &[OsString], tasks: &[Task], stop: &AtomicBool) -> Summary {
     let start = Instant::now();
     let mut frames = Vec::new();
     for (i, task) in tasks.iter().enumerate() {
@@ -464,7 +497,8 @@ pub fn run(job: &Path, exe: &Path, tasks: &[Task], stop: &AtomicBool) -> Summary
             ),
         };
         eprintln!(
-            "[{}/{}] {}: {what}",
+            "{}[{}/{}] {}: {what}",
+            crate::logging::stamp(),
             i + 1,
             tasks.len(),
             report.output.display()

@@ -11,6 +11,9 @@
 //!   at its next tile and writes a checkpoint that `--resume` continues. A second signal ends
 //!   the process at once.
 //!
+//! - SIGUSR1 asks for a snapshot: the render writes its checkpoint after the pass under way
+//!   and goes on ([`take_snapshot_request`]); outside sampling it is ignored.
+//!
 //! The handler runs on a thread of its own (signal-hook's iterator), so it may take locks and
 //! print; library users that never call [`install`] keep the default behaviour of signals.
 
@@ -24,6 +27,8 @@ struct State {
     received: AtomicUsize,
     /// Number of live [`Deferred`] guards: while positive, the first signal only stops.
     deferred: AtomicUsize,
+    /// SIGUSR1 received and not yet answered.
+    snapshot: AtomicBool,
     /// What to undo before a signal ends the process, with the id of its guard.
     cleanups: Mutex<Vec<(u64, Cleanup)>>,
 }
@@ -35,6 +40,7 @@ fn state() -> &'static State {
         stop: Arc::new(AtomicBool::new(false)),
         received: AtomicUsize::new(0),
         deferred: AtomicUsize::new(0),
+        snapshot: AtomicBool::new(false),
         cleanups: Mutex::new(Vec::new()),
     })
 }
@@ -45,8 +51,8 @@ pub fn install() -> Result<Arc<AtomicBool>> {
     static INSTALLED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     INSTALLED
         .get_or_init(|| {
-            use signal_hook::consts::{SIGINT, SIGTERM};
-            let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM])
+            use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
+            let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1])
                 .map_err(|e| e.to_string())?;
             std::thread::Builder::new()
                 .name("lucerna-signals".into())
@@ -65,6 +71,10 @@ pub fn install() -> Result<Arc<AtomicBool>> {
 
 fn handle(signal: i32) {
     let s = state();
+    if signal == signal_hook::consts::SIGUSR1 {
+        s.snapshot.store(true, Ordering::SeqCst);
+        return;
+    }
     let first = s.received.swap(signal as usize, Ordering::SeqCst) == 0;
     s.stop.store(true, Ordering::SeqCst);
     if first && s.deferred.load(Ordering::SeqCst) > 0 {
@@ -107,6 +117,11 @@ fn clean_up() {
 /// The signal received (0 if none).
 pub fn received() -> i32 {
     state().received.load(Ordering::SeqCst) as i32
+}
+
+/// Whether SIGUSR1 asked for a snapshot since the last call (which answers it).
+pub fn take_snapshot_request() -> bool {
+    state().snapshot.swap(false, Ordering::SeqCst)
 }
 
 /// Whether a signal has been received.

@@ -11,15 +11,20 @@
 
 pub mod batch;
 pub mod camera;
+pub mod cli;
 pub mod color;
+pub mod commands;
 pub mod error;
 pub mod files;
 pub mod film;
 pub mod geometry;
 pub mod ingest;
+pub mod install;
 pub mod integrator;
 pub mod interrupt;
+pub mod job;
 pub mod light;
+pub mod logging;
 pub mod material;
 pub mod memory;
 pub mod merge;

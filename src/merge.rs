@@ -249,8 +249,8 @@ pub fn merge(parts: &[Part]) -> Result<(Planes, Header)> {
     }
     let uncovered = cover.iter().filter(|&&c| c == 0).count();
     if uncovered > 0 {
-        eprintln!(
-            "warning: merge: {uncovered} pixels of the window {} are in no input; they are black",
+        log::warn!(
+            "merge: {uncovered} pixels of the window {} are in no input; they are black",
             window.describe()
         );
     }

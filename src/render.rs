@@ -566,7 +566,19 @@ pub fn render(world: &World, options: &RenderOptions) -> (Film, RenderStats) {
 /// Renders into `film`: empty (from [`RenderOptions::film`]) or restored from a
 /// checkpoint, whose pixels continue their sample sequences where they stopped, so that
 /// the result is the image an uninterrupted render gives (up to float rounding).
-pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (Film, RenderStats) {
+pub fn render_into(world: &World, options: &RenderOptions, film: Film) -> (Film, RenderStats) {
+    render_with(world, options, film, &mut |_, _| {})
+}
+
+/// [`render_into`], calling `after_pass` with the film and the figures so far after every
+/// pass (passes take at most 16 samples per pixel, or a time budget's share): where
+/// periodic checkpoints and snapshots are written.
+pub fn render_with(
+    world: &World,
+    options: &RenderOptions,
+    mut film: Film,
+    after_pass: &mut dyn FnMut(&Film, &RenderStats),
+) -> (Film, RenderStats) {
     let plan = options.render_plan(world);
     let adaptive = options.noise_threshold.is_some();
     let range = options.sample_range();
@@ -649,7 +661,11 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
                     let samples = counts_samples.then(|| bar.position() - before);
                     let spp =
                         counts_samples.then(|| (bar.position() as f64 / pixels as f64, target));
-                    eprintln!("{}", lines.line(done, elapsed.as_secs_f64(), samples, spp));
+                    eprintln!(
+                        "{}{}",
+                        crate::logging::stamp(),
+                        lines.line(done, elapsed.as_secs_f64(), samples, spp)
+                    );
                 }
             }))
         }
@@ -754,6 +770,20 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         if let PassSamples::UpTo(total) = pass {
             done = total;
         }
+        if !interrupted() {
+            after_pass(
+                &film,
+                &RenderStats {
+                    seconds: start.elapsed().as_secs_f64(),
+                    spp: film.max_samples(),
+                    samples: film.total_samples(),
+                    rays: *counts.lock().expect("no thread panicked holding the lock"),
+                    discarded: film.discarded(),
+                    interrupted: false,
+                    learned_split,
+                },
+            );
+        }
     }
     reporting.store(false, Ordering::Relaxed);
     if let Some(reporter) = reporter {
@@ -767,7 +797,8 @@ pub fn render_into(world: &World, options: &RenderOptions, mut film: Film) -> (F
         let spp = (options.time.is_none() && !adaptive)
             .then(|| (film.total_samples() as f64 / pixels as f64, target));
         eprintln!(
-            "{}",
+            "{}{}",
+            crate::logging::stamp(),
             lines.line(1.0, start.elapsed().as_secs_f64(), Some(samples), spp)
         );
     }

@@ -235,6 +235,12 @@ pub fn write_layers(
     extra: &[Aov],
     keep: impl Fn(Aov) -> bool,
 ) -> Result<()> {
+    write_planes(path, film_planes(film, extra, keep), header)
+}
+
+/// The planes [`write_layers`] writes: the film's layers that `keep` accepts (the beauty
+/// always) and `extra` (say, the sample counts of a checkpoint).
+pub fn film_planes(film: &Film, extra: &[Aov], keep: impl Fn(Aov) -> bool) -> Planes {
     let mut channels = Vec::new();
     let mut aovs: Vec<Aov> = film.aovs.iter().collect();
     aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
@@ -247,12 +253,11 @@ pub fn write_layers(
                 .zip(film.planes(aov)),
         );
     }
-    let planes = Planes {
+    Planes {
         display: film.display,
         window: film.window,
         channels,
-    };
-    write_planes(path, planes, header)
+    }
 }
 
 /// Makes every value finite, as no NaN or infinity may reach a file: infinities (sums that
@@ -284,8 +289,8 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
     let replaced = make_finite(&mut planes.channels);
     let mut header = header.clone();
     if replaced > 0 {
-        eprintln!(
-            "lucerna: warning: {}: {replaced} values beyond float range written as the largest float (NaN as 0); lucerna/non_finite_replaced counts them",
+        log::warn!(
+            "{}: {replaced} values beyond float range written as the largest float (NaN as 0); lucerna/non_finite_replaced counts them",
             path.display()
         );
         header.set(
@@ -299,8 +304,8 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         && let Some((name, _)) = planes.channels.iter().find(|(n, _)| is_data_channel(n))
     {
         // A checkpoint's sample counts, or a data layer: never stored lossily.
-        eprintln!(
-            "lucerna: note: {}: written with ZIP compression: channel {name} holds data that {} would change",
+        log::info!(
+            "note: {}: written with ZIP compression: channel {name} holds data that {} would change",
             path.display(),
             compression
         );

@@ -4,6 +4,7 @@
 
 pub mod aov;
 pub mod crypto;
+pub mod denoise;
 pub mod exr;
 pub mod filter;
 pub mod preview;

@@ -4,10 +4,9 @@
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
 //! [--no-validate | --strict] [--variant SET=NAME]... [--purpose LIST] [--no-payloads]
-//! [--render-settings PRIM] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`. PYTHON is `$LUCERNA_PYTHON`, else
-//! the repository's `.venv` (where `tools/test.sh` installs the plugin's requirements), else
-//! `python3`; the plugin folder is `$LUCERNA_USD_PLUGIN`, else `plugins/usd` of the source tree
-//! this binary was built from (put before any `PYTHONPATH` already set).
+//! [--render-settings PRIM] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`
+//! (before any `PYTHONPATH` already set). The plugin is embedded in the binary; PYTHON and
+//! the plugin folder are found as src/install.rs says.
 //!
 //! The plugin writes into a scratch folder made by `tempfile` (a unique name, mode 0700)
 //! that is removed afterwards, also when a signal ends lucerna (src/interrupt.rs kills the
@@ -20,7 +19,7 @@ use super::{LoadOptions, tangents};
 use crate::error::{Error, Result};
 use crate::scene::{self, Scene};
 use std::io::Read;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -29,30 +28,16 @@ pub const EXTENSIONS: [&str; 4] = ["usd", "usda", "usdc", "usdz"];
 
 const ERROR_PREFIX: &str = "lucerna-usd: error: ";
 
-fn plugin_dir() -> PathBuf {
-    std::env::var_os("LUCERNA_USD_PLUGIN").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("plugins/usd"),
-        PathBuf::from,
-    )
-}
-
-fn python() -> PathBuf {
-    if let Some(p) = std::env::var_os("LUCERNA_PYTHON") {
-        return p.into();
-    }
-    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python");
-    if venv.exists() {
-        venv
-    } else {
-        "python3".into()
-    }
-}
-
 /// Converts the stage at `path` with the plugin and reads the result.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     crate::files::check_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
-    let plugin = plugin_dir();
-    let python = python();
+    let plugin = crate::install::plugin_dir()?;
+    let python = crate::install::python();
+    log::debug!(
+        "USD plugin: {} -m lucerna_usd, from {}",
+        python.display(),
+        plugin.display()
+    );
     let install = format!(
         "{} -m pip install -r {}",
         python.display(),
@@ -111,7 +96,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
             "usd plugin",
             format!(
                 "cannot run Python ({}: {e}); USD needs Python 3 with usd-core: install \
-                 python3, then `{install}` (or point LUCERNA_PYTHON at a Python that has it)",
+                 python3, then run `lucerna setup` (or `{install}`, or point LUCERNA_PYTHON \
+                 at a Python that has usd-core)",
                 python.display()
             ),
         )
@@ -174,7 +160,7 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
                 path,
                 "usd plugin",
                 format!(
-                    "usd-core or another package is missing for {}: run `{install}`",
+                    "usd-core or another package is missing for {}: run `lucerna setup` (or `{install}`)",
                     python.display()
                 ),
             ));

@@ -386,23 +386,29 @@ pub fn read_settings_toml(text: &str) -> Result<Vec<(String, String)>, String> {
     let table: toml::Table = text
         .parse()
         .map_err(|e: toml::de::Error| e.message().to_string())?;
-    table
-        .into_iter()
-        .map(|(key, value)| {
-            let text = match value {
-                toml::Value::String(s) => s,
-                toml::Value::Integer(i) => i.to_string(),
-                toml::Value::Float(f) => f.to_string(),
-                other => {
-                    return Err(format!(
-                        "{key}: expected a string or a number, got {}",
-                        other.type_str()
-                    ));
+    let scalar = |key: &str, value: toml::Value| match value {
+        toml::Value::String(s) => Ok(s),
+        toml::Value::Integer(i) => Ok(i.to_string()),
+        toml::Value::Float(f) => Ok(f.to_string()),
+        toml::Value::Boolean(b) => Ok(b.to_string()),
+        other => Err(format!(
+            "{key}: expected a string, a number or a boolean, got {}",
+            other.type_str()
+        )),
+    };
+    let mut pairs = Vec::new();
+    for (key, value) in table {
+        match value {
+            // A repeatable setting (variant, light-group): one pair per element.
+            toml::Value::Array(items) => {
+                for item in items {
+                    pairs.push((key.clone(), scalar(&key, item)?));
                 }
-            };
-            Ok((key, text))
-        })
-        .collect()
+            }
+            value => pairs.push((key.clone(), scalar(&key, value)?)),
+        }
+    }
+    Ok(pairs)
 }
 
 /// Writes `(name, textual value)` pairs as TOML.

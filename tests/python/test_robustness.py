@@ -130,12 +130,17 @@ def test_an_image_header_is_checked_against_the_memory_limit_before_decoding(tmp
 
 @pytest.mark.parametrize("kind", ["device", "directory", "fifo"])
 def test_outputs_that_are_not_files_are_refused_before_rendering(tmp_path, kind):
-    target = {"device": Path("/dev/null"), "directory": tmp_path, "fifo": tmp_path / "f"}[kind]
+    target = {"device": Path("/dev/null"), "directory": tmp_path / "d.exr",
+              "fifo": tmp_path / "f.exr"}[kind]
     if kind == "fifo":
         os.mkfifo(target)
+    elif kind == "directory":
+        target.mkdir()
     result = run("render", "-o", target, "--spp", "1", "--resolution", "8x8", timeout=20)
     assert result.returncode == 2, result.stderr
-    assert "never replaced" in result.stderr and "rendered" not in result.stderr, result.stderr
+    # /dev/null is refused for its name (not .exr) before its kind is looked at.
+    refusal = "not an .exr file" if kind == "device" else "never replaced"
+    assert refusal in result.stderr and "rendered" not in result.stderr, result.stderr
     assert Path("/dev/null").is_char_device()
 
 

@@ -468,8 +468,9 @@ def bad_values(s):
                 raise Failure(f"{what}: rejection must be one error line and no output: {text}")
             outcomes[what] = "rejected: " + lines[0].split(": ", 2)[-1]
         else:
-            warnings = [line for line in text.splitlines() if line.startswith("warning:")]
-            if not any(ch.isdigit() for line in warnings for ch in line.split(":", 2)[-1]):
+            warnings = [line.split("warning: ", 1)[1] for line in text.splitlines()
+                        if "warning: " in line]
+            if not any(ch.isdigit() for line in warnings for ch in line.split(":", 1)[-1]):
                 raise Failure(f"{what}: repaired without a counting warning: {text}")
             channels, _ = lt.read_exr(out)
             if not all(np.all(np.isfinite(c)) for c in channels.values()):

@@ -1,0 +1,5 @@
+"""`python -m lucerna ...`: the lucerna command line."""
+
+from lucerna import main
+
+main()
