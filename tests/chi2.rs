@@ -997,7 +997,7 @@ fn bsdfs_do_not_create_energy() {
     // Exempt: the glTF dielectric. Appendix B's fresnel_mix weights the diffuse base by
     // 1 - F(v·h) per direction instead of by the specular layer's albedo, so at grazing
     // angles base + layer reflect more than arrives (e.g. 1.12 at 86° for roughness 0.3,
-    // base 0.8). lucerna implements the specification exactly (see README).
+    // base 0.8). lucerna implements the specification exactly (docs/gltf.md, "Choosing the BSDF").
     // Also exempt: the layered model's dielectrics with a diffuse base, which it weighs as
     // appendix B does (and must, to agree with `gltf_pbr`). Energy is counted as flux, so light leaving a denser medium (its radiance scaled
     // by η², see `material::dielectric`) counts 1/η² of its weight.
