@@ -12,7 +12,8 @@
 //!   the process at once.
 //!
 //! - SIGUSR1 asks for a snapshot: the render writes its checkpoint after the pass under way
-//!   and goes on ([`take_snapshot_request`]); outside sampling it is ignored.
+//!   and goes on ([`take_snapshot_request`]); one received while the scene is read is
+//!   answered after the first pass, and the other commands ignore it.
 //!
 //! The handler runs on a thread of its own (signal-hook's iterator), so it may take locks and
 //! print; library users that never call [`install`] keep the default behaviour of signals.

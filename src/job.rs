@@ -153,12 +153,13 @@ fn parse_bool(value: &str) -> std::result::Result<bool, String> {
     }
 }
 
-fn positive_seconds(value: &str, most: f64) -> std::result::Result<f64, String> {
+/// A number of seconds in `least..=most`.
+fn seconds(value: &str, least: f64, most: f64) -> std::result::Result<f64, String> {
     value
         .parse::<f64>()
         .ok()
-        .filter(|s| *s > 0.0 && *s <= most)
-        .ok_or_else(|| format!("seconds in (0, {most}], got {value:?}"))
+        .filter(|s| s.is_finite() && *s > 0.0 && (least..=most).contains(s))
+        .ok_or_else(|| format!("a number of seconds from {least} to {most}, got {value:?}"))
 }
 
 /// An image size `WxH`.
@@ -170,8 +171,13 @@ pub fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
         v.trim()
             .parse::<u32>()
             .ok()
-            .filter(|&n| (1..=65536).contains(&n))
-            .ok_or_else(|| format!("sizes are integers in 1..=65536, got {v:?}"))
+            .filter(|n| (1..=crate::camera::MAX_IMAGE_SIDE).contains(n))
+            .ok_or_else(|| {
+                format!(
+                    "width and height are integers in 1..={}, got {v:?}",
+                    crate::camera::MAX_IMAGE_SIDE
+                )
+            })
     };
     Ok((parse(w)?, parse(h)?))
 }
@@ -221,8 +227,10 @@ impl RenderJob {
                 self.load.fps = value
                     .parse::<f64>()
                     .ok()
-                    .filter(|f| *f > 0.0 && *f <= 1000.0)
-                    .ok_or_else(|| format!("frames per second in (0, 1000], got {value:?}"))?
+                    .filter(|f| f.is_finite() && *f > 0.0)
+                    .ok_or_else(|| {
+                        format!("frames per second must be a positive number, got {value:?}")
+                    })?
             }
             "no-validate" => self.load.validate = !parse_bool(value)?,
             "strict" => self.load.strict = parse_bool(value)?,
@@ -232,7 +240,7 @@ impl RenderJob {
             "render-settings" => self.load.render_settings = text(),
             "material-variant" => self.load.material_variant = text(),
             "usd-timeout" => {
-                self.load.plugin_timeout = Duration::from_secs_f64(positive_seconds(value, 1e6)?)
+                self.load.plugin_timeout = Duration::from_secs_f64(seconds(value, 0.0, 1e7)?)
             }
             "resolution" => self.resolution = Some(parse_resolution(value)?),
             "camera" => self.camera = text(),
@@ -275,7 +283,7 @@ impl RenderJob {
             "ocio-view" => self.view.ocio_view = text(),
             "denoise" => self.denoise = parse_bool(value)?,
             "resume" => self.resume = parse_bool(value)?,
-            "checkpoint-interval" => self.checkpoint_interval = Some(positive_seconds(value, 1e7)?),
+            "checkpoint-interval" => self.checkpoint_interval = Some(seconds(value, 0.0, 1e7)?),
             "max-memory" => self.max_memory = Some(memory::parse_limit(value)?),
             "progress" => {
                 if !["auto", "bar", "lines", "alfred", "none"].contains(&value) {
@@ -283,7 +291,7 @@ impl RenderJob {
                 }
                 self.progress = value.into();
             }
-            "progress-interval" => self.progress_interval = positive_seconds(value, 1e6)?,
+            "progress-interval" => self.progress_interval = seconds(value, 0.05, 86_400.0)?,
             "quiet" => self.quiet = parse_bool(value)?,
             "light-group" => {
                 let mut groups = crate::light::groups::describe(&self.options.light_groups);
@@ -395,16 +403,14 @@ impl RenderJob {
         if let Some(p) = &self.output
             && !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))
         {
-            {
-                return Err(Error::bad_input(
-                    "",
-                    "--output",
-                    format!(
-                        "{} is not an .exr file: lucerna writes multi-layer OpenEXR (--preview writes a PNG of the beauty)",
-                        p.display()
-                    ),
-                ));
-            }
+            return Err(Error::bad_input(
+                "",
+                "--output",
+                format!(
+                    "{} is not an .exr file: lucerna writes multi-layer OpenEXR (--preview writes a PNG of the beauty)",
+                    p.display()
+                ),
+            ));
         }
         if let Some(p) = &self.preview
             && !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("png"))
