@@ -513,3 +513,29 @@ pub fn main_with(args: impl IntoIterator<Item = OsString>, lucerna: &[OsString])
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every option of `render` is also a settings-file key: none is "unknown" to
+    /// [`RenderJob::set`] (whatever its value's own checks say of a placeholder).
+    #[test]
+    fn every_render_option_is_a_settings_key() {
+        let definition = command();
+        let render = definition.find_subcommand("render").unwrap();
+        let mut keys = 0;
+        for arg in render.get_arguments() {
+            let key = arg.get_long().unwrap_or(arg.get_id().as_str());
+            if matches!(key, "settings" | "help" | "log-level" | "log-timestamps") {
+                continue;
+            }
+            keys += 1;
+            let value = if arg.get_action().takes_values() { "1" } else { "true" };
+            if let Err(e) = RenderJob::default().set(key, value) {
+                assert!(!e.contains("unknown setting"), "--{key}: {e}");
+            }
+        }
+        assert!(keys >= 50, "{keys}");
+    }
+}
