@@ -419,7 +419,7 @@ fn run_task(exe: &[OsString], task: &Task, stop: &AtomicBool) -> FrameReport {
 }
 
 /// Starts `exe args` with its output in `log` and waits for it, passing SIGTERM on when
-/// `stop` is set.
+/// `stop` is set and SIGUSR1 (a snapshot) when the batch receives it.
 fn spawn_and_wait(
     exe: &[OsString],
     args: &[String],
@@ -450,6 +450,11 @@ fn spawn_and_wait(
     loop {
         if let Some(status) = child.try_wait().map_err(|e| e.to_string())? {
             return Ok(status);
+        }
+        if crate::interrupt::take_snapshot_request() {
+            // SIGUSR1 to the batch: the frame being rendered writes a snapshot.
+            // SAFETY: kill(2) with the pid of a child this process has not yet reaped.
+            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGUSR1) };
         }
         if stop.load(Ordering::Relaxed) && !forwarded {
             // SAFETY: kill(2) with the pid of a child this process has not yet reaped.

@@ -72,6 +72,16 @@ enum Command {
         #[arg(short, long)]
         output: PathBuf,
     },
+    /// Add a `denoised` layer to a render (Open Image Denoise, guided by its albedo and
+    /// normal layers): for renders merged from passes or tiles, denoised whole.
+    Denoise {
+        /// The EXR (with albedo and normal layers: render with --denoise or --aov
+        /// albedo,normal).
+        input: PathBuf,
+        /// Where to write the result. [default: replace INPUT]
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
     /// Write a scene as a lucerna scene file (a JSON manifest and a binary buffer beside it),
     /// exactly as the renderer sees it.
     Convert {
@@ -438,7 +448,10 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
         cli.log_timestamps,
     );
     let (name, sub) = matches.subcommand().expect("a subcommand is required");
-    if matches!(name, "render" | "inspect" | "convert" | "merge" | "batch") {
+    if matches!(
+        name,
+        "render" | "inspect" | "convert" | "merge" | "batch" | "denoise"
+    ) {
         crate::interrupt::install()?;
     }
     let definition = command();
@@ -466,6 +479,10 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
             crate::memory::set_process_limit(crate::memory::default_limit());
             let load = load_from(sub, sub_definition)?;
             crate::commands::convert(&scene, &output, &load)?;
+            Ok(0)
+        }
+        Command::Denoise { input, output } => {
+            crate::commands::denoise(&input, output.as_deref())?;
             Ok(0)
         }
         Command::Merge { inputs, output } => {
@@ -531,7 +548,11 @@ mod tests {
                 continue;
             }
             keys += 1;
-            let value = if arg.get_action().takes_values() { "1" } else { "true" };
+            let value = if arg.get_action().takes_values() {
+                "1"
+            } else {
+                "true"
+            };
             if let Err(e) = RenderJob::default().set(key, value) {
                 assert!(!e.contains("unknown setting"), "--{key}: {e}");
             }

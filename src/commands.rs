@@ -55,6 +55,52 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<()> {
     Ok(())
 }
 
+/// `lucerna denoise`: adds (or replaces) the `denoised` layer of the EXR at `input`, from
+/// its beauty, albedo and normal layers, and writes it to `output` (the input itself,
+/// replaced atomically, when `None`): for renders merged from passes or tiles, which are
+/// denoised whole.
+pub fn denoise(input: &Path, output: Option<&Path>) -> Result<()> {
+    use film::denoise::{Denoiser, Inputs, LAYER, albedo_guide, deinterleave, interleave};
+    let output = output.unwrap_or(input);
+    crate::files::check_output(output, "--output")?;
+    let (mut planes, header) = film::exr::read(input)?;
+    let channel = |names: &[&str]| -> Result<Vec<Vec<f32>>> {
+        names
+            .iter()
+            .map(|n| {
+                planes.channel(n).map(<[f32]>::to_vec).ok_or_else(|| {
+                    Error::bad_input(
+                        input,
+                        "channels",
+                        format!(
+                            "no channel {n}: render with --denoise, or with --aov albedo,normal"
+                        ),
+                    )
+                })
+            })
+            .collect()
+    };
+    let beauty = channel(&["R", "G", "B", "A"])?;
+    let albedo = channel(&["albedo.R", "albedo.G", "albedo.B"])?;
+    let normal = channel(&["normal.X", "normal.Y", "normal.Z"])?;
+    let denoiser = Denoiser::new()?;
+    let rgb = denoiser.denoise(&Inputs {
+        width: planes.window.width as usize,
+        height: planes.window.height as usize,
+        beauty: &interleave(&beauty),
+        albedo: &albedo_guide(&albedo, &beauty),
+        normal: &interleave(&normal),
+    })?;
+    let prefix = format!("{LAYER}.");
+    planes.channels.retain(|(n, _)| !n.starts_with(&prefix));
+    for (c, plane) in ["R", "G", "B"].iter().zip(deinterleave(&rgb)) {
+        planes.channels.push((format!("{prefix}{c}"), plane));
+    }
+    film::exr::write_planes(output, planes, &header)?;
+    log::info!("wrote {} with a denoised layer", output.display());
+    Ok(())
+}
+
 /// `lucerna batch`: runs a job file's renders with `lucerna` (the command that runs the
 /// CLI: this binary, or a Python with the package), writes the summary; returns the exit
 /// code (0, 1 if a frame failed, 128 + signal if interrupted).

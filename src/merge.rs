@@ -255,7 +255,21 @@ pub fn merge(parts: &[Part]) -> Result<(Planes, Header)> {
         );
     }
     let mut channels = Vec::new();
+    let denoised = format!("{}.", crate::film::denoise::LAYER);
+    if parts[0]
+        .planes
+        .channels
+        .iter()
+        .any(|(n, _)| n.starts_with(&denoised))
+    {
+        log::info!(
+            "merge: the parts' denoised layers are left out (a mean of denoised parts is not the denoised whole): run `lucerna denoise` on the merged file"
+        );
+    }
     for (name, _) in &parts[0].planes.channels {
+        if name.starts_with(&denoised) {
+            continue;
+        }
         let mut out = vec![0f64; n];
         let mut seen = vec![false; n];
         let beauty = name

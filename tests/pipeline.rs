@@ -337,3 +337,30 @@ fn sigusr1_writes_a_snapshot_and_the_render_goes_on() {
     assert!(err.contains("checkpoint:"), "{err}");
     assert_eq!(checkpoint_facts(&out).0, 1);
 }
+
+/// SIGUSR1 sent to `lucerna batch` reaches the frame being rendered, which writes a
+/// snapshot and goes on.
+#[test]
+fn sigusr1_to_a_batch_reaches_its_render() {
+    let dir = temp_dir("batch-sigusr1");
+    let job = dir.join("job.toml");
+    std::fs::write(
+        &job,
+        "[settings]\nspp = 1024\nprogress = \"none\"\n\n[[render]]\noutput = \"b.exr\"\nresolution = \"64x64\"\n",
+    )
+    .unwrap();
+    let out = dir.join("b.exr");
+    let caught = dir.join("caught.exr");
+    let mut batch = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["batch", job.to_str().unwrap()])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    // SAFETY: kill(2) with the pid of a child not yet reaped.
+    unsafe { libc::kill(batch.id() as libc::pid_t, libc::SIGUSR1) };
+    assert!(catch_checkpoint(&mut batch, &out, &caught), "no snapshot");
+    assert_eq!(checkpoint_facts(&caught).0, 0);
+    assert!(batch.wait().unwrap().success());
+    assert_eq!(checkpoint_facts(&out).0, 1);
+}

@@ -79,6 +79,12 @@ def merge(inputs: list[str | os.PathLike], output: str | os.PathLike) -> None:
     _native.merge([os.fspath(p) for p in inputs], os.fspath(output))
 
 
+def denoise(input: str | os.PathLike, output: str | os.PathLike | None = None) -> None:
+    """Adds the `denoised` layer to a render with albedo and normal layers (`lucerna
+    denoise`), writing `output` or replacing `input`."""
+    _native.denoise(os.fspath(input), None if output is None else os.fspath(output))
+
+
 def main(argv: list[str] | None = None) -> int:
     """The `lucerna` command line."""
     args = ["lucerna", *(sys.argv[1:] if argv is None else argv)]

@@ -160,6 +160,13 @@ fn merge(inputs: Vec<PathBuf>, output: PathBuf) -> PyResult<()> {
     lucerna::commands::merge(&inputs, &output).map_err(to_python)
 }
 
+/// `lucerna denoise`.
+#[pyfunction]
+#[pyo3(signature = (input, output=None))]
+fn denoise(input: PathBuf, output: Option<PathBuf>) -> PyResult<()> {
+    lucerna::commands::denoise(&input, output.as_deref()).map_err(to_python)
+}
+
 /// `lucerna convert`.
 #[pyfunction]
 #[pyo3(signature = (scene, output, settings))]
@@ -186,6 +193,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(render, m)?)?;
     m.add_function(wrap_pyfunction!(inspect, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(denoise, m)?)?;
     m.add_function(wrap_pyfunction!(convert, m)?)?;
     m.add_function(wrap_pyfunction!(cli, m)?)?;
     Ok(())

@@ -98,3 +98,27 @@ def test_preview_view_transforms(tmp_path):
     # Checked before rendering: exit 2 and no EXR.
     assert bad.returncode == 2 and "no display 'Cinema'" in bad.stderr, bad.stderr
     assert not (tmp_path / "b.exr").exists()
+
+
+def test_merged_passes_are_denoised_whole(tmp_path):
+    """Passes rendered with --denoise merge without their denoised layers; `lucerna denoise`
+    then denoises the merged render."""
+    parts = []
+    for k in (1, 2):
+        out, _ = render(tmp_path, None, 16, 1, "--denoise", "--pass", f"{k}/2")
+        part = tmp_path / f"part{k}.exr"
+        out.rename(part)
+        parts.append(str(part))
+    merged = tmp_path / "merged.exr"
+    done = subprocess.run([BIN, "merge", *parts, "-o", str(merged)], capture_output=True, text=True)
+    assert done.returncode == 0 and "left out" in done.stderr, done.stderr
+    assert "denoised.R" not in read_exr(merged)[0]
+    done = subprocess.run([BIN, "denoise", str(merged)], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    channels = read_exr(merged)[0]
+    reference = rgb(read_exr(render(tmp_path, None, 1024, 2)[0])[0])
+    assert relmse(rgb(channels, "denoised"), reference) < 0.4 * relmse(rgb(channels), reference)
+    # A render without the guides is refused, naming what is missing.
+    plain, _ = render(tmp_path, None, 2, 1)
+    done = subprocess.run([BIN, "denoise", str(plain)], capture_output=True, text=True)
+    assert done.returncode == 2 and "albedo" in done.stderr, done.stderr
