@@ -74,13 +74,15 @@ def test_preview_view_transforms(tmp_path):
     """The preview through standard, agx and an OCIO display/view (OCIO's built-in ACES
     2.0 config through OpenImageIO): a bright scene clips under standard, rolls off under
     agx and ACES, and exposure darkens it."""
-    from PIL import Image
     scene = ROOT / "tests/assets/gltf/Avocado/Avocado.gltf"
 
     def preview(*view):
         png = tmp_path / f"p{len(list(tmp_path.iterdir()))}.png"
         out, log = render(tmp_path, scene, 4, 1, "--env", "4", "--preview", str(png), *view)
-        return np.asarray(Image.open(png), dtype=np.float64) / 255, log
+        image = oiio.ImageInput.open(str(png))
+        pixels = image.read_image(0, 0, 0, 3, "uint8")
+        image.close()
+        return np.asarray(pixels, dtype=np.float64) / 255, log
 
     standard, _ = preview()
     agx, _ = preview("--view-transform", "agx")
