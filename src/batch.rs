@@ -438,12 +438,24 @@ fn spawn_and_wait(
     let err = file
         .try_clone()
         .map_err(|e| format!("cannot write {}: {e}", log.display()))?;
-    let mut child = Command::new(&exe[0])
+    let mut command = Command::new(&exe[0]);
+    command
         .args(&exe[1..])
         .args(args)
         .stdin(Stdio::null())
         .stdout(file)
-        .stderr(err)
+        .stderr(err);
+    // The child starts with SIGUSR1 ignored, until its own handler takes it over: a
+    // snapshot request forwarded in its first milliseconds must not end it (SIGUSR1's
+    // default action).
+    // SAFETY: signal(2) is async-signal-safe, as code between fork and exec must be.
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(&mut command, || {
+            libc::signal(libc::SIGUSR1, libc::SIG_IGN);
+            Ok(())
+        });
+    }
+    let mut child = command
         .spawn()
         .map_err(|e| format!("cannot start {}: {e}", program.join(" ")))?;
     let mut forwarded = false;
