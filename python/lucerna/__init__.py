@@ -23,7 +23,7 @@ from . import _native
 __version__ = _native.__version__
 
 # The USD plugin runs in a Python that has usd-core: by default this one (pip install
-# "lucerna[usd]"), and the Open Image Denoise library is looked for beside it (pip install
+# "lucerna[usd]" from this folder), and the Open Image Denoise library is looked for beside it (pip install
 # "lucerna[denoise]").
 os.environ.setdefault("LUCERNA_PYTHON", sys.executable)
 
