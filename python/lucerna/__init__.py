@@ -22,9 +22,9 @@ from . import _native
 
 __version__ = _native.__version__
 
-# The USD plugin runs in a Python that has usd-core: by default this one (pip install
-# "lucerna[usd]" from this folder), and the Open Image Denoise library is looked for beside it (pip install
-# "lucerna[denoise]").
+# The USD plugin runs in a Python that has usd-core: by default this one (the `usd` extra of
+# this package), and the Open Image Denoise library is looked for beside it (the `denoise`
+# extra): pip install "./python[usd,denoise]" from a checkout.
 os.environ.setdefault("LUCERNA_PYTHON", sys.executable)
 
 
