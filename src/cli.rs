@@ -153,6 +153,11 @@ struct LoadArgs {
     /// Render glTF KHR_materials_variants variant NAME. [default: the default materials]
     #[arg(long, value_name = "NAME")]
     material_variant: Option<String>,
+    /// The glTF animation that plays at --frame, by name or index (a character's walk, run,
+    /// ...). [default: the file's animations; of clips that animate the same nodes, the
+    /// first]
+    #[arg(long, value_name = "NAME")]
+    animation: Option<String>,
     /// Seconds the USD plugin may take to convert a stage before it is stopped.
     /// [default: 1800]
     #[arg(long, value_name = "SECONDS")]

@@ -104,7 +104,7 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 38] = [
+pub const JOB_SETTINGS: [&str; 39] = [
     "output",
     "frames",
     "frame",
@@ -116,6 +116,7 @@ pub const JOB_SETTINGS: [&str; 38] = [
     "no-payloads",
     "render-settings",
     "material-variant",
+    "animation",
     "usd-timeout",
     "resolution",
     "camera",
@@ -239,6 +240,7 @@ impl RenderJob {
             "no-payloads" => self.load.payloads = !parse_bool(value)?,
             "render-settings" => self.load.render_settings = text(),
             "material-variant" => self.load.material_variant = text(),
+            "animation" => self.load.animation = text(),
             "usd-timeout" => {
                 self.load.plugin_timeout = Duration::from_secs_f64(seconds(value, 0.0, 1e7)?)
             }

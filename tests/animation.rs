@@ -167,3 +167,60 @@ fn frames_render_a_sequence() {
     assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("{frame}"));
 }
+
+/// Two animations of one node are clips: the first plays (warned, naming --animation);
+/// `--animation NAME` or an index plays another; an unknown one is refused with the list.
+#[test]
+fn animation_clips_are_chosen_by_name_or_index() {
+    let mut b = animated_scene([0.0, 1.0]);
+    let mover = 1; // animated_scene's nodes: the quad, then its parent "mover"
+    let input = b.floats("SCALAR", &[0.0, 1.0]);
+    let lifted = b.floats("VEC3", &[0.0, 7.0, -10.0, 0.0, 7.0, -10.0]);
+    b.add(
+        "animations",
+        json!({
+            "name": "lift",
+            "samplers": [{"input": input, "output": lifted}],
+            "channels": [{"sampler": 0, "target": {"node": mover, "path": "translation"}}]
+        }),
+    );
+    let glb = b.glb();
+    let origin = |animation: Option<&str>| {
+        let scene = lucerna::ingest::gltf::import_with(
+            &glb,
+            "clips.glb",
+            None,
+            Some(0.5),
+            lucerna::ingest::gltf::Choices {
+                animation,
+                ..Default::default()
+            },
+        )?;
+        let p = scene.instances[0].transform.transform_point3(DVec3::ZERO);
+        Ok::<_, lucerna::Error>((p, scene.warnings))
+    };
+    let (p, warnings) = origin(None).unwrap();
+    assert!(p.abs_diff_eq(DVec3::new(0.0, 0.0, -10.0), 1e-6), "{p}");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("\"lift\"") && w.contains("--animation")),
+        "{warnings:?}"
+    );
+    for chosen in ["lift", "1"] {
+        let (p, warnings) = origin(Some(chosen)).unwrap();
+        assert!(
+            p.abs_diff_eq(DVec3::new(0.0, 7.0, -10.0), 1e-6),
+            "{chosen}: {p}"
+        );
+        assert!(
+            !warnings.iter().any(|w| w.contains("clips")),
+            "{warnings:?}"
+        );
+    }
+    let err = origin(Some("run")).unwrap_err().to_string();
+    assert!(
+        err.contains("\"run\"") && err.contains("\"slide\", \"lift\""),
+        "{err}"
+    );
+}

@@ -189,7 +189,17 @@ fn material_variants_are_selectable() {
         json!({"KHR_materials_variants": {"variants": [{"name": "Ripe"}, {"name": "Midnight"}]}});
     let glb = b.glb();
     let base = |variant: Option<&str>| {
-        let scene = ingest::gltf::import_with(&glb, "variants.glb", None, None, variant).unwrap();
+        let scene = ingest::gltf::import_with(
+            &glb,
+            "variants.glb",
+            None,
+            None,
+            ingest::gltf::Choices {
+                material_variant: variant,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let material = scene.meshes[scene.instances[0].mesh as usize].material;
         (
             scene.materials[material as usize].base_color,
@@ -206,9 +216,18 @@ fn material_variants_are_selectable() {
     );
     assert_eq!(base(Some("Midnight")).0.truncate(), Vec3::Z);
     assert_eq!(base(Some("Ripe")).0.truncate(), Vec3::X); // Not mapped: the default.
-    let err = ingest::gltf::import_with(&glb, "variants.glb", None, None, Some("Raw"))
-        .unwrap_err()
-        .to_string();
+    let err = ingest::gltf::import_with(
+        &glb,
+        "variants.glb",
+        None,
+        None,
+        ingest::gltf::Choices {
+            material_variant: Some("Raw"),
+            ..Default::default()
+        },
+    )
+    .unwrap_err()
+    .to_string();
     assert!(
         err.contains("\"Raw\"") && err.contains("Ripe, Midnight"),
         "{err}"

@@ -59,10 +59,19 @@ const FLOAT_OR_NORMALIZED: &[DataType] = &[
 /// Deepest node hierarchy accepted (deeper ones are almost certainly malicious).
 const MAX_NODE_DEPTH: usize = 1024;
 
+/// What to take from a glTF file that offers several: a KHR_materials_variants variant and an
+/// animation (clip), by name (`None`: the default materials; the file's animations as
+/// [`Importer::pose_at`] plays them).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Choices<'a> {
+    pub material_variant: Option<&'a str>,
+    /// An animation's name, or its index in the file.
+    pub animation: Option<&'a str>,
+}
+
 /// Reads and converts the glTF file at `path`, posed at `time` seconds of its animations
-/// (`None`: the nodes' own transforms), with KHR_materials_variants variant
-/// `material_variant` (`None`: the default materials).
-pub fn load(path: &Path, time: Option<f64>, material_variant: Option<&str>) -> Result<Scene> {
+/// (`None`: the nodes' own transforms), with `choices`.
+pub fn load(path: &Path, time: Option<f64>, choices: Choices) -> Result<Scene> {
     let bytes = crate::files::read_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     let base = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p,
@@ -73,7 +82,7 @@ pub fn load(path: &Path, time: Option<f64>, material_variant: Option<&str>) -> R
         &path.display().to_string(),
         Some(base),
         time,
-        material_variant,
+        choices,
     )
 }
 
@@ -90,16 +99,16 @@ pub fn import_at(
     base: Option<&Path>,
     time: Option<f64>,
 ) -> Result<Scene> {
-    import_with(bytes, source, base, time, None)
+    import_with(bytes, source, base, time, Choices::default())
 }
 
-/// [`import_at`] with the KHR_materials_variants variant `material_variant` (by name).
+/// [`import_at`] with `choices` (material variant, animation).
 pub fn import_with(
     bytes: &[u8],
     source: &str,
     base: Option<&Path>,
     time: Option<f64>,
-    material_variant: Option<&str>,
+    choices: Choices,
 ) -> Result<Scene> {
     let gltf = parse(bytes, source)?;
     let mut buffers = load_buffers(&gltf.document, gltf.blob.as_deref(), source, base)?;
@@ -122,9 +131,11 @@ pub fn import_with(
         world_of: HashMap::new(),
         skinned: Vec::new(),
         variant: None,
+        animation: None,
         unsupported_material_extensions: Default::default(),
     };
-    importer.select_variant(material_variant)?;
+    importer.select_variant(choices.material_variant)?;
+    importer.select_animation(choices.animation)?;
     importer.run(time)?;
     Ok(importer.scene)
 }
@@ -379,6 +390,9 @@ struct Importer<'a> {
     skinned: Vec<(usize, String)>,
     /// The KHR_materials_variants variant to render (index into the file's variants).
     variant: Option<usize>,
+    /// The one animation that plays (`--animation`); `None`: all, clips resolved as
+    /// [`Importer::pose_at`] says.
+    animation: Option<usize>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
 }
@@ -466,8 +480,10 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
-    /// Samples every animation channel at `time` seconds into [`Importer::pose`]. All the
-    /// file's animations play together; a property animated twice takes the last.
+    /// Samples every animation channel at `time` seconds into [`Importer::pose`]: the
+    /// chosen animation's alone (`--animation`), else all the file's together, an animation
+    /// that animates what an earlier one does being a clip of one character that does not
+    /// play (warned).
     fn pose_at(&mut self, time: f64) -> Result<()> {
         use gltf::animation::Property;
         use gltf::animation::util::ReadOutputs;
@@ -475,7 +491,12 @@ impl<'a> Importer<'a> {
         // Animations that animate what an earlier one does: clips of one character (a
         // walk, a run); the earlier one plays.
         let mut clips = std::collections::BTreeSet::new();
-        for animation in self.doc.animations() {
+        let chosen = self.animation;
+        for animation in self
+            .doc
+            .animations()
+            .filter(|a| chosen.is_none_or(|c| c == a.index()))
+        {
             for channel in animation.channels() {
                 let element = format!(
                     "animations[{}].channels[{}]",
@@ -578,7 +599,7 @@ impl<'a> Importer<'a> {
             self.warn(
                 "animations",
                 format!(
-                    "{} animate the same nodes as {first} (clips of one animation); {first} is rendered",
+                    "{} animate the same nodes as {first} (clips of one animation); {first} is rendered (--animation NAME plays another)",
                     skipped.join(", ")
                 ),
             );
@@ -961,6 +982,44 @@ impl<'a> Importer<'a> {
 
     /// Selects KHR_materials_variants variant `name`; without one, a file with variants gets
     /// a warning naming them.
+    /// Chooses the animation that plays, by name or index; an unknown one is refused with
+    /// the file's animations listed.
+    fn select_animation(&mut self, wanted: Option<&str>) -> Result<()> {
+        let Some(wanted) = wanted else {
+            return Ok(());
+        };
+        let names: Vec<String> = self
+            .doc
+            .animations()
+            .map(|a| {
+                a.name()
+                    .map_or_else(|| format!("{}", a.index()), |n| format!("{n:?}"))
+            })
+            .collect();
+        let found = self
+            .doc
+            .animations()
+            .position(|a| a.name() == Some(wanted))
+            .or_else(|| wanted.parse::<usize>().ok().filter(|&i| i < names.len()));
+        match found {
+            Some(i) => {
+                self.animation = Some(i);
+                Ok(())
+            }
+            None if names.is_empty() => Err(self.err(
+                "animations",
+                format!("animation {wanted:?} requested, but the file has no animations"),
+            )),
+            None => Err(self.err(
+                "animations",
+                format!(
+                    "has no animation {wanted:?} (it has {}; give a name or an index)",
+                    names.join(", ")
+                ),
+            )),
+        }
+    }
+
     fn select_variant(&mut self, name: Option<&str>) -> Result<()> {
         let names: Vec<String> = self
             .doc

@@ -52,6 +52,8 @@ pub struct LoadOptions {
     pub render_settings: Option<String>,
     /// The glTF KHR_materials_variants variant to render (by name).
     pub material_variant: Option<String>,
+    /// The glTF animation that plays (by name or index; default: the file's animations).
+    pub animation: Option<String>,
     /// How long the USD plugin may take to convert a stage before it is stopped.
     pub plugin_timeout: std::time::Duration,
 }
@@ -72,6 +74,7 @@ impl Default for LoadOptions {
             payloads: true,
             render_settings: None,
             material_variant: None,
+            animation: None,
             plugin_timeout: DEFAULT_PLUGIN_TIMEOUT,
         }
     }
@@ -88,10 +91,22 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         "gltf" | "glb" => gltf::load(
             path,
             options.frame.map(|f| f / options.fps),
-            options.material_variant.as_deref(),
+            gltf::Choices {
+                material_variant: options.material_variant.as_deref(),
+                animation: options.animation.as_deref(),
+            },
         ),
         scene::file::EXTENSION => scene::file::read(path),
-        e if usd::EXTENSIONS.contains(&e) => usd::load(path, options),
+        e if usd::EXTENSIONS.contains(&e) => {
+            let mut scene = usd::load(path, options)?;
+            if options.animation.is_some() {
+                scene.warnings.push(format!(
+                    "{}: --animation chooses among a glTF file's animations; a USD stage plays its time samples at --frame",
+                    path.display()
+                ));
+            }
+            Ok(scene)
+        }
         _ => Err(Error::bad_input(
             path,
             "file",
