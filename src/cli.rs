@@ -23,7 +23,8 @@ use std::path::PathBuf;
                   Open Image Denoise library), LUCERNA_HOME (where `lucerna setup` installs)."
 )]
 struct Cli {
-    /// How much lucerna says on stderr: error, warn, info or debug. [default: info]
+    /// How much lucerna says on stderr: error, warn, info or debug (progress lines follow
+    /// --progress instead). [default: info]
     #[arg(long, global = true, value_name = "LEVEL", value_parser = crate::logging::parse_level)]
     log_level: Option<log::LevelFilter>,
     /// Start every message with its UTC time (RFC 3339), as farm logs want.
@@ -380,7 +381,10 @@ fn apply_command_line(
 ) -> Result<()> {
     for arg in command.get_arguments() {
         let id = arg.get_id().as_str();
-        if id == "settings" || matches.value_source(id) != Some(ValueSource::CommandLine) {
+        // The settings file is read first; logging options are global, not render settings.
+        if matches!(id, "settings" | "log_level" | "log_timestamps")
+            || matches.value_source(id) != Some(ValueSource::CommandLine)
+        {
             continue;
         }
         let key = arg.get_long().unwrap_or(id);
