@@ -60,42 +60,38 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<()> {
 /// replaced atomically, when `None`): for renders merged from passes or tiles, which are
 /// denoised whole.
 pub fn denoise(input: &Path, output: Option<&Path>) -> Result<()> {
-    use film::denoise::{Denoiser, Inputs, LAYER, albedo_guide, deinterleave, interleave};
+    use film::denoise::{Denoiser, LAYER, Layers};
     let output = output.unwrap_or(input);
     crate::files::check_output(output, "--output")?;
     let (mut planes, header) = film::exr::read(input)?;
-    let channel = |names: &[&str]| -> Result<Vec<Vec<f32>>> {
-        names
-            .iter()
-            .map(|n| {
-                planes.channel(n).map(<[f32]>::to_vec).ok_or_else(|| {
-                    Error::bad_input(
-                        input,
-                        "channels",
-                        format!(
-                            "no channel {n}: render with --denoise, or with --aov albedo,normal"
-                        ),
-                    )
-                })
-            })
-            .collect()
+    let channel = |n: &str| {
+        planes.channel(n).ok_or_else(|| {
+            Error::bad_input(
+                input,
+                "channels",
+                format!("no channel {n}: render with --denoise, or with --aov albedo,normal"),
+            )
+        })
     };
-    let beauty = channel(&["R", "G", "B", "A"])?;
-    let albedo = channel(&["albedo.R", "albedo.G", "albedo.B"])?;
-    let normal = channel(&["normal.X", "normal.Y", "normal.Z"])?;
-    let denoiser = Denoiser::new()?;
-    let rgb = denoiser.denoise(&Inputs {
+    let layers = Layers {
         width: planes.window.width as usize,
         height: planes.window.height as usize,
-        beauty: &interleave(&beauty),
-        albedo: &albedo_guide(&albedo, &beauty),
-        normal: &interleave(&normal),
-    })?;
+        beauty: [channel("R")?, channel("G")?, channel("B")?, channel("A")?],
+        albedo: [
+            channel("albedo.R")?,
+            channel("albedo.G")?,
+            channel("albedo.B")?,
+        ],
+        normal: [
+            channel("normal.X")?,
+            channel("normal.Y")?,
+            channel("normal.Z")?,
+        ],
+    };
+    let rgb = Denoiser::new()?.denoise(&layers)?;
     let prefix = format!("{LAYER}.");
     planes.channels.retain(|(n, _)| !n.starts_with(&prefix));
-    for (c, plane) in ["R", "G", "B"].iter().zip(deinterleave(&rgb)) {
-        planes.channels.push((format!("{prefix}{c}"), plane));
-    }
+    planes.channels.extend(film::denoise::channels(rgb));
     film::exr::write_planes(output, planes, &header)?;
     log::info!("wrote {} with a denoised layer", output.display());
     Ok(())
@@ -138,7 +134,7 @@ pub fn batch(
         summary_path.display()
     );
     Ok(if summary.interrupted {
-        (128 + crate::interrupt::received().clamp(1, 127)) as u8
+        crate::interrupt::exit_code(crate::interrupt::received())
     } else if summary.failed > 0 {
         1
     } else {

@@ -89,7 +89,7 @@ fn handle(signal: i32) {
         "lucerna: interrupted (signal {signal}){}; nothing written",
         if first { " before any result" } else { "" }
     );
-    std::process::exit(128 + signal);
+    std::process::exit(exit_code(signal) as i32);
 }
 
 /// Kills registered child processes and removes registered scratch folders and files.
@@ -118,6 +118,11 @@ fn clean_up() {
 /// The signal received (0 if none).
 pub fn received() -> i32 {
     state().received.load(Ordering::SeqCst) as i32
+}
+
+/// The exit code of a process a signal stopped: 128 + the signal, as shells report it.
+pub fn exit_code(signal: i32) -> u8 {
+    (128 + signal.clamp(1, 127)) as u8
 }
 
 /// Whether SIGUSR1 asked for a snapshot since the last call (which answers it).

@@ -164,7 +164,7 @@ fn seconds(value: &str, least: f64, most: f64) -> std::result::Result<f64, Strin
 }
 
 /// An image size `WxH`.
-pub fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
+fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
     let (w, h) = s
         .split_once(['x', 'X'])
         .ok_or_else(|| format!("expected WIDTHxHEIGHT, got {s:?}"))?;
@@ -184,7 +184,7 @@ pub fn parse_resolution(s: &str) -> std::result::Result<(u32, u32), String> {
 }
 
 /// An RGB radiance `R,G,B` (or one value for all three).
-pub fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
+fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
     let values: Vec<f32> = s
         .split(',')
         .map(|v| {
@@ -207,7 +207,7 @@ pub fn parse_rgb(s: &str) -> std::result::Result<Vec3, String> {
 }
 
 /// A frame number of an animation.
-pub fn parse_frame(s: &str) -> std::result::Result<f64, String> {
+fn parse_frame(s: &str) -> std::result::Result<f64, String> {
     s.parse::<f64>()
         .ok()
         .filter(|f| f.is_finite() && f.abs() <= 1e9)
@@ -462,8 +462,7 @@ pub struct Outcome {
 impl Outcome {
     /// The process exit code: 0, or 128 + the signal, as shells report it.
     pub fn exit_code(&self) -> u8 {
-        self.interrupted
-            .map_or(0, |s| (128 + s.clamp(1, 127)) as u8)
+        self.interrupted.map_or(0, crate::interrupt::exit_code)
     }
 }
 
@@ -1072,19 +1071,20 @@ fn render_view(
     let denoised = match (&denoiser, stats.interrupted) {
         (Some(d), false) => {
             let start = Instant::now();
-            let beauty_planes = film.planes(Aov::Beauty);
-            let albedo = film::denoise::albedo_guide(&film.planes(Aov::Albedo), &beauty_planes);
-            let beauty = film::denoise::interleave(&beauty_planes);
-            let normal = film::denoise::interleave(&film.planes(Aov::Normal));
-            let rgb = d.denoise(&film::denoise::Inputs {
+            let (beauty, albedo, normal) = (
+                film.planes(Aov::Beauty),
+                film.planes(Aov::Albedo),
+                film.planes(Aov::Normal),
+            );
+            let rgb = d.denoise(&film::denoise::Layers {
                 width: film.width as usize,
                 height: film.height as usize,
-                beauty: &beauty,
-                albedo: &albedo,
-                normal: &normal,
+                beauty: std::array::from_fn(|c| beauty[c].as_slice()),
+                albedo: std::array::from_fn(|c| albedo[c].as_slice()),
+                normal: std::array::from_fn(|c| normal[c].as_slice()),
             })?;
             log::info!("denoised in {:.2} s", start.elapsed().as_secs_f64());
-            Some(film::denoise::deinterleave(&rgb))
+            Some(rgb)
         }
         _ => None,
     };
@@ -1105,11 +1105,7 @@ fn render_view(
             };
             let mut planes = exr::film_planes(&film, extra, keep);
             if let Some(d) = &denoised {
-                for (c, plane) in ["R", "G", "B"].iter().zip(d) {
-                    planes
-                        .channels
-                        .push((format!("{}.{c}", film::denoise::LAYER), plane.clone()));
-                }
+                planes.channels.extend(film::denoise::channels(d.clone()));
             }
             exr::write_planes(&out.path, planes, &header)?;
         }

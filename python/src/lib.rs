@@ -32,12 +32,8 @@ fn layers<'py>(py: Python<'py>, rendered: &lucerna::job::Rendered) -> PyResult<B
     };
     let (w, h) = (film.width as usize, film.height as usize);
     let add = |name: &str, planes: Vec<&[f32]>| -> PyResult<()> {
-        let c = planes.len();
-        let mut data = Vec::with_capacity(w * h * c);
-        for i in 0..w * h {
-            data.extend(planes.iter().map(|p| p[i]));
-        }
-        let array = PyArray1::from_vec(py, data).reshape([h, w, c])?;
+        let pixels = lucerna::film::interleave(&planes);
+        let array = PyArray1::from_vec(py, pixels).reshape([h, w, planes.len()])?;
         dict.set_item(name, array)
     };
     for aov in film.aovs.iter() {

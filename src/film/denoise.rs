@@ -71,13 +71,14 @@ pub struct Denoiser {
     pub path: PathBuf,
 }
 
-/// The images of one denoising: row-major RGB over `width` x `height`.
-pub struct Inputs<'a> {
+/// The layers of one denoising, as planes (row-major over `width` x `height`): the beauty
+/// R, G, B, A, the albedo R, G, B and the normal X, Y, Z, as a film or an EXR holds them.
+pub struct Layers<'a> {
     pub width: usize,
     pub height: usize,
-    pub beauty: &'a [f32],
-    pub albedo: &'a [f32],
-    pub normal: &'a [f32],
+    pub beauty: [&'a [f32]; 4],
+    pub albedo: [&'a [f32]; 3],
+    pub normal: [&'a [f32]; 3],
 }
 
 impl Denoiser {
@@ -247,25 +248,29 @@ impl Denoiser {
     }
 
     /// The denoised beauty (row-major RGB), with prefiltered albedo and normal.
-    pub fn denoise(&self, inputs: &Inputs) -> Result<Vec<f32>> {
-        let size = (inputs.width, inputs.height);
-        let n = inputs.width * inputs.height * 3;
+    pub fn denoise(&self, layers: &Layers) -> Result<[Vec<f32>; 3]> {
+        let size = (layers.width, layers.height);
+        let n = layers.width * layers.height * 3;
         let mut albedo = vec![0.0; n];
-        self.run(size, &[("albedo", inputs.albedo)], &mut albedo, &[])?;
+        let guide = albedo_guide(&layers.albedo, &layers.beauty);
+        self.run(size, &[("albedo", &guide)], &mut albedo, &[])?;
         let mut normal = vec![0.0; n];
-        self.run(size, &[("normal", inputs.normal)], &mut normal, &[])?;
+        let normals = super::interleave(&layers.normal);
+        self.run(size, &[("normal", &normals)], &mut normal, &[])?;
         let mut output = vec![0.0; n];
         self.run(
             size,
             &[
-                ("color", inputs.beauty),
+                ("color", &super::interleave(&layers.beauty[..3])),
                 ("albedo", &albedo),
                 ("normal", &normal),
             ],
             &mut output,
             &[("hdr", true), ("cleanAux", true)],
         )?;
-        Ok(output)
+        Ok(std::array::from_fn(|c| {
+            output.iter().skip(c).step_by(3).copied().collect()
+        }))
     }
 }
 
@@ -288,7 +293,7 @@ impl Drop for Denoiser {
 /// clamped to [0, 1], as OIDN's documentation asks for primary rays that hit no surface.
 /// Without it a silhouette against a bright background has a black guide and its
 /// antialiased edge is smeared.
-pub fn albedo_guide(albedo: &[Vec<f32>], beauty: &[Vec<f32>]) -> Vec<f32> {
+fn albedo_guide(albedo: &[&[f32]; 3], beauty: &[&[f32]; 4]) -> Vec<f32> {
     let n = albedo[0].len();
     let mut rgb = Vec::with_capacity(n * 3);
     for i in 0..n {
@@ -300,16 +305,10 @@ pub fn albedo_guide(albedo: &[Vec<f32>], beauty: &[Vec<f32>]) -> Vec<f32> {
     rgb
 }
 
-/// Interleaves three planes into row-major RGB.
-pub fn interleave(planes: &[Vec<f32>]) -> Vec<f32> {
-    let mut rgb = Vec::with_capacity(planes[0].len() * 3);
-    for ((&r, &g), &b) in planes[0].iter().zip(&planes[1]).zip(&planes[2]) {
-        rgb.extend([r, g, b]);
-    }
-    rgb
-}
-
-/// Splits row-major RGB into three planes.
-pub fn deinterleave(rgb: &[f32]) -> [Vec<f32>; 3] {
-    std::array::from_fn(|c| rgb.iter().skip(c).step_by(3).copied().collect())
+/// The EXR channels of a denoised beauty: `denoised.R`, `.G`, `.B`.
+pub fn channels(rgb: [Vec<f32>; 3]) -> impl Iterator<Item = (String, Vec<f32>)> {
+    ["R", "G", "B"]
+        .into_iter()
+        .zip(rgb)
+        .map(|(c, plane)| (format!("{LAYER}.{c}"), plane))
 }

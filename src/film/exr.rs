@@ -223,23 +223,12 @@ pub fn channel_names(film: &Film, extra: &[Aov]) -> Vec<String> {
 /// into place), with `header` in the header; `extra` AOVs (data layers the film can always
 /// produce, such as `spp`) are written too even if the film's AOV set lacks them.
 pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result<()> {
-    write_layers(path, film, header, extra, |_| true)
+    write_planes(path, film_planes(film, extra, |_| true), header)
 }
 
-/// [`write`] with only the layers `keep` accepts (the beauty always): one render product
-/// of several that share a render.
-pub fn write_layers(
-    path: &Path,
-    film: &Film,
-    header: &Header,
-    extra: &[Aov],
-    keep: impl Fn(Aov) -> bool,
-) -> Result<()> {
-    write_planes(path, film_planes(film, extra, keep), header)
-}
-
-/// The planes [`write_layers`] writes: the film's layers that `keep` accepts (the beauty
-/// always) and `extra` (say, the sample counts of a checkpoint).
+/// The planes of `film` to write: its layers that `keep` accepts (the beauty always; a
+/// render product of several that share a render keeps its own) and `extra` (say, the
+/// sample counts of a checkpoint).
 pub fn film_planes(film: &Film, extra: &[Aov], keep: impl Fn(Aov) -> bool) -> Planes {
     let mut channels = Vec::new();
     let mut aovs: Vec<Aov> = film.aovs.iter().collect();

@@ -771,6 +771,16 @@ impl Film {
 
 /// Writes a file atomically: `write` fills a temporary file next to `path`, which is then
 /// renamed over `path`. A failed or killed write never leaves a partial file at `path`.
+/// Interleaves planes (one per channel) into row-major pixels: what OIDN and numpy take.
+pub fn interleave(planes: &[&[f32]]) -> Vec<f32> {
+    let n = planes.first().map_or(0, |p| p.len());
+    let mut pixels = Vec::with_capacity(n * planes.len());
+    for i in 0..n {
+        pixels.extend(planes.iter().map(|p| p[i]));
+    }
+    pixels
+}
+
 pub fn write_atomically<F>(path: &std::path::Path, write: F) -> crate::Result<()>
 where
     F: FnOnce(&mut std::io::BufWriter<std::fs::File>) -> crate::Result<()>,
