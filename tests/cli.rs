@@ -2,7 +2,7 @@
 
 mod common;
 
-use common::cli::{header_text, lucerna, lucerna_ok, temp_dir};
+use common::cli::{header_text, lucerna, lucerna_ok, lucerna_stderr, temp_dir};
 use common::gltf_builder::{Builder, png_rgba};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -380,13 +380,8 @@ fn a_scene_without_light_gets_a_default_environment() {
             "-q",
         ];
         args.extend_from_slice(extra);
-        let output = lucerna(&args);
-        assert!(
-            output.status.success(),
-            "{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        let stderr = String::from_utf8_lossy(&output.stderr).to_string();
+        let (ok, stderr) = lucerna_stderr(&args);
+        assert!(ok, "{stderr}");
         let (planes, _) = lucerna::film::exr::read(&out).unwrap();
         let r = planes.channel("R").unwrap();
         (
@@ -427,13 +422,9 @@ fn progress_lines_off_a_terminal() {
             "-q",
         ];
         args.extend_from_slice(extra);
-        let output = lucerna(&args);
-        assert!(
-            output.status.success(),
-            "{}",
-            String::from_utf8_lossy(&output.stderr)
-        );
-        String::from_utf8_lossy(&output.stderr).to_string()
+        let (ok, stderr) = lucerna_stderr(&args);
+        assert!(ok, "{stderr}");
+        stderr
     };
     let text = stderr(&["--progress-interval", "0.05"]);
     let lines: Vec<&str> = text

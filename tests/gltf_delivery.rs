@@ -188,8 +188,8 @@ fn material_variants_are_selectable() {
     b.json["extensions"] =
         json!({"KHR_materials_variants": {"variants": [{"name": "Ripe"}, {"name": "Midnight"}]}});
     let glb = b.glb();
-    let base = |variant: Option<&str>| {
-        let scene = ingest::gltf::import_with(
+    let import = |variant: Option<&str>| {
+        ingest::gltf::import_with(
             &glb,
             "variants.glb",
             None,
@@ -199,7 +199,9 @@ fn material_variants_are_selectable() {
                 ..Default::default()
             },
         )
-        .unwrap();
+    };
+    let base = |variant: Option<&str>| {
+        let scene = import(variant).unwrap();
         let material = scene.meshes[scene.instances[0].mesh as usize].material;
         (
             scene.materials[material as usize].base_color,
@@ -216,18 +218,7 @@ fn material_variants_are_selectable() {
     );
     assert_eq!(base(Some("Midnight")).0.truncate(), Vec3::Z);
     assert_eq!(base(Some("Ripe")).0.truncate(), Vec3::X); // Not mapped: the default.
-    let err = ingest::gltf::import_with(
-        &glb,
-        "variants.glb",
-        None,
-        None,
-        ingest::gltf::Choices {
-            material_variant: Some("Raw"),
-            ..Default::default()
-        },
-    )
-    .unwrap_err()
-    .to_string();
+    let err = import(Some("Raw")).unwrap_err().to_string();
     assert!(
         err.contains("\"Raw\"") && err.contains("Ripe, Midnight"),
         "{err}"

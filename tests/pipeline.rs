@@ -4,18 +4,10 @@
 
 mod common;
 
-use common::cli::{lucerna, lucerna_ok, temp_dir};
+use common::cli::{lucerna, lucerna_ok, lucerna_stderr as stderr_of, temp_dir};
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-fn stderr_of(args: &[&str]) -> (bool, String) {
-    let out = lucerna(args);
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 /// Every `render` option that takes a value states its default in `--help`; the help is
 /// grouped by topic.

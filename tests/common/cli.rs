@@ -11,6 +11,15 @@ pub fn lucerna(args: &[&str]) -> Output {
         .unwrap()
 }
 
+/// Runs the binary with `args`: whether it succeeded, and its stderr.
+pub fn lucerna_stderr(args: &[&str]) -> (bool, String) {
+    let out = lucerna(args);
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// Runs the binary with `args` and asserts that it succeeded (showing its stderr if not).
 pub fn lucerna_ok(args: &[&str]) {
     let run = lucerna(args);

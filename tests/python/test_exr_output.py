@@ -51,14 +51,18 @@ def all_render(tmp_path_factory):
     return read(out)
 
 
+def assert_finite_float32(channels):
+    for name, plane in channels.items():
+        assert np.isfinite(plane).all(), name
+        assert plane.dtype == np.float32
+
+
 def test_readme_command_writes_the_beauty(default_render):
     """Without --aov a render writes the beauty only (RGBA), at the default 512x512."""
     spec, ch = default_render
     assert sorted(ch) == ["A", "B", "G", "R"]
     assert (spec.width, spec.height) == (512, 512)
-    for name, plane in ch.items():
-        assert np.isfinite(plane).all(), name
-        assert plane.dtype == np.float32
+    assert_finite_float32(ch)
 
 
 def test_aov_all_writes_every_core_layer(all_render):
@@ -66,9 +70,7 @@ def test_aov_all_writes_every_core_layer(all_render):
     missing = [c for c in CORE_CHANNELS if c not in ch]
     assert not missing, f"missing channels: {missing}"
     assert (spec.width, spec.height) == (256, 256)
-    for name, plane in ch.items():
-        assert np.isfinite(plane).all(), name
-        assert plane.dtype == np.float32
+    assert_finite_float32(ch)
 
 
 def test_header_metadata(default_render):
