@@ -21,8 +21,8 @@
 //! ```
 
 use crate::error::{Error, Result};
-use crate::film::exr;
 use crate::job::RenderJob;
+use crate::output::exr;
 use crate::render::RenderOptions;
 use crate::sequence::{FrameList, output_path};
 use serde::{Deserialize, Serialize};

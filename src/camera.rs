@@ -2,9 +2,9 @@
 //! provides the world-to-camera and world-to-NDC matrices compositors read from the EXR.
 
 use crate::geometry::ray::Ray;
+use crate::geometry::space::RenderSpace;
 use crate::sampling::warp::square_to_uniform_disk;
 use crate::scene::{self, Projection};
-use crate::world::RenderSpace;
 use glam::{DMat4, DVec3, DVec4, Vec2, Vec3};
 
 /// Image size used when neither the request nor the scene decides it: the long side.

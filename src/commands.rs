@@ -4,11 +4,11 @@
 //! stopping the USD plugin, and a merge without leaving its temporary output).
 
 use crate::error::{Error, Result};
-use crate::film;
 use crate::job::{load_scene, memory_estimate};
-use crate::plan::{self, PlanMode, RenderPlan, SceneFeatures};
 use crate::render::RenderOptions;
+use crate::render::plan::{PlanMode, RenderPlan};
 use crate::scene::LightKind;
+use crate::scene::features::{SceneFeatures, strip_unused_attributes};
 use crate::{ingest, memory};
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -33,17 +33,17 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<()> {
     let parts = inputs
         .iter()
         .map(|path| {
-            let (planes, header) = film::exr::read(path)?;
-            Ok(crate::merge::Part {
+            let (planes, header) = crate::output::exr::read(path)?;
+            Ok(crate::output::merge::Part {
                 path: path.clone(),
                 planes,
                 header,
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    let (planes, header) = crate::merge::merge(&parts)?;
+    let (planes, header) = crate::output::merge::merge(&parts)?;
     let (window, display) = (planes.window, planes.display);
-    film::exr::write_planes(output, planes, &header)?;
+    crate::output::exr::write_planes(output, planes, &header)?;
     log::info!(
         "merged {} parts into {} (pixels {} of {}x{})",
         parts.len(),
@@ -60,10 +60,10 @@ pub fn merge(inputs: &[PathBuf], output: &Path) -> Result<()> {
 /// replaced atomically, when `None`): for renders merged from passes or tiles, which are
 /// denoised whole.
 pub fn denoise(input: &Path, output: Option<&Path>) -> Result<()> {
-    use film::denoise::{Denoiser, LAYER, Layers};
+    use crate::output::denoise::{Denoiser, LAYER, Layers};
     let output = output.unwrap_or(input);
     crate::files::check_output(output, "--output")?;
-    let (mut planes, header) = film::exr::read(input)?;
+    let (mut planes, header) = crate::output::exr::read(input)?;
     let channel = |n: &str| {
         planes.channel(n).ok_or_else(|| {
             Error::bad_input(
@@ -91,8 +91,10 @@ pub fn denoise(input: &Path, output: Option<&Path>) -> Result<()> {
     let rgb = Denoiser::new()?.denoise(&layers)?;
     let prefix = format!("{LAYER}.");
     planes.channels.retain(|(n, _)| !n.starts_with(&prefix));
-    planes.channels.extend(film::denoise::channels(rgb));
-    film::exr::write_planes(output, planes, &header)?;
+    planes
+        .channels
+        .extend(crate::output::denoise::channels(rgb));
+    crate::output::exr::write_planes(output, planes, &header)?;
     log::info!("wrote {} with a denoised layer", output.display());
     Ok(())
 }
@@ -115,7 +117,7 @@ pub fn batch(
     let _forwarding = crate::interrupt::defer();
     let summary = crate::batch::run(job, lucerna, &tasks, &stop);
     let json = serde_json::to_string_pretty(&summary).expect("the summary serialises");
-    film::write_atomically(&summary_path, |w| {
+    crate::files::write_atomically(&summary_path, |w| {
         use std::io::Write;
         w.write_all(json.as_bytes())
             .map_err(|e| Error::other(&summary_path, "summary", e.to_string()))
@@ -161,7 +163,7 @@ pub fn inspect(
     }
     let mut scene = load_scene(Some(path), load)?;
     if options.plan != PlanMode::General {
-        plan::strip_unused_attributes(&mut scene);
+        strip_unused_attributes(&mut scene);
     }
     let triangles: usize = scene.meshes.iter().map(|m| m.triangles.len()).sum();
     let vertices: usize = scene.meshes.iter().map(|m| m.positions.len()).sum();

@@ -5,7 +5,8 @@
 //! render starts, so an hour of rendering is not lost to a name that cannot be written: an
 //! existing output must be a regular file (a device node, FIFO or directory is never
 //! replaced: renaming over `/dev/null` as root would replace the device), and its directory
-//! must accept a new file (a probe file is created and removed).
+//! must accept a new file (a probe file is created and removed). Every file lucerna writes
+//! is written atomically ([`write_atomically`]).
 
 use crate::error::{Error, Result};
 use std::path::Path;
@@ -91,6 +92,54 @@ pub fn check_output(path: &Path, element: &str) -> Result<()> {
         .tempfile_in(dir)
         .map_err(|e| Error::other(dir, element, format!("cannot write here: {e}")))?;
     Ok(())
+}
+
+/// Writes a file atomically: `write` fills a temporary file next to `path`, which is then
+/// renamed over `path`. A failed or killed write never leaves a partial file at `path`.
+pub fn write_atomically<F>(path: &std::path::Path, write: F) -> crate::Result<()>
+where
+    F: FnOnce(&mut std::io::BufWriter<std::fs::File>) -> crate::Result<()>,
+{
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::other(path, "output", "not a file name"))?;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}",
+        name.to_string_lossy(),
+        std::process::id()
+    ));
+    // Never rename over a device node, FIFO or directory (the render checked this before
+    // it started; this holds for every writer).
+    if let Ok(meta) = std::fs::metadata(path)
+        && !meta.is_file()
+    {
+        return Err(Error::bad_input(
+            path,
+            "output",
+            "exists and is not a regular file",
+        ));
+    }
+    let _removed_on_signal = crate::interrupt::watch_scratch(tmp.clone());
+    let result = (|| {
+        let file =
+            std::fs::File::create(&tmp).map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        let mut writer = std::io::BufWriter::new(file);
+        write(&mut writer)?;
+        let file = writer
+            .into_inner()
+            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        file.sync_all()
+            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::other(path, "output", e.to_string()))
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
 }
 
 #[cfg(test)]

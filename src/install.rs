@@ -20,6 +20,10 @@ use std::process::Command;
 
 include!(concat!(env!("OUT_DIR"), "/plugin_files.rs"));
 
+/// The Python package that carries Open Image Denoise's library (`lucerna setup` installs
+/// it; `output::denoise` looks for the library inside it).
+pub const DENOISER_PACKAGE: &str = "pyoidn==2.5.1.0";
+
 fn home() -> Option<PathBuf> {
     std::env::var_os("HOME")
         .filter(|h| !h.is_empty())
@@ -162,7 +166,7 @@ pub fn setup(venv: Option<&Path>, denoiser: bool) -> Result<PathBuf> {
     pip.args(["-m", "pip", "install", "--disable-pip-version-check", "-r"])
         .arg(plugin.join("requirements.txt"));
     if denoiser {
-        pip.arg(crate::film::denoise::PYTHON_PACKAGE);
+        pip.arg(DENOISER_PACKAGE);
     }
     run(
         &mut pip,

@@ -10,12 +10,15 @@
 
 use crate::error::{Error, Result};
 use crate::film::aov::{Aov, AovSet};
-use crate::film::exr::{self, Attribute, Header};
-use crate::film::preview::{Curve, ViewTransform};
+use crate::film::planes::Planes;
 use crate::film::{self, Film};
-use crate::plan::{self, PlanMode};
+use crate::output::exr::{self, Attribute, Header};
+use crate::output::preview::{Curve, ViewTransform};
+use crate::output::{denoise, preview};
+use crate::render::plan::PlanMode;
 use crate::render::{self, ProgressLines, RenderOptions, RenderStats};
 use crate::scene::Scene;
+use crate::scene::features::strip_unused_attributes;
 use crate::sequence::{FrameList, output_path};
 use crate::world::World;
 use crate::{ingest, memory};
@@ -490,7 +493,7 @@ pub fn run(job: &RenderJob) -> Result<Outcome> {
     job.finish()?;
     if job.preview.is_some() && job.write_files {
         // An OCIO display or view that does not exist fails before the scene is read.
-        film::preview::check(&job.view)?;
+        preview::check(&job.view)?;
     }
     let mut options = job.options.clone();
     options.interrupt = Some(match &job.stop {
@@ -539,7 +542,7 @@ const MAX_LIGHT_GROUPS: usize = 64;
 
 /// What a checkpoint being resumed already holds.
 struct Resumed {
-    planes: exr::Planes,
+    planes: Planes,
     discarded: u64,
     seconds: f64,
 }
@@ -830,7 +833,7 @@ pub fn memory_estimate(
             &options.aovs,
             options.noise_threshold.is_some(),
         ),
-        ..crate::world::estimate_memory(scene)
+        ..crate::world::build::estimate_memory(scene)
     }
 }
 
@@ -950,15 +953,19 @@ fn render_view(
     }
     // Subdivision surfaces are refined for this view before the memory estimate counts them.
     scene.subdivision_level = job.subdiv_level;
-    crate::world::refine_subdivision_surfaces(&mut scene, view.camera.as_deref(), view.resolution)?;
+    crate::world::build::refine_subdivision_surfaces(
+        &mut scene,
+        view.camera.as_deref(),
+        view.resolution,
+    )?;
     if options.plan != PlanMode::General {
-        plan::strip_unused_attributes(&mut scene);
+        strip_unused_attributes(&mut scene);
     }
     let limit = job.max_memory.or_else(memory::default_limit);
     memory_estimate(&scene, view.camera.as_deref(), view.resolution, options)
         .check(limit, &scene.source)?;
     // The denoiser is loaded before rendering: a missing library fails at once.
-    let denoiser = job.denoise.then(film::denoise::Denoiser::new).transpose()?;
+    let denoiser = job.denoise.then(denoise::Denoiser::new).transpose()?;
     if let Some(d) = &denoiser {
         log::debug!("Open Image Denoise from {}", d.path.display());
     }
@@ -1000,12 +1007,8 @@ fn render_view(
     }
     let mut film = options.film(&world);
     // Names come from the scene (light groups): refused now rather than after the render.
-    exr::check_names(
-        exr::channel_names(&film, &[Aov::Spp])
-            .iter()
-            .map(|n| n.as_str()),
-    )
-    .map_err(|reason| Error::bad_input(&source, "light groups", reason))?;
+    exr::check_names(film.channel_names(&[Aov::Spp]).iter().map(|n| n.as_str()))
+        .map_err(|reason| Error::bad_input(&source, "light groups", reason))?;
     let resumed = if job.resume {
         read_checkpoint(&output, &source, identity.as_ref(), options)?
     } else {
@@ -1076,7 +1079,7 @@ fn render_view(
                 film.planes(Aov::Albedo),
                 film.planes(Aov::Normal),
             );
-            let rgb = d.denoise(&film::denoise::Layers {
+            let rgb = d.denoise(&denoise::Layers {
                 width: film.width as usize,
                 height: film.height as usize,
                 beauty: std::array::from_fn(|c| beauty[c].as_slice()),
@@ -1103,9 +1106,9 @@ fn render_view(
                         || (matches!(aov, Aov::LightGroup(_)) && own.wants_light_groups())
                 }
             };
-            let mut planes = exr::film_planes(&film, extra, keep);
+            let mut planes = film.to_planes(extra, keep);
             if let Some(d) = &denoised {
-                planes.channels.extend(film::denoise::channels(d.clone()));
+                planes.channels.extend(denoise::channels(d.clone()));
             }
             exr::write_planes(&out.path, planes, &header)?;
         }
@@ -1139,13 +1142,13 @@ fn render_view(
     } else {
         if let Some(png) = preview {
             match &denoised {
-                Some(d) => film::preview::write_rgb(
+                Some(d) => preview::write_rgb(
                     png,
                     (film.width, film.height),
                     [&d[0], &d[1], &d[2]],
                     &job.view,
                 )?,
-                None => film::preview::write(png, &film, &job.view)?,
+                None => preview::write(png, &film, &job.view)?,
             }
         }
         let peak = render::peak_memory_bytes().map_or(String::new(), |b| {
@@ -1220,7 +1223,7 @@ fn write_stats_json(
         "interrupted": stats.interrupted,
         "denoised": job.denoise && !stats.interrupted,
     });
-    film::write_atomically(&path, |w| {
+    crate::files::write_atomically(&path, |w| {
         use std::io::Write;
         serde_json::to_writer_pretty(&mut *w, &json)
             .map_err(|e| Error::other(&path, "write", e.to_string()))?;

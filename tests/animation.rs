@@ -113,7 +113,7 @@ fn malformed_animation_is_refused() {
 }
 
 fn bright_centroid_x(exr: &Path) -> f32 {
-    let (planes, _) = lucerna::film::exr::read(exr).unwrap();
+    let (planes, _) = lucerna::output::exr::read(exr).unwrap();
     let r = planes.channel("R").unwrap();
     let w = planes.window.width as usize;
     let (mut sum, mut weight) = (0.0, 0.0);
@@ -147,7 +147,7 @@ fn frames_render_a_sequence() {
         .iter()
         .map(|f| {
             let path = dir.join(format!("slide.shot.{f:04}.exr"));
-            let (_, header) = lucerna::film::exr::read(&path).unwrap();
+            let (_, header) = lucerna::output::exr::read(&path).unwrap();
             assert_eq!(header.number("lucerna/frame"), Some(*f as f64));
             bright_centroid_x(&path)
         })

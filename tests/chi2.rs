@@ -12,7 +12,7 @@ use lucerna::geometry::triangle::{RayShear, TriangleBlock, intersect};
 use lucerna::integrator::LightSampling;
 use lucerna::light::emission_texture::{self, EmissionPyramid, TriangleEmission};
 use lucerna::light::environment::{Environment, EnvironmentMap};
-use lucerna::light::{Light, QuadricLight, SphereLight, TriangleLight};
+use lucerna::light::{DistantCone, Light, QuadricLight, SphereLight, TriangleLight};
 use lucerna::material::Bsdf;
 use lucerna::material::dielectric::{Dielectric, ThinDielectric};
 use lucerna::material::gltf_pbr::GltfPbr;
@@ -543,11 +543,11 @@ fn visible_solid_angle(light: &Light, origin: Vec3) -> f64 {
 fn distant_cone_light() {
     // A wide cone so that its directions span many bins, about a tilted axis.
     let half_angle = 0.5f32;
-    let light = Light::DistantCone {
+    let light = Light::DistantCone(DistantCone {
         to_light: Vec3::new(0.3, 0.8, -0.5).normalize(),
         radiance: Vec3::ONE,
         one_minus_cos: 1.0 - half_angle.cos(),
-    };
+    });
     let mut rng = Pcg32::new(11, 0);
     let p = Vec3::new(0.2, -0.1, 0.4);
     chi2::sphere(

@@ -336,7 +336,7 @@ fn light_groups_come_from_extras_and_the_command_line() {
         "-o",
         out.to_str().unwrap(),
     ]);
-    let (planes, _) = lucerna::film::exr::read(&out).unwrap();
+    let (planes, _) = lucerna::output::exr::read(&out).unwrap();
     let layers: Vec<&str> = planes
         .channels
         .iter()
@@ -382,7 +382,7 @@ fn a_scene_without_light_gets_a_default_environment() {
         args.extend_from_slice(extra);
         let (ok, stderr) = lucerna_stderr(&args);
         assert!(ok, "{stderr}");
-        let (planes, _) = lucerna::film::exr::read(&out).unwrap();
+        let (planes, _) = lucerna::output::exr::read(&out).unwrap();
         let r = planes.channel("R").unwrap();
         (
             r.iter().map(|&v| v as f64).sum::<f64>() / r.len() as f64,

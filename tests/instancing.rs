@@ -100,7 +100,7 @@ fn memory_grows_with_the_shared_mesh_not_with_placements() {
 /// fraction of the same spheres flattened, and each estimate covers the BVH that is built.
 #[test]
 fn memory_estimate_follows_sharing() {
-    use lucerna::world::estimate_memory;
+    use lucerna::world::build::estimate_memory;
     let placed = estimate_memory(&spheres(1000));
     let flat = estimate_memory(&spheres(1000).unshared());
     assert!(

@@ -10,9 +10,10 @@ use lucerna::film::Film;
 use lucerna::film::aov::{Aov, AovSet};
 use lucerna::film::filter::PixelFilter;
 use lucerna::ingest;
-use lucerna::plan::{self, Kernel, Lobes, PlanMode, RenderPlan, SceneFeatures};
+use lucerna::render::plan::{Kernel, PlanMode, RenderPlan};
 use lucerna::render::{self, RenderOptions, RenderStats};
 use lucerna::sampling::sampler::SamplerKind;
+use lucerna::scene::features::{Lobes, SceneFeatures, strip_unused_attributes};
 use lucerna::scene::{Environment, Light, LightKind, Scene};
 use lucerna::world::World;
 use std::path::Path;
@@ -151,7 +152,7 @@ fn plans_of_small_scenes_are_as_expected() {
     // Texture coordinates stay where a texture reads them and go elsewhere, with tangents
     // that no normal map needs.
     let mut twin = shipped("scenes/usd-twin/usd-twin.gltf");
-    assert_eq!(plan::strip_unused_attributes(&mut twin), 0);
+    assert_eq!(strip_unused_attributes(&mut twin), 0);
     let f = SceneFeatures::of(&twin);
     assert_eq!((f.textured_materials, f.meshes_with_uvs), (1, 1));
     let mut untextured = cornell();
@@ -164,7 +165,7 @@ fn plans_of_small_scenes_are_as_expected() {
     mesh.tangents = Some(vec![Vec4::X; n]);
     let f = SceneFeatures::of(&untextured);
     assert_eq!((f.meshes_with_uvs, f.meshes_with_tangents), (1, 1));
-    assert_eq!(plan::strip_unused_attributes(&mut untextured), 3);
+    assert_eq!(strip_unused_attributes(&mut untextured), 3);
     let f = SceneFeatures::of(&untextured);
     assert_eq!((f.meshes_with_uvs, f.meshes_with_tangents), (0, 0));
 
@@ -224,7 +225,7 @@ fn render_with(
     configure: impl FnOnce(&mut RenderOptions),
 ) -> (Film, RenderStats) {
     if mode != PlanMode::General {
-        plan::strip_unused_attributes(&mut scene);
+        strip_unused_attributes(&mut scene);
     }
     let mut options = RenderOptions {
         aovs: AovSet::parse(aovs).unwrap(),

@@ -4,7 +4,8 @@
 mod common;
 
 use common::cli::{lucerna, lucerna_ok, temp_dir};
-use lucerna::film::exr::{self, Planes};
+use lucerna::film::planes::Planes;
+use lucerna::output::exr;
 use std::path::Path;
 use std::process::Command;
 

@@ -2,7 +2,7 @@
 //! with the right image and no NaN or Inf reaching a pixel.
 //!
 //! - The Cornell box far from the origin and at extreme scales renders like the
-//!   well-conditioned original. Render space (`world::RenderSpace`) recentres the scene in
+//!   well-conditioned original. Render space (`geometry::space::RenderSpace`) recentres the scene in
 //!   double precision and scales it by a power of two, so a box 1e7 units away or 1e4 times
 //!   larger only changes float rounding: with the same samples the image is (almost) the
 //!   same, and against another seed its error is the original's own noise.

@@ -81,7 +81,8 @@ fn ray_sets(world: &World) -> RaySets {
     let target = match world.lights.lights.first() {
         Some(Light::Triangle(t)) => (t.p[0] + t.p[1] + t.p[2]) / 3.0,
         Some(Light::Sphere(s)) => s.centre,
-        Some(Light::Point { position, .. } | Light::Spot { position, .. }) => *position,
+        Some(Light::Point(l)) => l.position,
+        Some(Light::Spot(l)) => l.position,
         _ => Vec3::new(0.0, world.radius, 0.0),
     };
     let segment = |from: Vec3, to: Vec3| Ray {

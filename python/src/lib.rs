@@ -32,7 +32,7 @@ fn layers<'py>(py: Python<'py>, rendered: &lucerna::job::Rendered) -> PyResult<B
     };
     let (w, h) = (film.width as usize, film.height as usize);
     let add = |name: &str, planes: Vec<&[f32]>| -> PyResult<()> {
-        let pixels = lucerna::film::interleave(&planes);
+        let pixels = lucerna::film::planes::interleave(&planes);
         let array = PyArray1::from_vec(py, pixels).reshape([h, w, planes.len()])?;
         dict.set_item(name, array)
     };

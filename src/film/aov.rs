@@ -1,8 +1,9 @@
-//! The AOVs (render passes) lucerna can write, their EXR layer names and channels, and the
-//! routing of tagged contributions to the light AOVs that want them.
+//! The AOVs (render passes) lucerna can write, their EXR layer names and channels, and
+//! which tagged contributions each light AOV takes (`router` turns that into a table).
 
 use super::crypto;
-use crate::integrator::path::{Contribution, Source};
+use super::record::{Contribution, FirstHit, Source};
+use glam::Vec3;
 
 /// Deepest per-depth layer (`nee_d16`, `bsdf_d16`).
 pub const MAX_DEPTH_AOV: u8 = 16;
@@ -177,7 +178,7 @@ impl Aov {
     }
 
     /// Whether this light AOV takes the (MIS-weighted) contribution `c`.
-    fn takes(self, c: &Contribution) -> bool {
+    pub(super) fn takes(self, c: &Contribution) -> bool {
         let direct = c.depth == 1;
         let indirect = c.depth >= 2;
         match self {
@@ -215,7 +216,7 @@ impl Aov {
 
     /// The lobe (0 diffuse, 1 glossy, 2 transmission) and whether indirect, of a lobe
     /// light layer.
-    fn lobe_split(self) -> Option<(usize, usize)> {
+    pub(super) fn lobe_split(self) -> Option<(usize, usize)> {
         Some(match self {
             Self::DiffuseDirect => (0, 0),
             Self::DiffuseIndirect => (0, 1),
@@ -390,106 +391,27 @@ impl AovSet {
     }
 }
 
-/// Rows of the routing table: depths 0 to [`MAX_DEPTH_AOV`], then one for every deeper one.
-const ROUTED_DEPTHS: usize = MAX_DEPTH_AOV as usize + 2;
+/// The data AOVs that are means of a first-hit vector over the pixel's samples, in the
+/// order of [`mean_data`].
+pub const MEAN_DATA: [Aov; 6] = [
+    Aov::Albedo,
+    Aov::Normal,
+    Aov::Position,
+    Aov::DiffuseColor,
+    Aov::GlossyColor,
+    Aov::TransmissionColor,
+];
 
-/// Precomputed routing: for each (source, depth) the light-AOV slots a contribution goes
-/// to, and the slots of the two single-technique AOVs.
-#[derive(Clone, Debug)]
-pub struct Router {
-    /// Light AOVs in slot order (slot 0 is the beauty).
-    pub slots: Vec<Aov>,
-    /// [source][depth] → slots.
-    table: [[Vec<u8>; ROUTED_DEPTHS]; 3],
-    /// Slots of `direct_nee_unweighted` and `direct_bsdf_unweighted`.
-    pub single_technique: [Option<u8>; 2],
-    /// [lobe][direct, indirect] → slot of the lobe layers, which take each contribution
-    /// times its lobe share.
-    pub lobes: [[Option<u8>; 2]; 3],
-    /// Slot of each light group's layer.
-    group_slots: Vec<u8>,
-    /// Slot of each light's group (empty without light groups).
-    light_slot: Vec<u8>,
-}
-
-impl Router {
-    /// Routing for the light AOVs of `set`.
-    pub fn new(set: &AovSet) -> Self {
-        let slots: Vec<Aov> = set.iter().filter(|a| a.is_light()).collect();
-        let slot_of = |aov: Aov| slots.iter().position(|&a| a == aov).map(|i| i as u8);
-        let sources = [Source::Emission, Source::Nee, Source::Bsdf];
-        let table = std::array::from_fn(|s| {
-            std::array::from_fn(|d| {
-                let probe = Contribution {
-                    value: glam::Vec3::ZERO,
-                    depth: d as u32,
-                    source: sources[s],
-                    single_technique: None,
-                    lobes: None,
-                    light: None,
-                };
-                slots
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, a)| a.takes(&probe))
-                    .map(|(i, _)| i as u8)
-                    .collect()
-            })
-        });
-        let mut lobes = [[None; 2]; 3];
-        let mut group_slots = Vec::new();
-        for (i, aov) in slots.iter().enumerate() {
-            if let Some((lobe, indirect)) = aov.lobe_split() {
-                lobes[lobe][indirect] = Some(i as u8);
-            }
-            if let Aov::LightGroup(k) = aov {
-                debug_assert_eq!(*k as usize, group_slots.len());
-                group_slots.push(i as u8);
-            }
-        }
-        Self {
-            single_technique: [
-                slot_of(Aov::DirectNeeUnweighted),
-                slot_of(Aov::DirectBsdfUnweighted),
-            ],
-            lobes,
-            group_slots,
-            light_slot: Vec::new(),
-            table,
-            slots,
-        }
-    }
-
-    /// Routes each light's contributions to its group's layer: `of_light[l]` is the group
-    /// of light `l` (see `light::groups`).
-    pub fn set_light_groups(&mut self, of_light: &[u32]) {
-        if !self.group_slots.is_empty() {
-            self.light_slot = of_light
-                .iter()
-                .map(|&g| self.group_slots[g as usize])
-                .collect();
-        }
-    }
-
-    /// The light-group slot of light `light`, if light groups are routed.
-    #[inline]
-    pub fn light_group_slot(&self, light: u32) -> Option<u8> {
-        self.light_slot.get(light as usize).copied()
-    }
-
-    /// True if some layer takes lobe shares.
-    pub fn wants_lobes(&self) -> bool {
-        self.lobes.iter().flatten().any(Option::is_some)
-    }
-
-    /// The slots taking contribution `c`'s weighted value.
-    #[inline]
-    pub fn route(&self, c: &Contribution) -> &[u8] {
-        let s = match c.source {
-            Source::Emission => 0,
-            Source::Nee => 1,
-            Source::Bsdf => 2,
-        };
-        &self.table[s][(c.depth as usize).min(ROUTED_DEPTHS - 1)]
-    }
+/// The values of [`MEAN_DATA`] at a first hit.
+#[inline]
+pub(super) fn mean_data(hit: &FirstHit) -> [Vec3; 6] {
+    let [diffuse, glossy, transmission] = hit.lobe_albedo;
+    [
+        hit.albedo,
+        hit.normal,
+        hit.position,
+        diffuse,
+        glossy,
+        transmission,
+    ]
 }

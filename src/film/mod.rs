@@ -1,454 +1,36 @@
 //! The film: per-pixel accumulation of every requested AOV, in tiles so that threads own
 //! disjoint memory. Samples of one pixel are summed in f64 in sample order before they
 //! reach the tile, so a pixel's value does not depend on the thread count.
+//!
+//! The film defines what it accepts (`record`: tagged contributions and first-hit data,
+//! handed over through a `Recorder`), routes contributions to the AOVs that want them
+//! (`aov`, `router`), accumulates them (`tile`) and gives its layers out as named planes
+//! (`planes`), from which it can also be restored. Writing files is `output`'s job.
 
 pub mod aov;
 pub mod crypto;
-pub mod denoise;
-pub mod exr;
 pub mod filter;
-pub mod preview;
+pub mod planes;
+pub mod record;
+pub mod router;
+pub mod tile;
+pub mod window;
 
-use crate::integrator::path::{Contribution, FirstHit, Recorder};
-use aov::{Aov, AovSet, Router};
+use aov::{Aov, AovSet, MEAN_DATA};
 use glam::{DVec3, Vec3};
+use planes::Planes;
+pub use router::{Router, SampleRecord};
+pub use tile::{PixelAccumulator, Tile};
+pub use window::Window;
 
 /// Tile edge in pixels.
 pub const TILE_SIZE: u32 = 16;
 /// Depth written where the camera saw nothing (as Cycles does).
 pub const BACKGROUND_DEPTH: f32 = 1e10;
 
-/// The data AOVs that are means of a first-hit vector over the pixel's samples, in the
-/// order of [`mean_data`].
-pub const MEAN_DATA: [Aov; 6] = [
-    Aov::Albedo,
-    Aov::Normal,
-    Aov::Position,
-    Aov::DiffuseColor,
-    Aov::GlossyColor,
-    Aov::TransmissionColor,
-];
-
-/// The values of [`MEAN_DATA`] at a first hit.
-#[inline]
-fn mean_data(hit: &FirstHit) -> [Vec3; 6] {
-    let [diffuse, glossy, transmission] = hit.lobe_albedo;
-    [
-        hit.albedo,
-        hit.normal,
-        hit.position,
-        diffuse,
-        glossy,
-        transmission,
-    ]
-}
-
-/// What one camera sample produced, routed into light-AOV slots as it arrives. Without
-/// `ROUTED` (the beauty is the only light layer) every contribution goes to slot 0 and the
-/// routing table is never read.
-pub struct SampleRecord<'r, const ROUTED: bool> {
-    router: &'r Router,
-    values: Vec<Vec3>,
-    covered: bool,
-    hit: Option<FirstHit>,
-    discarded: u64,
-}
-
-impl<'r, const ROUTED: bool> SampleRecord<'r, ROUTED> {
-    /// An empty record for `router`'s slots.
-    pub fn new(router: &'r Router) -> Self {
-        Self {
-            router,
-            values: vec![Vec3::ZERO; router.slots.len()],
-            covered: false,
-            hit: None,
-            discarded: 0,
-        }
-    }
-
-    /// Empties the record for the next sample.
-    #[inline]
-    pub fn clear(&mut self) {
-        self.values.fill(Vec3::ZERO);
-        self.covered = false;
-        self.hit = None;
-    }
-
-    /// The value of light slot `slot` so far.
-    pub fn value(&self, slot: usize) -> Vec3 {
-        self.values[slot]
-    }
-}
-
-impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
-    #[inline]
-    fn wants_single_technique(&self) -> bool {
-        ROUTED && self.router.single_technique.iter().any(Option::is_some)
-    }
-
-    #[inline]
-    fn wants_lobes(&self) -> bool {
-        ROUTED && self.router.wants_lobes()
-    }
-
-    #[inline]
-    fn contribution(&mut self, c: Contribution) {
-        // A non-finite contribution is dropped whole, from every AOV, and counted.
-        let finite = c.value.is_finite()
-            && c.single_technique
-                .is_none_or(|s| s[0].is_finite() && s[1].is_finite());
-        if !finite {
-            self.discarded += 1;
-            return;
-        }
-        if !ROUTED {
-            self.values[0] += c.value;
-            return;
-        }
-        for &slot in self.router.route(&c) {
-            self.values[slot as usize] += c.value;
-        }
-        if let Some(single) = c.single_technique {
-            for (value, slot) in single.iter().zip(self.router.single_technique) {
-                if let Some(slot) = slot {
-                    self.values[slot as usize] += *value;
-                }
-            }
-        }
-        if let Some(slot) = c
-            .light
-            .filter(|_| c.depth >= 1)
-            .and_then(|l| self.router.light_group_slot(l))
-        {
-            self.values[slot as usize] += c.value;
-        }
-        if let Some(shares) = c.lobes.filter(|_| c.depth >= 1) {
-            let indirect = usize::from(c.depth >= 2);
-            for (share, slots) in shares.iter().zip(&self.router.lobes) {
-                if let Some(slot) = slots[indirect] {
-                    self.values[slot as usize] += c.value * *share;
-                }
-            }
-        }
-    }
-
-    #[inline]
-    fn first_hit(&mut self, hit: Option<FirstHit>) {
-        let Some(hit) = hit else {
-            self.covered = true;
-            return;
-        };
-        let finite = mean_data(&hit).iter().all(|v| v.is_finite()) && hit.depth.is_finite();
-        if finite {
-            self.covered = true;
-            self.hit = Some(hit);
-        } else {
-            self.discarded += 1;
-        }
-    }
-}
-
-/// Sums of one pixel's samples over a range of sample indices, in double precision.
-pub struct PixelAccumulator {
-    light: Vec<DVec3>,
-    beauty_squares: DVec3,
-    coverage: f64,
-    /// Sums of [`MEAN_DATA`].
-    data: [DVec3; 6],
-    /// Samples per object and per material hit (Cryptomatte only).
-    crypto: Option<[crypto::Counts; 2]>,
-    depth: f32,
-    samples: u32,
-    /// Rays the samples traced (the pixel's cost, for adaptive sampling).
-    pub rays: u64,
-    discarded: u64,
-}
-
-impl PixelAccumulator {
-    /// An empty accumulator for `slots` light slots; `crypto` also counts the objects and
-    /// materials hit.
-    pub fn new(slots: usize, crypto: bool) -> Self {
-        Self {
-            crypto: crypto.then(Default::default),
-            light: vec![DVec3::ZERO; slots],
-            beauty_squares: DVec3::ZERO,
-            coverage: 0.0,
-            data: [DVec3::ZERO; 6],
-            depth: f32::INFINITY,
-            samples: 0,
-            rays: 0,
-            discarded: 0,
-        }
-    }
-
-    /// Empties the accumulator for the next pixel.
-    pub fn clear(&mut self) {
-        self.light.fill(DVec3::ZERO);
-        self.beauty_squares = DVec3::ZERO;
-        self.coverage = 0.0;
-        self.data = [DVec3::ZERO; 6];
-        if let Some(c) = &mut self.crypto {
-            c[0].clear();
-            c[1].clear();
-        }
-        self.depth = f32::INFINITY;
-        self.samples = 0;
-        self.rays = 0;
-        self.discarded = 0;
-    }
-
-    /// Adds one sample of a render whose only light layer is the beauty (as the packet
-    /// kernel produces them): its value, whether the camera ray hit a surface, and the
-    /// contributions dropped for being non-finite.
-    #[inline]
-    pub fn add_sample(&mut self, value: Vec3, covered: bool, discarded: u64) {
-        let b = value.as_dvec3();
-        self.light[0] += b;
-        self.beauty_squares += b * b;
-        if covered {
-            self.coverage += 1.0;
-        }
-        self.samples += 1;
-        self.discarded += discarded;
-    }
-
-    /// Adds one sample and takes its discarded-contribution count.
-    #[inline]
-    pub fn add<const ROUTED: bool>(&mut self, rec: &mut SampleRecord<ROUTED>) {
-        for (acc, v) in self.light.iter_mut().zip(&rec.values) {
-            *acc += v.as_dvec3();
-        }
-        let b = rec.values[0].as_dvec3();
-        self.beauty_squares += b * b;
-        if rec.covered {
-            self.coverage += 1.0;
-        }
-        if let Some(h) = &rec.hit {
-            for (sum, v) in self.data.iter_mut().zip(mean_data(h)) {
-                *sum += v.as_dvec3();
-            }
-            if let Some([objects, materials]) = &mut self.crypto {
-                crypto::count(objects, h.object, 1);
-                crypto::count(materials, h.material, 1);
-            }
-            self.depth = self.depth.min(h.depth);
-        }
-        self.samples += 1;
-        self.discarded += rec.discarded;
-        rec.discarded = 0;
-    }
-}
-
-/// One tile's accumulated sums.
-pub struct Tile {
-    pub x0: u32,
-    pub y0: u32,
-    pub width: u32,
-    pub height: u32,
-    /// Light slots, slot-major (`slot * pixels + pixel`).
-    light: Vec<Vec3>,
-    /// Beauty sums and sums of squares in f64, for the variance AOV and adaptive sampling.
-    beauty_sum: Vec<DVec3>,
-    beauty_squares: Vec<DVec3>,
-    /// Rays traced per pixel (adaptive sampling only).
-    rays: Vec<u64>,
-    coverage: Vec<f32>,
-    /// Sums of [`MEAN_DATA`] (empty where not requested).
-    data: [Vec<Vec3>; 6],
-    /// Per pixel, samples per object and per material (empty without Cryptomatte).
-    crypto: [Vec<crypto::Counts>; 2],
-    depth: Vec<f32>,
-    samples: Vec<u32>,
-    /// Contributions dropped for being NaN or infinite.
-    pub discarded: u64,
-}
-
-impl Tile {
-    fn new(
-        x0: u32,
-        y0: u32,
-        width: u32,
-        height: u32,
-        slots: usize,
-        aovs: &AovSet,
-        adaptive: bool,
-    ) -> Self {
-        let n = (width * height) as usize;
-        let vec3s = |aov: Aov| {
-            if aovs.contains(aov) {
-                vec![Vec3::ZERO; n]
-            } else {
-                Vec::new()
-            }
-        };
-        let with_variance = aovs.contains(Aov::Variance) || adaptive;
-        Self {
-            x0,
-            y0,
-            width,
-            height,
-            light: vec![Vec3::ZERO; slots * n],
-            beauty_sum: if with_variance {
-                vec![DVec3::ZERO; n]
-            } else {
-                Vec::new()
-            },
-            beauty_squares: if with_variance {
-                vec![DVec3::ZERO; n]
-            } else {
-                Vec::new()
-            },
-            rays: if adaptive { vec![0; n] } else { Vec::new() },
-            coverage: vec![0.0; n],
-            data: MEAN_DATA.map(vec3s),
-            crypto: if aovs.wants_crypto() {
-                [vec![Vec::new(); n], vec![Vec::new(); n]]
-            } else {
-                Default::default()
-            },
-            depth: if aovs.contains(Aov::Depth) {
-                vec![f32::INFINITY; n]
-            } else {
-                Vec::new()
-            },
-            samples: vec![0; n],
-            discarded: 0,
-        }
-    }
-
-    /// Number of pixels.
-    pub fn pixel_count(&self) -> usize {
-        (self.width * self.height) as usize
-    }
-
-    /// Adds a pixel's accumulated samples; `pixel` indexes the tile row-major.
-    pub fn add(&mut self, pixel: usize, acc: &PixelAccumulator) {
-        let n = self.pixel_count();
-        for (slot, sum) in acc.light.iter().enumerate() {
-            self.light[slot * n + pixel] += sum.as_vec3();
-        }
-        if !self.beauty_sum.is_empty() {
-            self.beauty_sum[pixel] += acc.light[0];
-            self.beauty_squares[pixel] += acc.beauty_squares;
-        }
-        if !self.rays.is_empty() {
-            self.rays[pixel] += acc.rays;
-        }
-        self.coverage[pixel] += acc.coverage as f32;
-        for (sums, sum) in self.data.iter_mut().zip(acc.data) {
-            if !sums.is_empty() {
-                sums[pixel] += sum.as_vec3();
-            }
-        }
-        if let Some(counts) = &acc.crypto {
-            for (tile_counts, pixel_counts) in self.crypto.iter_mut().zip(counts) {
-                for &(index, n) in pixel_counts {
-                    crypto::count(&mut tile_counts[pixel], index, n);
-                }
-            }
-        }
-        if !self.depth.is_empty() {
-            self.depth[pixel] = self.depth[pixel].min(acc.depth);
-        }
-        self.samples[pixel] += acc.samples;
-        self.discarded += acc.discarded;
-    }
-
-    /// Samples taken so far at `pixel` (row-major in the tile): the index of its next one.
-    pub fn samples_at(&self, pixel: usize) -> u32 {
-        self.samples[pixel]
-    }
-
-    /// What adaptive sampling knows of `pixel`: its per-sample variance of the beauty,
-    /// relative as relMSE weighs it (mean over channels of s² / (mean² + 0.01)), and its
-    /// rays per sample. `None` before two samples, or without the sums of squares.
-    pub fn pixel_statistics(&self, pixel: usize) -> Option<(f64, f64)> {
-        let n = self.samples[pixel] as f64;
-        if n < 2.0 || self.beauty_sum.is_empty() || self.rays.is_empty() {
-            return None;
-        }
-        let s = self.beauty_sum[pixel];
-        let mean = s / n;
-        let var = ((self.beauty_squares[pixel] - s * mean) / (n - 1.0)).max(DVec3::ZERO);
-        let relative = var / (mean * mean + DVec3::splat(RELATIVE_ERROR_FLOOR));
-        Some((relative.element_sum() / 3.0, self.rays[pixel] as f64 / n))
-    }
-}
-
 /// The constant relMSE adds to the squared reference in its denominator, so that dark
-/// pixels do not dominate (`../shared/design.md`, "Accuracy and speed").
+/// pixels do not dominate (relMSE = mean of (x - ref)² / (ref² + 0.01); docs/tools.md).
 pub const RELATIVE_ERROR_FLOOR: f64 = 0.01;
-
-/// A rectangle of pixels of an image: a crop window, and the EXR data window it becomes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Window {
-    pub x: u32,
-    pub y: u32,
-    pub width: u32,
-    pub height: u32,
-}
-
-impl Window {
-    /// The whole of a `width` × `height` image.
-    pub fn full(width: u32, height: u32) -> Self {
-        Self {
-            x: 0,
-            y: 0,
-            width,
-            height,
-        }
-    }
-
-    /// Parses `X0,Y0,X1,Y1`: pixel columns X0..X1 and rows Y0..Y1 (ends excluded, origin at
-    /// the top left), e.g. `0,0,320,240` for the top-left quarter of a 640x480 image.
-    pub fn parse(text: &str) -> Result<Self, String> {
-        let numbers: Vec<u32> = text
-            .split(',')
-            .map(|v| v.trim().parse::<u32>())
-            .collect::<Result<_, _>>()
-            .map_err(|_| format!("expected X0,Y0,X1,Y1 in pixels, got {text:?}"))?;
-        match numbers[..] {
-            [x0, y0, x1, y1] if x1 > x0 && y1 > y0 => Ok(Self {
-                x: x0,
-                y: y0,
-                width: x1 - x0,
-                height: y1 - y0,
-            }),
-            [_, _, _, _] => Err(format!(
-                "the window {text:?} is empty (X1 <= X0 or Y1 <= Y0)"
-            )),
-            _ => Err(format!("expected X0,Y0,X1,Y1 in pixels, got {text:?}")),
-        }
-    }
-
-    /// `X0,Y0,X1,Y1`, as [`Window::parse`] reads it.
-    pub fn describe(&self) -> String {
-        format!(
-            "{},{},{},{}",
-            self.x,
-            self.y,
-            self.x + self.width,
-            self.y + self.height
-        )
-    }
-
-    /// True if the window lies inside a `width` × `height` image.
-    pub fn fits(&self, width: u32, height: u32) -> bool {
-        self.x as u64 + self.width as u64 <= width as u64
-            && self.y as u64 + self.height as u64 <= height as u64
-    }
-
-    /// Number of pixels.
-    pub fn pixel_count(&self) -> usize {
-        self.width as usize * self.height as usize
-    }
-
-    /// Row-major index in the window of image pixel (`x`, `y`), which must lie inside it.
-    #[inline]
-    pub fn index(&self, x: u32, y: u32) -> usize {
-        (y - self.y) as usize * self.width as usize + (x - self.x) as usize
-    }
-}
 
 /// All tiles of an image's window plus the AOV set and routing. Tiles, and the sample
 /// sequences of their pixels, are placed in image coordinates, so that a window renders
@@ -534,7 +116,7 @@ impl Film {
     /// back): `planes` must hold every AOV of this film and `spp`. The sums are rebuilt as
     /// mean × samples (exact up to float rounding); sums of squares, where this film keeps
     /// them, from the `variance` layer. `discarded` is the checkpoint's NaN/Inf count.
-    pub fn restore(&mut self, planes: &exr::Planes, discarded: u64) -> Result<(), String> {
+    pub fn restore(&mut self, planes: &Planes, discarded: u64) -> Result<(), String> {
         if planes.display != self.display || planes.window != self.window {
             return Err(format!(
                 "it holds pixels {} of a {}x{} image; this render is pixels {} of {}x{}",
@@ -767,65 +349,38 @@ impl Film {
         }
         planes
     }
-}
 
-/// Writes a file atomically: `write` fills a temporary file next to `path`, which is then
-/// renamed over `path`. A failed or killed write never leaves a partial file at `path`.
-/// Interleaves planes (one per channel) into row-major pixels: what OIDN and numpy take.
-pub fn interleave(planes: &[&[f32]]) -> Vec<f32> {
-    let n = planes.first().map_or(0, |p| p.len());
-    let mut pixels = Vec::with_capacity(n * planes.len());
-    for i in 0..n {
-        pixels.extend(planes.iter().map(|p| p[i]));
+    /// The channel names of the film's layers, with `extra` AOVs.
+    pub fn channel_names(&self, extra: &[Aov]) -> Vec<String> {
+        let mut aovs: Vec<Aov> = self.aovs.iter().collect();
+        aovs.extend(extra.iter().filter(|a| !self.aovs.contains(**a)));
+        aovs.into_iter()
+            .flat_map(|aov| self.aovs.channel_names(aov))
+            .collect()
     }
-    pixels
-}
 
-pub fn write_atomically<F>(path: &std::path::Path, write: F) -> crate::Result<()>
-where
-    F: FnOnce(&mut std::io::BufWriter<std::fs::File>) -> crate::Result<()>,
-{
-    use crate::error::Error;
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::other(path, "output", "not a file name"))?;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(std::path::Path::new("."));
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    // Never rename over a device node, FIFO or directory (the render checked this before
-    // it started; this holds for every writer).
-    if let Ok(meta) = std::fs::metadata(path)
-        && !meta.is_file()
-    {
-        return Err(Error::bad_input(
-            path,
-            "output",
-            "exists and is not a regular file",
-        ));
+    /// The film's layers as planes: those that `keep` accepts (the beauty always; a render
+    /// product of several that share a render keeps its own) and `extra` (say, the sample
+    /// counts of a checkpoint).
+    pub fn to_planes(&self, extra: &[Aov], keep: impl Fn(Aov) -> bool) -> Planes {
+        let mut channels = Vec::new();
+        let mut aovs: Vec<Aov> = self.aovs.iter().collect();
+        aovs.extend(extra.iter().filter(|a| !self.aovs.contains(**a)));
+        aovs.retain(|&a| a == Aov::Beauty || extra.contains(&a) || keep(a));
+        for aov in aovs {
+            channels.extend(
+                self.aovs
+                    .channel_names(aov)
+                    .into_iter()
+                    .zip(self.planes(aov)),
+            );
+        }
+        Planes {
+            display: self.display,
+            window: self.window,
+            channels,
+        }
     }
-    let _removed_on_signal = crate::interrupt::watch_scratch(tmp.clone());
-    let result = (|| {
-        let file =
-            std::fs::File::create(&tmp).map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
-        let mut writer = std::io::BufWriter::new(file);
-        write(&mut writer)?;
-        let file = writer
-            .into_inner()
-            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
-        file.sync_all()
-            .map_err(|e| Error::other(&tmp, "output", e.to_string()))?;
-        std::fs::rename(&tmp, path).map_err(|e| Error::other(path, "output", e.to_string()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 #[cfg(test)]

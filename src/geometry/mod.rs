@@ -6,6 +6,7 @@ pub mod frame;
 pub mod instances;
 pub mod quadric;
 pub mod ray;
+pub mod space;
 pub mod sphere;
 pub mod subdivision;
 pub mod triangle;

@@ -90,7 +90,7 @@ const INT_SCALE: f32 = 256.0;
 /// Wächter & Binder, "A Fast and Robust Method for Avoiding Self-Intersection" (Ray Tracing
 /// Gems, ch. 6): the offset is a fixed number of ulps of the coordinate, so it scales with the
 /// magnitude of the point, with an absolute offset near the origin where ulps vanish. Render
-/// space is normalised to the scene's size (see `world::RenderSpace`), which makes the absolute
+/// space is normalised to the scene's size (see `geometry::space::RenderSpace`), which makes the absolute
 /// part relative to the scene too.
 #[inline]
 pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {

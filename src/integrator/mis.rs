@@ -76,7 +76,7 @@ impl Mis {
 
     /// Parses `balance`, `power[:β]`, `maximum`, `cutoff[:α]`, `nee-only` or `bsdf-only`.
     pub fn parse(s: &str) -> Result<Self, String> {
-        let (name, param) = super::settings::name_and_parameter(s)?;
+        let (name, param) = super::parameter::name_and_parameter(s)?;
         let positive = |v: f32| {
             if v.is_finite() && v > 0.0 {
                 Ok(v)

@@ -1,6 +1,6 @@
 //! The packet kernel: the path tracer of [`super::path`] run on eight paths at a time, one
 //! a SIMD lane (AVX2), for renders whose only light layer is the beauty. The render plan
-//! chooses it where some material has a GGX lobe (see `plan::Kernel::packet`); `--plan
+//! chooses it where some material has a GGX lobe (see `render::plan::Kernel::packet`); `--plan
 //! packet` and `--plan scalar` force one kernel or the other.
 //!
 //! Why a second loop: one path at a time evaluates a BSDF, MIS weights and roulette for
@@ -40,16 +40,18 @@
 //! instructions, the MIS plates 2 %). A camera sample's value is complete when its last
 //! path ends; it then goes to its pixel's accumulator as the scalar kernel's samples do.
 
+use super::estimator::{
+    Emitter, PathState, RayCounts, emitters_at_infinity, sample_chosen_light, surface_emitter,
+};
 use super::media::Media;
 use super::mis::{Mis, Technique};
-use super::path::{
-    Emitter, PathState, PathTracer, RayCounts, emitters_at_infinity, sample_chosen_light,
-    surface_emitter,
-};
-use super::settings::{ROULETTE_CAP, ROULETTE_CAP_DEPTH, RussianRoulette, Settings};
+use super::path::PathTracer;
+use super::roulette::{ROULETTE_CAP, ROULETTE_CAP_DEPTH, RussianRoulette};
+use super::settings::Settings;
 use super::split::{FirstSplit, PixelParts, SampleParts, SamplePoints, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::filter::PixelFilter;
+use crate::film::record::{Contribution, FirstHit, Recorder};
 use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, RayLanes, offset_ray_origin_lanes};
 use crate::geometry::triangle::Lanes;
@@ -1369,7 +1371,7 @@ struct SlotRecorder {
     covered: bool,
 }
 
-impl super::path::Recorder for SlotRecorder {
+impl Recorder for SlotRecorder {
     fn wants_single_technique(&self) -> bool {
         false
     }
@@ -1378,7 +1380,7 @@ impl super::path::Recorder for SlotRecorder {
         false
     }
 
-    fn contribution(&mut self, c: super::path::Contribution) {
+    fn contribution(&mut self, c: Contribution) {
         if c.value.is_finite() {
             self.value += c.value;
         } else {
@@ -1386,7 +1388,7 @@ impl super::path::Recorder for SlotRecorder {
         }
     }
 
-    fn first_hit(&mut self, _: Option<super::path::FirstHit>) {
+    fn first_hit(&mut self, _: Option<FirstHit>) {
         self.covered = true;
     }
 }

@@ -26,233 +26,22 @@
 //! random numbers (`PathState::vertex`).
 
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
-use super::media::Media;
+use super::estimator::{
+    Emitter, PathState, RayCounts, emitters_at_infinity, sample_light, surface_emitter,
+};
 use super::mis::{Mis, Technique};
-use super::settings::{RussianRoulette, Settings};
+use super::roulette::RussianRoulette;
+use super::settings::Settings;
 use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
+use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, offset_ray_origin};
-use crate::light::LightSample;
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::scene::Material;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
-
-/// Where a contribution came from.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Source {
-    /// An emitter (or the environment) seen directly by the camera.
-    Emission,
-    /// Light sampling at a path vertex.
-    Nee,
-    /// A BSDF-sampled direction that hit an emitter (or escaped to the environment).
-    Bsdf,
-}
-
-/// Radiance a path adds to its pixel, with its tags.
-#[derive(Clone, Copy, Debug)]
-pub struct Contribution {
-    /// The MIS-weighted contribution (what the beauty receives).
-    pub value: Vec3,
-    /// Number of scattering events before the light arrived (0 for emission seen
-    /// directly, 1 for direct illumination).
-    pub depth: u32,
-    pub source: Source,
-    /// The same contribution weighted for light sampling alone and BSDF sampling alone
-    /// (each the unbiased single-technique estimator), when the recorder asks for them.
-    pub single_technique: Option<[Vec3; 2]>,
-    /// Shares of `value` owed to each lobe of the first scattering event, when the
-    /// recorder asks for them (depth >= 1).
-    pub lobes: Option<PerLobe>,
-    /// The light it came from (light sampling and BSDF-sampled emitter hits).
-    pub light: Option<u32>,
-}
-
-/// What the camera ray saw first: the data AOVs.
-#[derive(Clone, Copy, Debug)]
-pub struct FirstHit {
-    pub albedo: Vec3,
-    /// World-space shading normal, facing the camera.
-    pub normal: Vec3,
-    /// Distance along the camera's viewing axis, world units.
-    pub depth: f32,
-    /// World-space position.
-    pub position: Vec3,
-    /// Directional albedo of each lobe kind.
-    pub lobe_albedo: PerLobe,
-    /// The object and the material hit (indices: `World::objects`, the materials).
-    pub object: u32,
-    pub material: u32,
-}
-
-/// Receives what a path produces.
-pub trait Recorder {
-    /// Whether to compute [`Contribution::single_technique`] for direct light.
-    fn wants_single_technique(&self) -> bool;
-    /// Whether to compute [`Contribution::lobes`].
-    fn wants_lobes(&self) -> bool;
-    fn contribution(&mut self, c: Contribution);
-    /// The camera ray hit a surface (coverage); with its data when the kernel computes it.
-    fn first_hit(&mut self, hit: Option<FirstHit>);
-}
-
-/// Ray counts of one or more paths.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct RayCounts {
-    /// Camera and continuation rays (closest hit).
-    pub closest: u64,
-    /// Shadow rays (any hit).
-    pub shadow: u64,
-}
-
-impl RayCounts {
-    /// Adds another count.
-    pub fn add(&mut self, o: &RayCounts) {
-        self.closest += o.closest;
-        self.shadow += o.shadow;
-    }
-}
-
-/// The state a path carries from vertex to vertex.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct PathState {
-    /// Throughput: product of BSDF weights and roulette or splitting factors so far.
-    pub(crate) beta: Vec3,
-    /// Scattering events so far.
-    pub(crate) depth: u32,
-    /// Surfaces the path has met so far (scattering events and filter crossings): the
-    /// vertex whose random numbers the next surface takes. Equal to `depth` until a
-    /// filter is crossed.
-    pub(crate) vertex: u32,
-    /// Sample-dimension namespace of this path (0: the main path; branches get their own).
-    pub(crate) branch: u32,
-    /// The vertex the current ray left: where light selection and light densities are
-    /// evaluated for MIS when the ray finds an emitter.
-    pub(crate) prev_p: Vec3,
-    pub(crate) prev_n: Vec3,
-    /// Density of the BSDF sample that led here times the BSDF sample count there, and
-    /// whether it came from a delta lobe.
-    pub(crate) prev_pdf: f32,
-    pub(crate) prev_delta: bool,
-    /// Shadow rays sent from the previous vertex (light sampling's sample count there).
-    pub(crate) prev_nee_count: u32,
-    /// Lobe shares of the first scattering event (once there was one, and if wanted).
-    pub(crate) lobes: PerLobe,
-    /// The volumes the path is inside.
-    pub(crate) media: Media,
-    /// Distance travelled through filters since the previous vertex (render space): the
-    /// part of the way from `prev_p` to the next surface that light densities must add.
-    pub(crate) crossed: f32,
-}
-
-/// An emitter a path ran into: radiance towards the path, light index, and where.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Emitter {
-    pub le: Vec3,
-    pub light: usize,
-    /// Direction of the ray that found it and the distance along it (infinite for the
-    /// environment).
-    pub dir: Vec3,
-    pub dist: f32,
-}
-
-/// The emitters a ray that left the scene along `dir` finds: the environment and the
-/// distant lights whose cone contains the direction.
-#[inline]
-pub(crate) fn emitters_at_infinity(world: &World, dir: Vec3, mut found: impl FnMut(Emitter)) {
-    if let (Some(env), Some(index)) = (&world.lights.environment, world.lights.environment_index) {
-        found(Emitter {
-            le: env.radiance(dir),
-            light: index as usize,
-            dir,
-            dist: f32::INFINITY,
-        });
-    }
-    let cones = &world.lights.distant_cones;
-    let dir = if cones.is_empty() {
-        dir
-    } else {
-        dir.normalize()
-    };
-    for &index in cones {
-        let le = world.lights.lights[index as usize].radiance_at_infinity(dir);
-        if le != Vec3::ZERO {
-            found(Emitter {
-                le,
-                light: index as usize,
-                dir,
-                dist: f32::INFINITY,
-            });
-        }
-    }
-}
-
-/// The emitter the surface point `it`, found by `ray` at distance `t`, is, if it emits
-/// towards the ray.
-#[inline]
-pub(crate) fn surface_emitter(
-    world: &World,
-    it: &Interaction,
-    ray: &Ray,
-    t: f32,
-) -> Option<Emitter> {
-    let le = world.surfaces.emitted(it);
-    if le == Vec3::ZERO {
-        return None;
-    }
-    world.light_index(it).map(|light| Emitter {
-        le,
-        light,
-        dir: ray.dir,
-        dist: t * ray.dir.length(),
-    })
-}
-
-/// A light sample for shading point `it`: a light chosen with `u_select` (its index and
-/// selection probability) and a point on it from `u_light`, its radiance including the
-/// emitter's surface emission; `None` where it cannot contribute (no light, zero radiance,
-/// or below a surface that does not transmit, `both_sides` false).
-#[inline]
-pub(crate) fn sample_light(
-    world: &World,
-    settings: &Settings,
-    it: &Interaction,
-    u_select: f32,
-    u_light: Vec2,
-    both_sides: bool,
-) -> Option<(usize, f32, LightSample)> {
-    let (index, p_select) = world.lights.select(u_select, it.p, it.frame.n)?;
-    let ng = if both_sides { None } else { Some(it.ng) };
-    let ls = sample_chosen_light(world, settings, it.p, ng, index, u_light)?;
-    Some((index, p_select, ls))
-}
-
-/// [`sample_light`]'s sample of light `index`, once chosen, from point `p`; with a
-/// geometric normal `ng`, only above the surface.
-#[inline(always)]
-pub(crate) fn sample_chosen_light(
-    world: &World,
-    settings: &Settings,
-    p: Vec3,
-    ng: Option<Vec3>,
-    index: usize,
-    u_light: Vec2,
-) -> Option<LightSample> {
-    let lights = &world.lights;
-    let mut ls = lights.lights[index].sample(
-        p,
-        lights.environment.as_ref(),
-        settings.light_sampling,
-        u_light,
-    )?;
-    if let Some((prim, b)) = ls.area_point {
-        ls.radiance *= world.surfaces.emission_at(prim, b);
-    }
-    let useless = ls.radiance == Vec3::ZERO || ng.is_some_and(|ng| ls.wi.dot(ng) <= 0.0);
-    (!useless).then_some(ls)
-}
 
 /// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.
 struct Walk<'l> {
@@ -319,7 +108,7 @@ struct Continuation {
 }
 
 /// The path tracer over a world with given settings, in the variant a render plan chose
-/// (see `plan::Kernel`): `EMITTERS` looks up and MIS-weighs emitters that BSDF-sampled rays
+/// (see `render::plan::Kernel`): `EMITTERS` looks up and MIS-weighs emitters that BSDF-sampled rays
 /// hit; `DATA` computes the first hit's data AOVs.
 pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     world: &'a World,
@@ -331,50 +120,6 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
 }
 
 impl PathState {
-    /// The state of a camera path whose ray starts at `origin`.
-    pub(crate) fn camera(origin: Vec3) -> Self {
-        Self {
-            beta: Vec3::ONE,
-            depth: 0,
-            vertex: 0,
-            branch: 0,
-            prev_p: origin,
-            prev_n: Vec3::ZERO,
-            prev_pdf: 0.0,
-            prev_delta: true,
-            prev_nee_count: 1,
-            lobes: [Vec3::ZERO; 3],
-            media: Media::default(),
-            crossed: 0.0,
-        }
-    }
-
-    /// Density with which light sampling at the previous vertex (its shadow rays
-    /// together) produces the direction towards emitter `e`, which BSDF sampling found: the
-    /// other technique's density in its MIS weight (0 after a delta lobe, which light
-    /// sampling cannot follow).
-    #[inline]
-    pub(crate) fn light_density(&self, world: &World, settings: &Settings, e: &Emitter) -> f32 {
-        if self.prev_delta {
-            return 0.0;
-        }
-        let lights = &world.lights;
-        let select = lights.selection_probability(e.light, self.prev_p, self.prev_n);
-        let density = match &lights.lights[e.light] {
-            crate::light::Light::Environment => lights
-                .environment
-                .as_ref()
-                .map_or(0.0, |env| env.pdf(e.dir)),
-            l => l.pdf(
-                self.prev_p,
-                e.dir,
-                e.dist + self.crossed,
-                settings.light_sampling,
-            ),
-        };
-        select * density * self.prev_nee_count as f32
-    }
-
     /// A camera path (through filters at most) reached an unlit surface of colour
     /// `colour`: it is seen as emission (of no light: no light group takes it).
     fn reached_unlit<R: Recorder>(&self, walk: &mut Walk, rec: &mut R, colour: Vec3) {

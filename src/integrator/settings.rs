@@ -1,61 +1,15 @@
-//! The integrator's settings: every technique of `../shared/seed-path-tracing.md` as data.
+//! The integrator's settings: every sampling technique of the path tracer as data (MIS
+//! heuristic, Russian roulette, depth, light selection and sampling, splitting, sampler,
+//! seed).
 //!
 //! Each setting has one textual form (`name[:parameter]`), used on the command line, in
 //! TOML settings files and in the EXR header, so a render can be reproduced from its file.
 
 use super::mis::Mis;
+use super::roulette::RussianRoulette;
+use crate::light::sample::LightSampling;
+use crate::light::selection::LightSelect;
 use crate::sampling::sampler::SamplerKind;
-
-/// How paths are terminated beyond the maximum depth.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum RussianRoulette {
-    /// Only the maximum depth ends paths.
-    Off,
-    /// Continue with a fixed probability p at every bounce.
-    Fixed(f32),
-    /// Continue with p = min(1, luminance(throughput) / threshold); after
-    /// [`ROULETTE_CAP_DEPTH`] bounces p is also capped at [`ROULETTE_CAP`], so that paths in
-    /// closed scenes whose albedo is 1 still end (still unbiased).
-    Throughput(f32),
-    /// Efficiency-aware roulette and splitting (in the spirit of Rath et al. 2022): learned
-    /// per-region radiance moments and costs, and per-pixel variances and costs, choose the
-    /// survival or splitting factor that maximises efficiency (see `integrator::ears`); the
-    /// parameter is the largest splitting factor (default 1: roulette only).
-    Efficiency(f32),
-}
-
-/// Bounces after which throughput-based roulette caps its survival probability.
-pub const ROULETTE_CAP_DEPTH: u32 = 8;
-/// The cap on survival probability after [`ROULETTE_CAP_DEPTH`] bounces.
-pub const ROULETTE_CAP: f32 = 0.95;
-
-/// How a light is chosen for next-event estimation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LightSelect {
-    /// Every light that emits equally likely.
-    Uniform,
-    /// In proportion to emitted power.
-    Power,
-    /// In proportion to an estimate of the unoccluded contribution at the shading point,
-    /// through a light BVH (see `light::tree`).
-    Contribution,
-}
-
-/// The measure area lights are sampled in.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum LightSampling {
-    /// Uniformly by area.
-    Area,
-    /// Uniformly in the solid angle they subtend (triangles: spherical triangles; spheres:
-    /// the cone of directions), where that is numerically sound, else by area.
-    SolidAngle,
-    /// Spheres in the cone they subtend, other shapes by area: the cone costs about what
-    /// an area sample does and never samples the sphere's hidden side (on the MIS plates'
-    /// spheres, half the relMSE at equal samples), while spherical triangles cost several
-    /// times an area sample and gain little for lights that are small from where they are
-    /// seen (the Cornell box's).
-    Auto,
-}
 
 /// Shadow rays and BSDF samples at the first vertex seen from the camera.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,140 +79,6 @@ impl Default for Settings {
             sampler: SamplerKind::Sobol,
             seed: 0,
         }
-    }
-}
-
-/// Splits a setting value `name[:number]` into its name and optional parameter.
-pub(crate) fn name_and_parameter(s: &str) -> Result<(&str, Option<f32>), String> {
-    match s.split_once(':') {
-        Some((name, p)) => {
-            let value = p
-                .parse::<f32>()
-                .map_err(|_| format!("invalid number in {s:?}"))?;
-            Ok((name, Some(value)))
-        }
-        None => Ok((s, None)),
-    }
-}
-
-impl RussianRoulette {
-    /// Survival probability for a path with throughput luminance `throughput` after
-    /// `depth` scattering events (the efficiency mode decides elsewhere; 1 here).
-    #[inline]
-    pub fn survival(&self, throughput: f32, depth: u32) -> f32 {
-        match *self {
-            Self::Off | Self::Efficiency(_) => 1.0,
-            Self::Fixed(p) => p,
-            Self::Throughput(threshold) => {
-                let cap = if depth > ROULETTE_CAP_DEPTH {
-                    ROULETTE_CAP
-                } else {
-                    1.0
-                };
-                (throughput / threshold).min(cap)
-            }
-        }
-    }
-
-    /// Parses `off`, `fixed:P`, `throughput[:THRESHOLD]` or `efficiency[:MAX_SPLIT]`.
-    pub fn parse(s: &str) -> Result<Self, String> {
-        let (name, param) = name_and_parameter(s)?;
-        match (name, param) {
-            ("off", None) => Ok(Self::Off),
-            ("fixed", Some(p)) if p > 0.0 && p <= 1.0 => Ok(Self::Fixed(p)),
-            ("fixed", _) => {
-                Err("fixed roulette needs a survival probability in (0, 1], e.g. fixed:0.3".into())
-            }
-            ("throughput", p) => {
-                let t = p.unwrap_or(0.1);
-                if t.is_finite() && t > 0.0 {
-                    Ok(Self::Throughput(t))
-                } else {
-                    Err(format!("threshold must be positive, got {t}"))
-                }
-            }
-            ("efficiency", s) => {
-                let s = s.unwrap_or(1.0);
-                if s.is_finite() && s >= 1.0 {
-                    Ok(Self::Efficiency(s))
-                } else {
-                    Err(format!(
-                        "the largest splitting factor must be at least 1, got {s}"
-                    ))
-                }
-            }
-            _ => Err(format!(
-                "unknown Russian roulette {s:?} (off, fixed:P, throughput[:T], efficiency[:MAX_SPLIT])"
-            )),
-        }
-    }
-
-    /// The textual form [`RussianRoulette::parse`] reads.
-    pub fn describe(&self) -> String {
-        match self {
-            Self::Off => "off".into(),
-            Self::Fixed(p) => format!("fixed:{p}"),
-            Self::Throughput(t) => format!("throughput:{t}"),
-            Self::Efficiency(s) => format!("efficiency:{s}"),
-        }
-    }
-}
-
-impl LightSelect {
-    /// Parses `uniform`, `power` or `contribution`.
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "uniform" => Ok(Self::Uniform),
-            "power" => Ok(Self::Power),
-            "contribution" => Ok(Self::Contribution),
-            _ => Err(format!(
-                "unknown light selection {s:?} (uniform, power, contribution)"
-            )),
-        }
-    }
-
-    /// The textual form [`LightSelect::parse`] reads.
-    pub fn describe(&self) -> &'static str {
-        match self {
-            Self::Uniform => "uniform",
-            Self::Power => "power",
-            Self::Contribution => "contribution",
-        }
-    }
-}
-
-impl LightSampling {
-    /// Parses `area`, `solid-angle` or `auto`.
-    pub fn parse(s: &str) -> Result<Self, String> {
-        match s {
-            "area" => Ok(Self::Area),
-            "solid-angle" => Ok(Self::SolidAngle),
-            "auto" => Ok(Self::Auto),
-            _ => Err(format!(
-                "unknown light sampling {s:?} (area, solid-angle, auto)"
-            )),
-        }
-    }
-
-    /// The textual form [`LightSampling::parse`] reads.
-    pub fn describe(&self) -> &'static str {
-        match self {
-            Self::Area => "area",
-            Self::SolidAngle => "solid-angle",
-            Self::Auto => "auto",
-        }
-    }
-
-    /// Whether triangles are sampled as spherical triangles (where numerically sound).
-    #[inline]
-    pub fn triangles_by_solid_angle(self) -> bool {
-        self == Self::SolidAngle
-    }
-
-    /// Whether spheres are sampled in the cone they subtend (from outside them).
-    #[inline]
-    pub fn spheres_by_cone(self) -> bool {
-        self != Self::Area
     }
 }
 

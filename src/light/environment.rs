@@ -4,6 +4,7 @@
 //! Lat-long convention: v = θ / π from +Y (top row) to -Y; u = 0.5 + φ / 2π with
 //! φ = atan2(x, -z), so the image's centre column looks along -Z and u grows towards +X.
 
+use super::sample::LightSample;
 use crate::color::luminance;
 use crate::sampling::distribution::Distribution2D;
 use crate::sampling::warp::{UNIFORM_SPHERE_PDF, square_to_uniform_sphere};
@@ -144,6 +145,28 @@ impl Environment {
             Self::Constant(l) => luminance(*l) * 4.0 * PI,
             Self::Map(m) => m.luminance_integral,
         }
+    }
+}
+
+impl Environment {
+    /// Emitted power (luminance) through a disc of the scene's bounding `radius`, as pbrt
+    /// scales infinite lights.
+    pub fn power(&self, radius: f32) -> f32 {
+        PI * radius * radius * self.luminance_integral()
+    }
+
+    /// [`Environment::sample`] as a light sample.
+    #[inline]
+    pub fn light_sample(&self, u: Vec2) -> Option<LightSample> {
+        let s = self.sample(u)?;
+        Some(LightSample {
+            wi: s.wi,
+            target: None,
+            area_point: None,
+            radiance: s.radiance,
+            pdf: s.pdf,
+            delta: false,
+        })
     }
 }
 

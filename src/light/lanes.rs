@@ -304,8 +304,9 @@ fn vector(record: &[F8; RECORD], f: usize) -> V3 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::integrator::{LightSampling, LightSelect};
-    use crate::light::{SphereLight, TriangleLight, solid_angle};
+    use crate::light::{
+        LightSampling, LightSelect, PointLight, SphereLight, TriangleLight, solid_angle,
+    };
     use crate::sampling::distribution::AliasTable;
     use crate::sampling::pcg::Pcg32;
 
@@ -411,10 +412,10 @@ mod tests {
                 false,
                 2,
             ),
-            Light::Point {
+            Light::Point(PointLight {
                 position: Vec3::ONE,
                 intensity: Vec3::ONE,
-            },
+            }),
             sphere(Vec3::new(0.5, 0.5, 1.5), 0.6, false, 4),
             sphere(Vec3::new(-1.0, 1.0, 0.0), 0.01, true, 5),
         ];

@@ -5,10 +5,43 @@
 use super::Light;
 use super::environment::Environment;
 use super::tree::{LightBounds, LightTree};
-use crate::geometry::quadric::Quadric;
-use crate::integrator::LightSelect;
 use crate::sampling::distribution::AliasTable;
 use glam::Vec3;
+
+/// How a light is chosen for next-event estimation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LightSelect {
+    /// Every light that emits equally likely.
+    Uniform,
+    /// In proportion to emitted power.
+    Power,
+    /// In proportion to an estimate of the unoccluded contribution at the shading point,
+    /// through a light BVH (see `light::tree`).
+    Contribution,
+}
+
+impl LightSelect {
+    /// Parses `uniform`, `power` or `contribution`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s {
+            "uniform" => Ok(Self::Uniform),
+            "power" => Ok(Self::Power),
+            "contribution" => Ok(Self::Contribution),
+            _ => Err(format!(
+                "unknown light selection {s:?} (uniform, power, contribution)"
+            )),
+        }
+    }
+
+    /// The textual form [`LightSelect::parse`] reads.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::Uniform => "uniform",
+            Self::Power => "power",
+            Self::Contribution => "contribution",
+        }
+    }
+}
 
 /// How lights are chosen.
 #[derive(Clone, Debug)]
@@ -42,67 +75,7 @@ pub struct LightSet {
 
 /// What the light tree knows of light `l`; `None` for lights at infinity.
 fn bounds(l: &Light, environment: Option<&Environment>, radius: f32) -> Option<LightBounds> {
-    let phi = l.power(environment, radius);
-    let point = |p: Vec3, w: Vec3, cos_theta_o: f32, cos_theta_e: f32| LightBounds {
-        min: p,
-        max: p,
-        phi,
-        w,
-        cos_theta_o,
-        cos_theta_e,
-        two_sided: false,
-    };
-    Some(match l {
-        Light::Triangle(t) => LightBounds {
-            min: t.p[0].min(t.p[1]).min(t.p[2]),
-            max: t.p[0].max(t.p[1]).max(t.p[2]),
-            phi,
-            w: t.n,
-            cos_theta_o: 1.0,
-            cos_theta_e: 0.0,
-            two_sided: t.two_sided,
-        },
-        Light::Sphere(s) => LightBounds {
-            min: s.centre - s.radius,
-            max: s.centre + s.radius,
-            phi,
-            w: Vec3::Y,
-            cos_theta_o: -1.0,
-            cos_theta_e: 0.0,
-            two_sided: s.two_sided,
-        },
-        Light::Quadric(q) => {
-            let (min, max) = q.quadric.bounds();
-            // A disk's normals are its normal; a cylinder's lie at 90 degrees to its axis.
-            let (w, cos_theta_o) = match q.quadric {
-                Quadric::Disk(d) => (d.normal, 1.0),
-                Quadric::Cylinder(c) => (c.axis, 0.0),
-            };
-            LightBounds {
-                min,
-                max,
-                phi,
-                w,
-                cos_theta_o,
-                cos_theta_e: 0.0,
-                two_sided: q.two_sided,
-            }
-        }
-        Light::Point { position, .. } => point(*position, Vec3::Y, -1.0, 0.0),
-        Light::Spot {
-            position,
-            axis,
-            cos_inner,
-            cos_outer,
-            ..
-        } => {
-            // Full power inside the inner cone, falling off to nothing at the outer one.
-            let cos_e =
-                (cos_outer.clamp(-1.0, 1.0).acos() - cos_inner.clamp(-1.0, 1.0).acos()).cos();
-            point(*position, *axis, *cos_inner, cos_e)
-        }
-        Light::Directional { .. } | Light::DistantCone { .. } | Light::Environment => return None,
-    })
+    l.bounds(l.power(environment, radius))
 }
 
 impl LightSet {
@@ -147,7 +120,7 @@ impl LightSet {
             }
         };
         let distant_cones = (0..lights.len() as u32)
-            .filter(|&i| matches!(lights[i as usize], Light::DistantCone { .. }))
+            .filter(|&i| matches!(lights[i as usize], Light::DistantCone(_)))
             .collect();
         Self {
             lights,
@@ -227,10 +200,10 @@ mod tests {
     use super::*;
 
     fn point(intensity: f32) -> Light {
-        Light::Point {
+        Light::Point(crate::light::PointLight {
             position: Vec3::ZERO,
             intensity: Vec3::splat(intensity),
-        }
+        })
     }
 
     /// Uniform selection never picks a light that emits nothing, and its probabilities

@@ -6,9 +6,7 @@
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
-/// Below this alpha (roughness²) a surface is treated as perfectly smooth (a delta lobe),
-/// as pbrt-v4 does: the distribution is too peaked for floats to evaluate reliably.
-pub const SMOOTH_ALPHA: f32 = 1e-3;
+pub use crate::scene::material::SMOOTH_ALPHA;
 
 /// Isotropic GGX with alpha = roughness².
 #[derive(Clone, Copy, Debug)]

@@ -165,7 +165,7 @@ fn buffer_name(manifest: &Path) -> String {
 /// Writes `bytes` to `path` through a temporary file and a rename, so a reader never sees
 /// a half-written file.
 fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    crate::film::write_atomically(path, |w| {
+    crate::files::write_atomically(path, |w| {
         use std::io::Write;
         w.write_all(bytes)
             .map_err(|e| Error::other(path, "write", e.to_string()))

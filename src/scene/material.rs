@@ -4,6 +4,11 @@
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 
+/// Below this alpha (roughness²) a surface is treated as perfectly smooth (a delta lobe),
+/// as pbrt-v4 does: the distribution is too peaked for floats to evaluate reliably. The
+/// BSDFs (`material::microfacet`) and the analysis of a scene's lobes both read it.
+pub const SMOOTH_ALPHA: f32 = 1e-3;
+
 /// A material as the scene describes it.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Material {
@@ -221,7 +226,7 @@ impl Material {
         self.unlit
             || (self.transmits()
                 && self.volume.is_none()
-                && (self.roughness * self.roughness < crate::material::microfacet::SMOOTH_ALPHA
+                && (self.roughness * self.roughness < SMOOTH_ALPHA
                     || self.metallic_roughness_texture.is_some()
                     || self.anisotropy.is_some()))
     }

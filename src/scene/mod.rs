@@ -2,6 +2,7 @@
 //! right-handed, Y up (like glTF). Transforms are double precision so that a scene far from
 //! the origin keeps its detail until [`crate::world`] moves it into render space.
 
+pub mod features;
 pub mod file;
 pub mod material;
 pub mod texture;

@@ -5,7 +5,7 @@
 //! order, so that every lane is the scalar shading point to the bit. Only for code compiled
 //! with AVX2 (see `crate::simd`).
 
-use super::Surfaces;
+use super::surfaces::Surfaces;
 use crate::geometry::frame::frame_from_normal_lanes;
 use crate::geometry::{Hit, NOT_PLACED};
 use crate::material::{self, Bsdf, SurfaceAttributes};
@@ -103,7 +103,7 @@ impl TriangleHits {
             let low = (leaves.lt(threshold + F8::splat(1e-4)) & iz.gt(zero)).bits() & interpolated;
             for lane in crate::geometry::triangle::Lanes::new(low) {
                 let (n, g, w) = (ns.lane(lane), ng.lane(lane), wo.lane(lane));
-                ns.set_lane(lane, crate::world::valid_reflection_normal(n, g, w));
+                ns.set_lane(lane, super::surfaces::valid_reflection_normal(n, g, w));
             }
         }
         ShadingLanes {
@@ -239,7 +239,7 @@ mod tests {
                 let (n, wo) = (it.frame.n, -dirs[lane].normalize());
                 let target = (0.5 * it.ng.dot(wo)).min(0.01);
                 let reflected = (n * (2.0 * n.dot(wo)) - wo).dot(it.ng);
-                let threshold = crate::world::reflection_threshold(it.ng.dot(wo));
+                let threshold = crate::world::surfaces::reflection_threshold(it.ng.dot(wo));
                 bent += usize::from(
                     (n.dot(wo) - target).abs() < 1e-4 || (reflected - threshold).abs() < 2e-3,
                 );

@@ -6,8 +6,9 @@
 
 use crate::error::{Error, Result};
 use crate::film::Window;
-use crate::film::exr::{Attribute, Header, Planes};
+use crate::film::planes::Planes;
 use crate::integrator::settings::read_settings_toml;
+use crate::output::exr::{Attribute, Header};
 use crate::render::RenderOptions;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -255,7 +256,7 @@ pub fn merge(parts: &[Part]) -> Result<(Planes, Header)> {
         );
     }
     let mut channels = Vec::new();
-    let denoised = format!("{}.", crate::film::denoise::LAYER);
+    let denoised = format!("{}.", crate::output::denoise::LAYER);
     if parts[0]
         .planes
         .channels

@@ -15,10 +15,10 @@
 //! CG config), from lucerna's working space, linear Rec.709, which OCIO 2.5 configs name by
 //! its interop id `lin_rec709_scene`.
 
-use super::Film;
-use super::aov::Aov;
 use crate::color::linear_to_srgb;
 use crate::error::{Error, Result};
+use crate::film::Film;
+use crate::film::aov::Aov;
 use glam::{Mat3, Vec3};
 use std::path::Path;
 
@@ -153,7 +153,7 @@ pub fn write_rgb(
             bytes.push((linear_to_srgb(c) * 255.0 + 0.5) as u8);
         }
     }
-    super::write_atomically(path, |file| {
+    crate::files::write_atomically(path, |file| {
         let err = |e: png::EncodingError| Error::other(path, "PNG", e.to_string());
         let mut encoder = png::Encoder::new(file, width, height);
         encoder.set_color(png::ColorType::Rgb);
@@ -258,9 +258,9 @@ fn write_ocio(
         })
         .collect();
     let source = scratch.path().join("beauty.exr");
-    let planes = super::exr::Planes {
+    let planes = crate::film::planes::Planes {
         display: (width, height),
-        window: super::Window::full(width, height),
+        window: crate::film::Window::full(width, height),
         channels: ["R", "G", "B"]
             .iter()
             .map(|c| c.to_string())
@@ -272,7 +272,7 @@ fn write_ocio(
     let applied = run_ocio(&source, &png, view).map_err(failed)?;
     log::info!("preview through OCIO {applied}");
     // Moved into place whole, as every output is.
-    super::write_atomically(path, |file| {
+    crate::files::write_atomically(path, |file| {
         let bytes = std::fs::read(&png).map_err(|e| failed(e.to_string()))?;
         std::io::Write::write_all(file, &bytes).map_err(|e| failed(e.to_string()))
     })

@@ -8,9 +8,10 @@
 //! `colorInteropID` `lin_rec709_scene`; `owner` and `capDate` are set, `framesPerSecond`
 //! for frames of an animation.
 
-use super::aov::Aov;
-use super::{Film, Window};
 use crate::error::{Error, Result};
+use crate::film::aov::Aov;
+use crate::film::planes::Planes;
+use crate::film::{Film, Window};
 pub use exr::compression::Compression;
 use exr::meta::attribute::{Chromaticities, Rational};
 use exr::prelude::*;
@@ -130,29 +131,6 @@ fn string_of(t: &Text) -> String {
     String::from_utf8(t.bytes().to_vec()).unwrap_or_else(|_| t.to_string())
 }
 
-/// An EXR image's pixels as lucerna reads and writes them: named 32-bit float planes over
-/// a data window of the whole image (the display window, whose origin is 0, 0).
-#[derive(Clone, Debug)]
-pub struct Planes {
-    /// Size of the whole image.
-    pub display: (u32, u32),
-    /// The pixels present (all of the image but for crop renders).
-    pub window: Window,
-    /// Channel name (`layer.C`, the beauty unprefixed) and its row-major plane over the
-    /// window.
-    pub channels: Vec<(String, Vec<f32>)>,
-}
-
-impl Planes {
-    /// The plane of channel `name`, if the image has it.
-    pub fn channel(&self, name: &str) -> Option<&[f32]> {
-        self.channels
-            .iter()
-            .find(|(n, _)| n == name)
-            .map(|(_, p)| p.as_slice())
-    }
-}
-
 impl Header {
     /// The value of attribute `name`, if present.
     pub fn get(&self, name: &str) -> Option<&Attribute> {
@@ -210,43 +188,11 @@ pub fn check_names<'a>(
     Ok(())
 }
 
-/// The channel names `film` writes, with `extra` AOVs.
-pub fn channel_names(film: &Film, extra: &[Aov]) -> Vec<String> {
-    let mut aovs: Vec<Aov> = film.aovs.iter().collect();
-    aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
-    aovs.into_iter()
-        .flat_map(|aov| film.aovs.channel_names(aov))
-        .collect()
-}
-
 /// Writes `film` to `path` atomically (a temporary file in the same directory, renamed
 /// into place), with `header` in the header; `extra` AOVs (data layers the film can always
 /// produce, such as `spp`) are written too even if the film's AOV set lacks them.
 pub fn write(path: &Path, film: &Film, header: &Header, extra: &[Aov]) -> Result<()> {
-    write_planes(path, film_planes(film, extra, |_| true), header)
-}
-
-/// The planes of `film` to write: its layers that `keep` accepts (the beauty always; a
-/// render product of several that share a render keeps its own) and `extra` (say, the
-/// sample counts of a checkpoint).
-pub fn film_planes(film: &Film, extra: &[Aov], keep: impl Fn(Aov) -> bool) -> Planes {
-    let mut channels = Vec::new();
-    let mut aovs: Vec<Aov> = film.aovs.iter().collect();
-    aovs.extend(extra.iter().filter(|a| !film.aovs.contains(**a)));
-    aovs.retain(|&a| a == Aov::Beauty || extra.contains(&a) || keep(a));
-    for aov in aovs {
-        channels.extend(
-            film.aovs
-                .channel_names(aov)
-                .into_iter()
-                .zip(film.planes(aov)),
-        );
-    }
-    Planes {
-        display: film.display,
-        window: film.window,
-        channels,
-    }
+    write_planes(path, film.to_planes(extra, |_| true), header)
 }
 
 /// Makes every value finite, as no NaN or infinity may reach a file: infinities (sums that
@@ -357,7 +303,7 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
     let mut image_attributes = ImageAttributes::new(display);
     image_attributes.chromaticities = Some(REC709_D65);
     let image = Image::new(image_attributes, layer);
-    super::write_atomically(path, |file| {
+    crate::files::write_atomically(path, |file| {
         image
             .write()
             .to_buffered(file)

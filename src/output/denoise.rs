@@ -31,9 +31,6 @@ const LIBRARY_NAME: &str = "libOpenImageDenoise.so.2";
 /// The EXR layer of the denoised beauty.
 pub const LAYER: &str = "denoised";
 
-/// The Python package that carries the library (`lucerna setup` installs it).
-pub const PYTHON_PACKAGE: &str = "pyoidn==2.5.1.0";
-
 /// Where lucerna looks for the library, in order (existing files only, then the bare name
 /// for the system's search path).
 pub fn library_candidates() -> Vec<PathBuf> {
@@ -255,13 +252,16 @@ impl Denoiser {
         let guide = albedo_guide(&layers.albedo, &layers.beauty);
         self.run(size, &[("albedo", &guide)], &mut albedo, &[])?;
         let mut normal = vec![0.0; n];
-        let normals = super::interleave(&layers.normal);
+        let normals = crate::film::planes::interleave(&layers.normal);
         self.run(size, &[("normal", &normals)], &mut normal, &[])?;
         let mut output = vec![0.0; n];
         self.run(
             size,
             &[
-                ("color", &super::interleave(&layers.beauty[..3])),
+                (
+                    "color",
+                    &crate::film::planes::interleave(&layers.beauty[..3]),
+                ),
                 ("albedo", &albedo),
                 ("normal", &normal),
             ],

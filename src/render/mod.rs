@@ -1,21 +1,24 @@
 //! The render loop: passes of samples over tiles, tiles in parallel on the current rayon
 //! pool, an optional time budget, a progress bar, and the figures of the run.
 
+pub mod plan;
+
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
 use crate::film::{Film, PixelAccumulator, SampleRecord, Window};
 use crate::integrator::ears::{Ears, LEARNING_SAMPLES, Learning};
-use crate::integrator::path::{PathTracer, RayCounts};
+use crate::integrator::estimator::RayCounts;
+use crate::integrator::path::PathTracer;
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
 use crate::integrator::split::{
     self, FirstSplit, LearningPixels, PixelParts, SampleParts, SplitStats,
 };
 use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
 use crate::light::groups::LightGroups;
-use crate::plan::{PlanMode, RenderPlan};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
 use glam::Vec2;
+use plan::{PlanMode, RenderPlan};
 use rayon::prelude::*;
 use std::io::IsTerminal;
 use std::sync::Mutex;
