@@ -101,9 +101,13 @@ fn clean_up() {
         .iter()
     {
         match cleanup {
-            // SAFETY: kill(2) with a pid this process started and has not reaped yet.
+            // SAFETY: kill(2) and waitpid(2) with a pid this process started and has not
+            // reaped yet. Waiting makes sure the child is gone before this process exits (a
+            // killed process can take a while to tear down on a loaded machine); where the
+            // thread that runs it reaps it first, waitpid returns at once (ECHILD).
             Cleanup::Child(pid) => unsafe {
                 libc::kill(*pid as libc::pid_t, libc::SIGKILL);
+                libc::waitpid(*pid as libc::pid_t, std::ptr::null_mut(), 0);
             },
             Cleanup::Path(path) if path.is_dir() => {
                 let _ = std::fs::remove_dir_all(path);

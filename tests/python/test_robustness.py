@@ -42,6 +42,14 @@ def png_declaring(width, height):
             + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b""))
 
 
+def wait_for_progress(proc):
+    """Reads the render's stderr up to its first progress line (the render is sampling)."""
+    for line in proc.stderr:
+        if "progress" in line:
+            return
+    raise AssertionError("the render ended without a progress line")
+
+
 def processes_mentioning(text):
     """Pids whose command line contains `text` (read from /proc: no procps needed)."""
     found = []
@@ -65,7 +73,11 @@ def test_a_signal_while_a_usd_stage_converts_ends_the_process_at_once(tmp_path):
     env = dict(os.environ, TMPDIR=str(scratch))
     proc = subprocess.Popen([LUCERNA, "render", str(USD_TWIN), "-o", str(out), "--spp", "4"],
                             stderr=subprocess.PIPE, text=True, env=env)
-    time.sleep(0.3)  # Python and usd-core take longer than this to start
+    # The signal goes as soon as the plugin runs: Python and usd-core take far longer to
+    # start than this loop takes to see it.
+    deadline = time.monotonic() + 10
+    while not processes_mentioning(str(scratch)) and time.monotonic() < deadline:
+        time.sleep(0.002)
     sent = time.monotonic()
     proc.send_signal(signal.SIGTERM)
     _, stderr = proc.communicate(timeout=10)
@@ -86,9 +98,10 @@ def test_a_checkpoint_resumes_by_another_path_and_keeps_a_unicode_name(tmp_path)
     scene.write_bytes(CORNELL.read_bytes())
     out = tmp_path / "out.exr"
     common = ["--spp", "3000", "--resolution", "32x32", "--aov", "beauty"]
-    proc = subprocess.Popen([LUCERNA, "render", str(scene), "-o", str(out), *common],
+    lines = ["--progress", "lines", "--progress-interval", "0.05"]
+    proc = subprocess.Popen([LUCERNA, "render", str(scene), "-o", str(out), *common, *lines],
                             stderr=subprocess.PIPE, text=True, cwd=tmp_path)
-    time.sleep(1.0)
+    wait_for_progress(proc)
     proc.send_signal(signal.SIGINT)
     _, stderr = proc.communicate(timeout=10)
     assert proc.returncode == 128 + signal.SIGINT, stderr
@@ -101,9 +114,9 @@ def test_a_checkpoint_resumes_by_another_path_and_keeps_a_unicode_name(tmp_path)
     spec, pixels = read_exr(out)
     assert spec.getattribute("lucerna/complete") == 1 and np.isfinite(pixels).all()
     # The same path with other content is not the same scene.
-    proc = subprocess.Popen([LUCERNA, "render", str(scene), "-o", str(out), *common],
+    proc = subprocess.Popen([LUCERNA, "render", str(scene), "-o", str(out), *common, *lines],
                             stderr=subprocess.PIPE, text=True)
-    time.sleep(1.0)
+    wait_for_progress(proc)
     proc.send_signal(signal.SIGTERM)
     proc.communicate(timeout=10)
     scene.write_bytes(CORNELL.read_bytes() + b"\n")
