@@ -4,7 +4,8 @@
 //! stopping the USD plugin, and a merge without leaving its temporary output).
 
 use crate::error::{Error, Result};
-use crate::job::{load_scene, memory_estimate};
+use crate::ingest::load_scene;
+use crate::job::memory_estimate;
 use crate::render::RenderOptions;
 use crate::render::plan::{PlanMode, RenderPlan};
 use crate::scene::LightKind;

@@ -116,6 +116,18 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     }
 }
 
+/// Reads a scene (the embedded Cornell box without a path) and logs its warnings.
+pub fn load_scene(path: Option<&Path>, options: &LoadOptions) -> Result<Scene> {
+    let scene = match path {
+        Some(p) => load(p, options)?,
+        None => default_scene()?,
+    };
+    for w in &scene.warnings {
+        log::warn!("{w}");
+    }
+    Ok(scene)
+}
+
 /// Replaces the scene's environment with a constant radiance.
 pub fn set_constant_environment(scene: &mut Scene, radiance: Vec3) {
     scene.environment = Some(scene::Environment::Constant(radiance));

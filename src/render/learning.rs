@@ -1,0 +1,134 @@
+//! What the render learns while it runs, in one holder that the render loop drives between
+//! passes: efficiency-aware roulette and splitting (`integrator::ears`: per-region radiance
+//! moments and costs, learned in passes of 1, 1, 2, 4 and 8 samples) and learned first-vertex
+//! splitting (`integrator::split`: the split counts, learned in a pass of their own over one
+//! pixel in every 2×2 block).
+//!
+//! Each pass, the loop asks the holder whether a technique needs a learning pass of its own
+//! ([`LearnedState::split_learning_pass`]) or a shorter pass ([`LearnedState::limit_pass`]),
+//! renders with what has been learned so far ([`LearnedState::ears`],
+//! [`LearnedState::first_split`]), and hands back what each tile learned, in tile order
+//! whatever the thread count, so that the next pass decides the same way
+//! ([`LearnedState::absorb`]). A new learned technique (path guiding, a learned light
+//! selection) is a field of the holder, a field of [`TileLearning`], and its arms in these
+//! methods; the kernels read its state as they read these.
+
+use super::schedule::PassSamples;
+use crate::film::Film;
+use crate::integrator::ears::{self, Ears, Learning};
+use crate::integrator::split::{self, FirstSplit, LearningPixels, SplitStats};
+use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
+
+/// What one pass lets the techniques learn.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct PassLearning {
+    /// Efficiency-aware roulette gathers statistics in this pass.
+    pub ears: bool,
+    /// This pass takes this many samples in each learning pixel to learn the split counts.
+    pub split: Option<u32>,
+}
+
+/// What one tile learned in a pass.
+#[derive(Default)]
+pub(super) struct TileLearning {
+    pub ears: Option<Learning>,
+    pub split: Option<SplitStats>,
+}
+
+/// The learned state of a render.
+pub(super) struct LearnedState {
+    /// Efficiency-aware roulette's statistics (`rr = efficiency` only).
+    ears: Option<Ears>,
+    /// Whether the split counts are learned (`split = auto`).
+    split_auto: bool,
+    /// How the first vertex splits: the fixed counts, the learning split, or the counts
+    /// learned.
+    first_split: FirstSplit,
+    learned_split: Option<Split>,
+    learning_pixels: LearningPixels,
+}
+
+impl LearnedState {
+    /// Nothing learned yet, for a render with `settings` into `film`.
+    pub(super) fn new(settings: &Settings, film: &Film) -> Self {
+        Self {
+            ears: match settings.rr {
+                RussianRoulette::Efficiency(max_split) => {
+                    Some(Ears::new(film.width, film.height, max_split))
+                }
+                _ => None,
+            },
+            split_auto: settings.split == SplitChoice::Auto,
+            // Learned splitting takes the first samples of its learning pixels split two
+            // and two, then the counts chosen everywhere.
+            first_split: match settings.split {
+                SplitChoice::Fixed(counts) => FirstSplit::fixed(counts),
+                SplitChoice::Auto => FirstSplit::learning(),
+            },
+            learned_split: None,
+            learning_pixels: LearningPixels::new(film.display.0, film.display.1),
+        }
+    }
+
+    /// The samples each learning pixel takes in a pass that learns the split counts, when
+    /// one is due: `done` samples of every pixel taken, `uniform_spp` to take before
+    /// adaptive sampling.
+    pub(super) fn split_learning_pass(&self, done: u32, uniform_spp: u32) -> Option<u32> {
+        (self.split_auto && self.learned_split.is_none() && done < uniform_spp)
+            .then(|| split::LEARNING_SAMPLES.min(uniform_spp - done))
+    }
+
+    /// The samples of that pass: `n` in each learning pixel of `film`, none elsewhere.
+    pub(super) fn split_learning_samples(&self, film: &Film, n: u32) -> PassSamples {
+        PassSamples::learning(film, self.learning_pixels, n)
+    }
+
+    /// A uniform pass of `n` samples after `done`, shortened where a technique learns in
+    /// growing passes (efficiency-aware roulette: 1, 1, 2, 4, 8 samples, each deciding with
+    /// everything learned before it), and what the pass learns.
+    pub(super) fn limit_pass(&self, done: u32, n: u32) -> (u32, PassLearning) {
+        let learning = self.ears.is_some() && done < ears::LEARNING_SAMPLES;
+        let n = if learning { n.min(done.max(1)) } else { n };
+        (
+            n,
+            PassLearning {
+                ears: learning,
+                split: None,
+            },
+        )
+    }
+
+    /// Efficiency-aware roulette's statistics so far.
+    pub(super) fn ears(&self) -> Option<&Ears> {
+        self.ears.as_ref()
+    }
+
+    /// How the first vertex splits in the next pass.
+    pub(super) fn first_split(&self) -> FirstSplit {
+        self.first_split
+    }
+
+    /// The split counts learned, once they are.
+    pub(super) fn learned_split(&self) -> Option<Split> {
+        self.learned_split
+    }
+
+    /// Takes what the tiles of a pass that learned `pass` learned, in tile order.
+    pub(super) fn absorb(&mut self, pass: PassLearning, tiles: &[TileLearning]) {
+        if let (Some(e), true) = (self.ears.as_mut(), pass.ears) {
+            for l in tiles.iter().filter_map(|t| t.ears.as_ref()) {
+                e.merge(l);
+            }
+            e.refresh();
+        }
+        if let Some(n) = pass.split {
+            let mut stats = SplitStats::default();
+            for s in tiles.iter().filter_map(|t| t.split.as_ref()) {
+                stats.merge(s);
+            }
+            let counts = stats.choose();
+            self.first_split = FirstSplit::after_learning(counts, n, self.learning_pixels);
+            self.learned_split = Some(counts);
+        }
+    }
+}
