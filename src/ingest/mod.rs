@@ -3,7 +3,7 @@
 
 pub mod animation;
 pub mod gltf;
-pub mod gltf_delivery;
+
 pub mod image;
 pub mod skinning;
 pub mod tangents;
