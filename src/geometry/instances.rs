@@ -4,9 +4,10 @@
 //! shared geometry plus one transform and one top-level leaf per placement, as in pbrt's
 //! and Cycles' instancing, instead of with every placed triangle.
 
+use super::bvh::Bvh;
+use super::hit::{Hit, PrimitiveHit};
 use super::ray::Ray;
 use super::wide::{LeafResult, WideBvh};
-use super::{Bvh, Hit, PrimitiveHit};
 use glam::{Affine3A, Vec3};
 use obvhs::aabb::Aabb;
 
@@ -148,7 +149,8 @@ pub fn transformed_bounds(lo: Vec3, hi: Vec3, to_render: &Affine3A) -> (Vec3, Ve
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Primitive, tests::cube};
+    use super::super::Primitive;
+    use super::super::bvh::tests::cube;
     use super::*;
     use glam::Quat;
 

@@ -2,8 +2,8 @@
 //! intersection, the surface point and normal of a hit, texture coordinates, and uniform
 //! points by area for light sampling.
 
-use super::PrimitiveHit;
 use super::frame::Frame;
+use super::hit::PrimitiveHit;
 use super::ray::Ray;
 use crate::sampling::warp::square_to_uniform_disk;
 use glam::{Vec2, Vec3};

@@ -2,7 +2,7 @@
 //! ("Precision Improvements for Ray/Sphere Intersection", Ray Tracing Gems ch. 7), and the
 //! surface parameterisation used for texture coordinates.
 
-use super::PrimitiveHit;
+use super::hit::PrimitiveHit;
 use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
 use super::triangle::LaneHits;

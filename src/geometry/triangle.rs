@@ -1,7 +1,7 @@
 //! Watertight ray/triangle intersection (Woop, Benthin & Wald 2013, "Watertight Ray/Triangle
 //! Intersection"): rays never slip through shared edges or vertices of a closed mesh.
 
-use super::PrimitiveHit;
+use super::hit::PrimitiveHit;
 use super::ray::Ray;
 #[cfg(target_arch = "x86_64")]
 use crate::simd::{F8, LANES, M8, V3};
