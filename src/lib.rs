@@ -1,10 +1,11 @@
 //! lucerna: a physically based path tracer that renders glTF (and, through a plugin, USD)
 //! scenes into one multi-layer EXR.
 //!
-//! Data flow (see `../shared/design.md`): an ingest module turns a file into a [`scene::Scene`]
-//! (world units, right-handed, Y up); [`world::World`] prepares it for rendering (render space,
-//! BVH, lights); [`render`] runs the [`integrator`] over tiles and accumulates every requested
-//! AOV in a [`film::Film`], which [`film::exr`] writes atomically.
+//! Data flow (docs/architecture.md draws the layers): an ingest module turns a file into a
+//! [`scene::Scene`] (world units, right-handed, Y up); [`world::World`] prepares it for
+//! rendering (render space, BVH, lights, camera); [`render`] runs the [`integrator`] over
+//! tiles and accumulates every requested AOV in a [`film::Film`]; [`output`] writes it (EXR,
+//! preview, denoised beauty). A [`job`] does all of this for one `lucerna render`.
 
 // `!(x > 0.0)` is deliberate throughout: unlike `x <= 0.0`, it also rejects NaN.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

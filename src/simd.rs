@@ -1,6 +1,9 @@
 //! Eight-lane values for the packet kernel (`integrator::packet`): `F8` (f32), `U8` (u32),
 //! `M8` (a lane mask) and `V3` (three `F8`s, a vector per lane), on AVX2 and FMA.
 //!
+//! One concept in one file (1000 lines): the lane types and their operations, which must
+//! all follow the invariant below; splitting them would spread that invariant over files.
+//!
 //! Invariant: these types are only used inside functions compiled with
 //! `#[target_feature(enable = "avx2,fma")]`, which the render loop enters after
 //! `is_x86_feature_detected!` found both (every x86-64 CPU since 2013-2015). Their methods
@@ -838,11 +841,16 @@ impl AddAssign for V3 {
     }
 }
 
+/// Whether this CPU has AVX2 and FMA, which every use of these types needs.
+pub fn available() -> bool {
+    is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+}
+
 /// For the lane tests across the crate: whether the CPU has AVX2 and FMA (the module's
 /// invariant); where it has not, says the test is skipped.
 #[cfg(test)]
 pub(crate) fn avx2_or_skip() -> bool {
-    let available = crate::integrator::packet_kernel_available();
+    let available = available();
     if !available {
         eprintln!("no AVX2 and FMA here: skipped");
     }

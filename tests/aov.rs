@@ -1,4 +1,4 @@
-//! The AOV invariants of `../shared/design.md`, per pixel, and the unbiasedness of the
+//! The AOV invariants of docs/reference.md ("The EXR"), per pixel, and the unbiasedness of the
 //! single-technique direct-light layers.
 
 mod common;

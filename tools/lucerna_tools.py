@@ -1,7 +1,7 @@
 """Shared helpers of lucerna's experiment and benchmark tools: render through the binary,
 read EXRs with OpenImageIO, error metrics, cached references, labelled image grids.
 
-Error metric (../shared/design.md): relMSE = mean over pixels and channels of
+Error metric (docs/architecture.md, "Accuracy and speed"): relMSE = mean over pixels and channels of
 (x - ref)^2 / (ref^2 + 0.01); efficiency = 1 / (seconds x relMSE).
 """
 import copy

@@ -29,7 +29,8 @@ pub const TILE_SIZE: u32 = 16;
 pub const BACKGROUND_DEPTH: f32 = 1e10;
 
 /// The constant relMSE adds to the squared reference in its denominator, so that dark
-/// pixels do not dominate (relMSE = mean of (x - ref)² / (ref² + 0.01); docs/tools.md).
+/// pixels do not dominate (relMSE = mean of (x - ref)² / (ref² + 0.01); see
+/// docs/architecture.md, "Accuracy and speed").
 pub const RELATIVE_ERROR_FLOOR: f64 = 0.01;
 
 /// All tiles of an image's window plus the AOV set and routing. Tiles, and the sample

@@ -1,11 +1,11 @@
-//! Subdivision surfaces: Catmull-Clark (any polygons), Loop (triangles) and bilinear
-//! refinement of a control cage, with semi-sharp creases and corners (the Pixar rules of
-//! DeRose, Kass and Truong 1998, as OpenSubdiv applies them: sharpness s < 1 blends the
-//! smooth and sharp rules by s, each level lowers sharpness by one, 10 and above is
-//! infinitely sharp), USD's boundary interpolation (`edgeAndCorner`: boundary edges sharp
-//! and boundary vertices of one face corners; `edgeOnly`: boundary edges sharp only), and
-//! face-varying data (texture coordinates, colours) refined bilinearly within each face, as
-//! USD's faceVaryingLinearInterpolation `all` does.
+//! Subdivision surfaces, one concept in one file: Catmull-Clark (any polygons), Loop
+//! (triangles) and bilinear refinement of a control cage, with semi-sharp creases and
+//! corners (the Pixar rules of DeRose, Kass and Truong 1998, as OpenSubdiv applies them:
+//! sharpness s < 1 blends the smooth and sharp rules by s, each level lowers sharpness by
+//! one, 10 and above is infinitely sharp), USD's boundary interpolation (`edgeAndCorner`:
+//! boundary edges sharp and boundary vertices of one face corners; `edgeOnly`: boundary
+//! edges sharp only), and face-varying data (texture coordinates, colours) refined
+//! bilinearly within each face, as USD's faceVaryingLinearInterpolation `all` does.
 //!
 //! After the last level every vertex is moved to its limit position (the eigen-analysis
 //! masks of Catmull-Clark, Loop and the cubic B-spline along creases), so the triangles lie

@@ -24,7 +24,7 @@ pub use settings::{Settings, Split, SplitChoice};
 pub fn packet_kernel_available() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        is_x86_feature_detected!("avx2") && is_x86_feature_detected!("fma")
+        crate::simd::available()
     }
     #[cfg(not(target_arch = "x86_64"))]
     {

@@ -1,4 +1,5 @@
-//! The modified Phong BRDF of `../shared/seed-path-tracing.md` (Lafortune & Willems 1994):
+//! The modified Phong BRDF (Lafortune & Willems 1994, in the normalised form of pbrt and
+//! Veach's thesis):
 //!
 //! ```text
 //! f = kd / π + ks (n + 2) / (2π) cos^n α_r

@@ -75,12 +75,11 @@ pub struct Kernel {
     /// nor first-hit data is needed, the CPU has AVX2 and FMA, roulette does not learn
     /// (`rr = efficiency`), and (in `auto`) some material has a GGX lobe or some mesh a
     /// uniform material ([`SceneFeatures::uniform_meshes`]), which is what the lanes speed
-    /// up: the packet kernel takes 18 % fewer instructions than the scalar one on the MIS
-    /// plates, 22 % on the all-Lambert Cornell box (17 % less time) and 24 % on the
-    /// indirect room. Where no surface is uniform and none glossy, the lanes would shade
-    /// nothing (the Cornell box before they shaded: 1 % more instructions, about 5 % more
-    /// time), so `auto` keeps the scalar kernel (`--plan packet` runs it there too).
-    /// Passes that learn the first vertex's split (`--split auto`) run in it too.
+    /// up. Where no surface is uniform and none glossy, the lanes would shade nothing and
+    /// only add their bookkeeping, so `auto` keeps the scalar kernel (`--plan packet` runs
+    /// it there too). Passes that learn the first vertex's split (`--split auto`) run in it
+    /// too. A technique the packet kernel does not have yet keeps it out of the render
+    /// here (see `integrator::estimator`).
     pub packet: bool,
 }
 

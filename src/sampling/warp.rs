@@ -96,8 +96,8 @@ pub fn cosine_hemisphere_pdf(v: Vec3) -> f32 {
     v.z.max(0.0) / PI
 }
 
-/// Direction about +z with density (n+1)/(2π) cos^n θ: the Phong lobe of
-/// `../shared/seed-path-tracing.md` (cos θ = u^(1/(n+1)), φ = 2π u).
+/// Direction about +z with density (n+1)/(2π) cos^n θ: the modified Phong lobe
+/// (`material::phong`; cos θ = u^(1/(n+1)), φ = 2π u).
 #[inline]
 pub fn square_to_phong_lobe(u: Vec2, exponent: f32) -> Vec3 {
     let cos_theta = u.y.powf(1.0 / (exponent + 1.0));

@@ -1,6 +1,9 @@
 //! The scene file: the internal [`Scene`] on disk, so that other programs (the USD plugin,
 //! the benchmark's Mitsuba exporter) can write or read exactly what the renderer sees.
 //!
+//! One concept in one file (950 lines): the format, read and written here side by side so
+//! that every field's validation sits next to its writing.
+//!
 //! Two files: a JSON manifest `NAME.lucerna` and one little-endian binary buffer beside it
 //! (the manifest's `buffer`, normally `NAME.lucerna.bin`). Small values (materials, lights,
 //! cameras, instances) are JSON; bulk arrays are *views* into the buffer: `{offset, count}`
