@@ -33,7 +33,7 @@
 //!   learned under the policy of the early passes, and once splitting compounds along a
 //!   path they underestimate what a split sub-path costs, so splitting overshoots. On the
 //!   indirect room, at equal time, `efficiency:4` took an eighth of the samples of
-//!   `efficiency:1` and was about 0.7× as efficient (tools/lecture-results).
+//!   `efficiency:1` and was about 0.7× as efficient (tools/experiments/results/lecture).
 
 use crate::color::luminance;
 use glam::Vec3;

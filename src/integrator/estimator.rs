@@ -9,7 +9,7 @@
 //! kernel's to the bit; every piece of the estimator they share lives here (or in the
 //! BSDFs, lights and sampler both call), never as a second copy. A new technique lands in
 //! the scalar kernel first; the render plan (`render::plan::Kernel::packet`) keeps the packet
-//! kernel out of renders that use it until its lanes exist, and `tests/plan.rs` compares
+//! kernel out of renders that use it until its lanes exist, and `tests/it/plan.rs` compares
 //! the two kernels' images.
 
 use super::media::Media;

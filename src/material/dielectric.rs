@@ -1,6 +1,6 @@
 //! Dielectric interfaces that transmit: glass, water, clear plastic. The conventions are
 //! pbrt-v4's and Mitsuba 3's, and the models the same as Mitsuba's `dielectric`,
-//! `roughdielectric` and `thindielectric`, so that `tools/mitsuba_export.py` maps them one
+//! `roughdielectric` and `thindielectric`, so that `tools/lucerna_tools/mitsuba_export.py` maps them one
 //! to one:
 //!
 //! - [`Dielectric`]: the boundary of a volume. Smooth: exact Fresnel reflectance R picks

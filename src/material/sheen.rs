@@ -4,7 +4,7 @@
 //! visibility V = 1 / ((1 + Λ(wo) + Λ(wi)) 4 cos θo cos θi), times the sheen colour. The
 //! layer below is scaled by 1 - max(colour) E(cos θ) (the extension's albedo scaling,
 //! taken at both directions and the smaller kept, which keeps the layering reciprocal),
-//! where E is the sheen's directional albedo, tabulated by `tools/gen_sheen_albedo.py`.
+//! where E is the sheen's directional albedo, tabulated by `tools/generate/sheen_albedo.py`.
 //! Sampled by the cosine-weighted hemisphere: the lobe is broad.
 //!
 //! Roughness is clamped below at [`MIN_ROUGHNESS`]: the distribution collapses onto the

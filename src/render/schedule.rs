@@ -76,7 +76,7 @@ impl PassSamples {
 /// threshold derived from the noise target. v_p and c_p come from the pixel's eight
 /// neighbours, not from its own samples, so that the decision to stop a pixel does not
 /// depend directly on the values averaged into it; what remains (its share of K, and its
-/// neighbours' sample counts) is second order, and `tests/plan.rs` measures the bias.
+/// neighbours' sample counts) is second order, and `tests/it/plan.rs` measures the bias.
 /// A pixel at most doubles its count in a pass, so that later passes decide on better
 /// estimates, and deficits under a sixteenth of its count wait for a later pass.
 pub(super) fn adaptive_pass(film: &Film, threshold: f64, most: u32) -> Vec<u32> {

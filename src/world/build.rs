@@ -349,7 +349,7 @@ fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
 /// themselves: the bounds it is given, its PLOC nodes, sort keys and reinsertion state, and
 /// the wide nodes. Measured: the peak of `lucerna render` on single meshes of 0.32, 2 and
 /// 3.9 million triangles, less the scene and its render-space copy, is 304 to 319 bytes a
-/// triangle, which this constant makes 326 (tools/stress checks the estimate).
+/// triangle, which this constant makes 326 (tools/experiments/stress checks the estimate).
 const BVH_BUILD_BYTES_PER_PRIMITIVE: u64 = 240;
 
 /// Bytes a light holds beyond its `Light`: its light-tree node and selection entries.

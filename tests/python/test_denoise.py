@@ -1,7 +1,7 @@
 """`--denoise`: Open Image Denoise (the venv's pyoidn, which tools/test.sh installs) adds a
 `denoised` layer whose error against a converged reference is well below the noisy
 beauty's. The full figures (256x256, 16 spp against 4096) come from
-tools/denoise/compare.py; this is its fast version."""
+tools/compare/denoise/compare.py; this is its fast version."""
 import os
 import subprocess
 import sys
@@ -12,8 +12,7 @@ import OpenImageIO as oiio
 
 ROOT = Path(__file__).resolve().parents[2]
 BIN = os.environ.get("LUCERNA_BIN", str(ROOT / "target" / "release" / "lucerna"))
-sys.path.insert(0, str(ROOT / "tools"))
-from lucerna_tools import read_exr, relmse, rgb  # noqa: E402
+from lucerna_tools import read_exr, relmse, rgb
 
 AVOCADO = ROOT / "tests/assets/gltf/Avocado/Avocado.gltf"
 

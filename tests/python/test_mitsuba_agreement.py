@@ -1,5 +1,5 @@
 """lucerna against an independent renderer: Mitsuba 3 renders the scene exported from
-lucerna's scene file (tools/mitsuba_compare.py, tools/mitsuba_export.py); the difference
+lucerna's scene file (tools/lucerna_tools/mitsuba_compare.py, tools/lucerna_tools/mitsuba_export.py); the difference
 between the renderers must be within 2x the difference between two Mitsuba seeds, i.e. no
 visible bias. The Cornell box checks Lambertian surfaces and a one-sided area light; the MIS
 plates check GGX conductors (reflectance 1) and spherical lights; the glass box checks the
@@ -9,8 +9,7 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "tools"))
-import mitsuba_compare  # noqa: E402
+from lucerna_tools import mitsuba_compare
 
 
 def test_cornell_box_agrees_with_mitsuba():
@@ -34,6 +33,6 @@ def test_glass_box_agrees_with_mitsuba():
     assert r["ratio"] <= 2.0, r
     # The means of two 256-spp renders of this scene differ by about 0.45 % (one standard
     # deviation; mostly the caustics): the per-pixel ratio above is the calibrated check, and
-    # `tools/mitsuba_compare.py --seeds 16` measures the means' difference to 0.2 %.
+    # `tools/lucerna_tools/mitsuba_compare.py --seeds 16` measures the means' difference to 0.2 %.
     for lucerna, mitsuba in zip(r["mean_lucerna"], r["mean_mitsuba"]):
         assert abs(lucerna - mitsuba) <= 0.01 * mitsuba, r

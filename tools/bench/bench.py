@@ -10,7 +10,7 @@ report: a markdown table (scene, renderer, seconds, spp, errors, efficiency =
 1 / (seconds x relMSE)), the ratio of lucerna's efficiency to each Mitsuba variant's at each
 budget, log-log plots of error against time, and the machine it ran on.
 
-Mitsuba renders the scene exported from lucerna's own scene file (tools/mitsuba_export.py),
+Mitsuba renders the scene exported from lucerna's own scene file (tools/lucerna_tools/mitsuba_export.py),
 each render in a process of its own (tools/bench/mitsuba_worker.py). Its sample count for a
 budget comes from its measured seconds per sample (at first from calibration renders of at
 least half a second, then from its latest render); the efficiency uses the seconds it took.
@@ -32,9 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-TOOLS = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(TOOLS))
-import lucerna_tools as lt  # noqa: E402
+import lucerna_tools as lt
 
 WORKER = Path(__file__).resolve().parent / "mitsuba_worker.py"
 METRICS = ["relmse", "mse", "mape", "flip"]
@@ -63,15 +61,9 @@ def steal_share():
 
 
 def machine():
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), platform.processor())
+    cpu, _, isa = lt.cpu()
     mem = next((int(line.split()[1]) * 1024 for line in Path("/proc/meminfo").read_text().splitlines()
                 if line.startswith("MemTotal")), 0)
-    flags = next((line.split(":", 1)[1].split() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                  if line.startswith("flags")), [])
-    # The widest vectors the CPU has: Mitsuba's llvm variant and Embree run 16 lanes with
-    # AVX-512 and 8 with AVX2; lucerna's packet kernel runs 8 (AVX2) on both.
-    isa = "AVX-512" if "avx512f" in flags else "AVX2" if "avx2" in flags else "SSE"
 
     def out(cmd):
         try:

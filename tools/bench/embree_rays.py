@@ -1,11 +1,11 @@
 #!/usr/bin/env python3
-"""Ray throughput of Mitsuba 3's Embree (llvm_ad_rgb) on the ray sets of tools/throughput.rs,
+"""Ray throughput of Mitsuba 3's Embree (llvm_ad_rgb) on the ray sets of tools/bench/throughput.rs,
 to put lucerna's own figures (`cargo bench --bench throughput`) next to a production BVH on
 the same machine.
 
     .venv/bin/python tools/bench/embree_rays.py [SCENE]   (default: the Cornell box)
 
-The sets follow tools/throughput.rs: a camera ray through each pixel centre of a 1024x1024
+The sets follow tools/bench/throughput.rs: a camera ray through each pixel centre of a 1024x1024
 image (coherent closest hit); from each camera hit, a cosine-distributed direction around
 the normal (incoherent closest hit); segments from the camera hits to the first emitter's
 centre (coherent shadow) and between two random camera hits (incoherent shadow). Mitsuba
@@ -20,9 +20,8 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import lucerna_tools as lt  # noqa: E402
-import mitsuba_export  # noqa: E402
+import lucerna_tools as lt
+from lucerna_tools import mitsuba_export
 
 SIDE = 1024
 RUNS = 5

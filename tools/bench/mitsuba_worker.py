@@ -23,8 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import mitsuba_export  # noqa: E402
+from lucerna_tools import mitsuba_export
 
 LLVM_SPP_PER_CALL = 64
 

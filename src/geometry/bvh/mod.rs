@@ -21,7 +21,7 @@ use obvhs::aabb::Aabb;
 /// the surface area heuristic. A leaf's triangles are tested four at a time
 /// ([`TriangleBlock`]), so a leaf of four costs little more than a leaf of one. Chosen over
 /// leaf sizes 2, 4, 8 and visit costs 1, 2, 3, 4, 6 by rays per second. Against leaves of
-/// two triangles tested one by one with a visit cost of 1 (tools/throughput.rs, one thread,
+/// two triangles tested one by one with a visit cost of 1 (tools/bench/throughput.rs, one thread,
 /// interleaved runs), the million-triangle sphere field traces 7 % more coherent and 13 %
 /// more incoherent closest-hit rays and 8-9 % more shadow rays, with 13 % less BVH memory;
 /// the MIS plates' bounce and shadow rays are 12 % faster; the Cornell box's rays are

@@ -23,7 +23,7 @@
 //! pixel, sample index, depth and branch), the same first-vertex split and the same
 //! roulette, and the lanes perform the scalar code's operations in its order (see
 //! `material::lanes`), so the paths are the scalar kernel's to the bit and an image differs
-//! only by the order in which a pixel's samples are summed; `tests/plan.rs` compares the
+//! only by the order in which a pixel's samples are summed; `tests/it/plan.rs` compares the
 //! two.
 //!
 //! Lanes are refilled as paths end: first with the branches a split first vertex left

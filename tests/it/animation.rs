@@ -1,0 +1,226 @@
+//! glTF animation: channels sampled at the frame's time move the nodes they target (and
+//! their children), and `--frames` renders a sequence into `{frame}`-named files.
+
+use crate::common;
+
+use common::cli::temp_dir;
+use common::gltf_builder::Builder;
+use glam::DVec3;
+use serde_json::json;
+use std::path::Path;
+use std::process::Command;
+
+/// An emissive quad under a parent node whose translation slides linearly from x = −3 to
+/// x = 3 over the first second, whose rotation steps to 90° about Z at 0.5 s, and whose
+/// scale grows along a cubic spline (zero tangents) from 1 to 3; a camera at the origin.
+fn animated_scene(times: [f32; 2]) -> Builder {
+    let mut b = Builder::new();
+    let material = b.add(
+        "materials",
+        json!({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1]}, "emissiveFactor": [1, 1, 1]}),
+    );
+    let prim = b.quad_primitive(Some(material));
+    let mesh = b.mesh(json!([prim]));
+    let child = b.node(json!({"mesh": mesh, "scale": [0.4, 0.4, 0.4]}));
+    let mover = b.root(json!({"name": "mover", "translation": [0, 5, -10], "children": [child]}));
+    b.add(
+        "cameras",
+        json!({"type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 2.0, "znear": 0.1}}),
+    );
+    b.root(json!({"name": "shot", "camera": 0}));
+    let input = b.floats("SCALAR", &times);
+    let translations = b.floats("VEC3", &[-3.0, 0.0, -10.0, 3.0, 0.0, -10.0]);
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    let rotations = b.floats("VEC4", &[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, s, s]);
+    let step_input = b.floats("SCALAR", &[0.0, 0.5]);
+    #[rustfmt::skip]
+    let scales = b.floats("VEC3", &[
+        0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, // in-tangent, value, out-tangent
+        0.0, 0.0, 0.0, 3.0, 3.0, 3.0, 0.0, 0.0, 0.0,
+    ]);
+    b.add(
+        "animations",
+        json!({
+            "name": "slide",
+            "samplers": [
+                {"input": input, "output": translations, "interpolation": "LINEAR"},
+                {"input": step_input, "output": rotations, "interpolation": "STEP"},
+                {"input": input, "output": scales, "interpolation": "CUBICSPLINE"}
+            ],
+            "channels": [
+                {"sampler": 0, "target": {"node": mover, "path": "translation"}},
+                {"sampler": 1, "target": {"node": mover, "path": "rotation"}},
+                {"sampler": 2, "target": {"node": mover, "path": "scale"}}
+            ]
+        }),
+    );
+    b
+}
+
+fn scene_at(b: &Builder, time: Option<f64>) -> lucerna::Result<lucerna::scene::Scene> {
+    lucerna::ingest::gltf::import_at(&b.glb(), "animated.glb", None, time)
+}
+
+/// The quad's placement follows each channel's interpolation, through the hierarchy.
+#[test]
+fn channels_pose_the_nodes_at_the_frame_time() {
+    let b = animated_scene([0.0, 1.0]);
+    let placement = |time: Option<f64>| scene_at(&b, time).unwrap().instances[0].transform;
+    // Rest pose: the node's own translation, no rotation, unit scale (times the child's).
+    let rest = placement(None);
+    assert!(
+        rest.transform_point3(DVec3::ZERO)
+            .abs_diff_eq(DVec3::new(0.0, 5.0, -10.0), 1e-9)
+    );
+    for (time, x, quarter_turn, scale) in [
+        (-1.0, -3.0, false, 1.0),
+        (
+            0.25,
+            -1.5,
+            false,
+            1.0 + 2.0 * (3.0 * 0.0625 - 2.0 * 0.015625),
+        ),
+        (0.75, 1.5, true, 1.0 + 2.0 * (3.0 * 0.5625 - 2.0 * 0.421875)),
+        (5.0, 3.0, true, 3.0),
+    ] {
+        let m = placement(Some(time));
+        let origin = m.transform_point3(DVec3::ZERO);
+        assert!(
+            origin.abs_diff_eq(DVec3::new(x, 0.0, -10.0), 1e-6),
+            "t = {time}: {origin}"
+        );
+        let x_axis = m.transform_vector3(DVec3::X);
+        let expected = if quarter_turn { DVec3::Y } else { DVec3::X } * 0.4 * scale;
+        assert!(
+            x_axis.abs_diff_eq(expected, 1e-6),
+            "t = {time}: {x_axis} vs {expected}"
+        );
+    }
+    // Without a frame, an animated file says which pose it renders.
+    let warnings = scene_at(&b, None).unwrap().warnings;
+    assert!(warnings.iter().any(|w| w.contains("rest transforms")));
+}
+
+/// Key times that go backwards are refused with the channel named.
+#[test]
+fn malformed_animation_is_refused() {
+    let b = animated_scene([1.0, 0.0]);
+    let e = scene_at(&b, Some(0.5)).unwrap_err().to_string();
+    assert!(
+        e.contains("animations[0].channels[0]") && e.contains("increase"),
+        "{e}"
+    );
+}
+
+fn bright_centroid_x(exr: &Path) -> f32 {
+    let (planes, _) = lucerna::output::exr::read(exr).unwrap();
+    let r = planes.channel("R").unwrap();
+    let w = planes.window.width as usize;
+    let (mut sum, mut weight) = (0.0, 0.0);
+    for (i, v) in r.iter().enumerate() {
+        sum += v * (i % w) as f32;
+        weight += v;
+    }
+    sum / weight
+}
+
+/// `--frames 6-18x6` at 24 fps renders t = 0.25, 0.5, 0.75 s into `{frame}`-named files,
+/// and the quad moves right from frame to frame; several frames need `{frame}`.
+#[test]
+fn frames_render_a_sequence() {
+    let dir = temp_dir("frames");
+    let scene = animated_scene([0.0, 1.0]).write_glb(&dir, "slide");
+    let pattern = dir.join("{scene}.{camera}.{frame}.exr");
+    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", "-q", "--resolution", "64x32", "--spp", "4"])
+        .arg(&scene)
+        .args(["--frames", "6-18x6", "-o"])
+        .arg(&pattern)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let centroids: Vec<f32> = [6, 12, 18]
+        .iter()
+        .map(|f| {
+            let path = dir.join(format!("slide.shot.{f:04}.exr"));
+            let (_, header) = lucerna::output::exr::read(&path).unwrap();
+            assert_eq!(header.number("lucerna/frame"), Some(*f as f64));
+            bright_centroid_x(&path)
+        })
+        .collect();
+    assert!(
+        centroids[0] < centroids[1] - 2.0 && centroids[1] < centroids[2] - 2.0,
+        "{centroids:?}"
+    );
+    // The quad at x = 0 (t = 0.5) is centred.
+    assert!((centroids[1] - 32.0).abs() < 1.0, "{centroids:?}");
+    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", "-q", "--frames", "1-2", "-o"])
+        .arg(dir.join("flat.exr"))
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert_eq!(run.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("{frame}"));
+}
+
+/// Two animations of one node are clips: the first plays (warned, naming --animation);
+/// `--animation NAME` or an index plays another; an unknown one is refused with the list.
+#[test]
+fn animation_clips_are_chosen_by_name_or_index() {
+    let mut b = animated_scene([0.0, 1.0]);
+    let mover = 1; // animated_scene's nodes: the quad, then its parent "mover"
+    let input = b.floats("SCALAR", &[0.0, 1.0]);
+    let lifted = b.floats("VEC3", &[0.0, 7.0, -10.0, 0.0, 7.0, -10.0]);
+    b.add(
+        "animations",
+        json!({
+            "name": "lift",
+            "samplers": [{"input": input, "output": lifted}],
+            "channels": [{"sampler": 0, "target": {"node": mover, "path": "translation"}}]
+        }),
+    );
+    let glb = b.glb();
+    let origin = |animation: Option<&str>| {
+        let scene = lucerna::ingest::gltf::import_with(
+            &glb,
+            "clips.glb",
+            None,
+            Some(0.5),
+            lucerna::ingest::gltf::Choices {
+                animation,
+                ..Default::default()
+            },
+        )?;
+        let p = scene.instances[0].transform.transform_point3(DVec3::ZERO);
+        Ok::<_, lucerna::Error>((p, scene.warnings))
+    };
+    let (p, warnings) = origin(None).unwrap();
+    assert!(p.abs_diff_eq(DVec3::new(0.0, 0.0, -10.0), 1e-6), "{p}");
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("\"lift\"") && w.contains("--animation")),
+        "{warnings:?}"
+    );
+    for chosen in ["lift", "1"] {
+        let (p, warnings) = origin(Some(chosen)).unwrap();
+        assert!(
+            p.abs_diff_eq(DVec3::new(0.0, 7.0, -10.0), 1e-6),
+            "{chosen}: {p}"
+        );
+        assert!(
+            !warnings.iter().any(|w| w.contains("clips")),
+            "{warnings:?}"
+        );
+    }
+    let err = origin(Some("run")).unwrap_err().to_string();
+    assert!(
+        err.contains("\"run\"") && err.contains("\"slide\", \"lift\""),
+        "{err}"
+    );
+}

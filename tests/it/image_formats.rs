@@ -1,0 +1,152 @@
+//! Texture and environment image formats: Radiance HDR, TIFF (8-bit, 16-bit, float),
+//! OpenEXR, 16-bit PNG and WebP decode to the values written; float images are linear in
+//! every slot, integer ones are sRGB-decoded where the slot is a colour.
+
+use crate::common;
+
+use common::cli::temp_dir;
+use glam::{Vec2, Vec3};
+use lucerna::ingest;
+use lucerna::scene::{Scene, Texels};
+use std::path::Path;
+
+/// 4 × 2 RGB test values above 1 and below, as HDRIs hold.
+const VALUES: [[f32; 3]; 8] = [
+    [0.0, 0.25, 0.5],
+    [1.0, 2.0, 4.0],
+    [8.0, 0.125, 0.0625],
+    [0.5, 0.5, 0.5],
+    [16.0, 1.5, 0.75],
+    [0.03125, 0.0, 1.0],
+    [3.0, 3.0, 0.0],
+    [0.2, 0.4, 0.8],
+];
+
+fn environment_texels(path: &Path) -> (u32, u32, Vec<[f32; 4]>) {
+    let mut scene = Scene::default();
+    ingest::set_environment_map(&mut scene, path, Vec3::ONE).unwrap_or_else(|e| panic!("{e}"));
+    let t = &scene.textures[0];
+    match &*t.texels {
+        Texels::RgbaF32(p) => (t.width, t.height, p.clone()),
+        _ => panic!("environment texels are not linear floats"),
+    }
+}
+
+fn float_image() -> image::Rgb32FImage {
+    image::Rgb32FImage::from_fn(4, 2, |x, y| image::Rgb(VALUES[(y * 4 + x) as usize]))
+}
+
+#[test]
+fn radiance_hdr_environment_reads_its_values() {
+    let dir = temp_dir("hdr");
+    let path = dir.join("sky.hdr");
+    float_image().save(&path).unwrap();
+    let (w, h, texels) = environment_texels(&path);
+    assert_eq!((w, h), (4, 2));
+    for (t, v) in texels.iter().zip(VALUES) {
+        for c in 0..3 {
+            // RGBE keeps 8 mantissa bits a pixel (the largest channel's exponent).
+            let max = v.iter().cloned().fold(0.0, f32::max);
+            assert!((t[c] - v[c]).abs() <= max / 128.0, "{t:?} vs {v:?}");
+        }
+    }
+}
+
+#[test]
+fn float_tiff_and_openexr_environments_are_exact() {
+    let dir = temp_dir("float-formats");
+    let tiff = dir.join("sky.tif");
+    image::DynamicImage::ImageRgb32F(float_image())
+        .into_rgba32f()
+        .save(&tiff)
+        .unwrap();
+    let exr_path = dir.join("sky.exr");
+    exr::prelude::write_rgb_file(&exr_path, 4, 2, |x, y| {
+        let v = VALUES[y * 4 + x];
+        (v[0], v[1], v[2])
+    })
+    .unwrap();
+    for path in [tiff, exr_path] {
+        let (w, h, texels) = environment_texels(&path);
+        assert_eq!((w, h), (4, 2), "{}", path.display());
+        for (t, v) in texels.iter().zip(VALUES) {
+            assert_eq!(t[..3], v[..], "{}", path.display());
+        }
+    }
+}
+
+/// Integer images are sRGB-encoded: 16-bit TIFF and PNG environments decode to linear as
+/// 8-bit ones do, with 16-bit precision.
+#[test]
+fn sixteen_bit_images_are_srgb_decoded_with_full_precision() {
+    let dir = temp_dir("sixteen");
+    let encoded: [u16; 4] = [0, 1000, 32768, 65535];
+    let img = image::ImageBuffer::<image::Rgba<u16>, Vec<u16>>::from_fn(4, 1, |x, _| {
+        let v = encoded[x as usize];
+        image::Rgba([v, v, v, 65535])
+    });
+    let srgb_to_linear = |v: f32| {
+        if v <= 0.04045 {
+            v / 12.92
+        } else {
+            ((v + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    let tiff = dir.join("grey16.tif");
+    img.save(&tiff).unwrap();
+    let png_path = dir.join("grey16.png");
+    let mut encoder = png::Encoder::new(std::fs::File::create(&png_path).unwrap(), 4, 1);
+    encoder.set_color(png::ColorType::Rgba);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    let samples: Vec<u8> = img.as_raw().iter().flat_map(|v| v.to_be_bytes()).collect();
+    encoder
+        .write_header()
+        .unwrap()
+        .write_image_data(&samples)
+        .unwrap();
+    for path in [tiff, png_path] {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let (_, _, texels) = environment_texels(&path);
+        for (t, e) in texels.iter().zip(encoded) {
+            let expected = srgb_to_linear(e as f32 / 65535.0);
+            assert!(
+                (t[0] - expected).abs() < 1e-6,
+                "{name}: {} vs {expected}",
+                t[0]
+            );
+        }
+        // And as a texture: the 16-bit values are kept (8 bytes a texel).
+        let decoded = ingest::image::decode(&std::fs::read(&path).unwrap()).unwrap();
+        assert!(matches!(decoded.texels, Texels::Rgba16(_)), "{name}");
+    }
+}
+
+/// A float texture is linear in a colour slot: no sRGB decoding of values that are
+/// already linear (and may exceed 1).
+#[test]
+fn float_textures_are_linear_in_colour_slots() {
+    let t = lucerna::scene::Texture {
+        name: "hdr".into(),
+        width: 1,
+        height: 1,
+        texels: std::sync::Arc::new(Texels::RgbaF32(vec![[0.5, 2.0, 0.25, 1.0]])),
+        wrap_u: lucerna::scene::Wrap::Repeat,
+        wrap_v: lucerna::scene::Wrap::Repeat,
+        nearest: false,
+    };
+    assert_eq!(
+        t.sample(Vec2::splat(0.5), true).to_array(),
+        [0.5, 2.0, 0.25, 1.0]
+    );
+}
+
+/// Formats lucerna cannot read are refused naming the format.
+#[test]
+fn unknown_and_ktx2_images_are_refused_clearly() {
+    let err = ingest::image::decode(b"\xabKTX 20\xbb\r\n\x1a\n....")
+        .err()
+        .unwrap();
+    assert!(err.contains("KTX2"), "{err}");
+    let err = ingest::image::decode(b"GIF89a....").err().unwrap();
+    assert!(err.contains("unsupported image format"), "{err}");
+}

@@ -1,0 +1,426 @@
+//! The scene file (`lucerna convert`): a round trip changes nothing the renderer sees, and a
+//! malformed file is a bad-input error naming the element, never a panic.
+
+use crate::common;
+
+use common::cli::temp_dir;
+use common::gltf_builder::{Builder, png_rgba};
+use common::scenes::render;
+use lucerna::error::ErrorKind;
+use lucerna::film::aov::ALL;
+use lucerna::ingest;
+use lucerna::integrator::Settings;
+use lucerna::scene::{Scene, file};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+
+/// A quad with every vertex attribute, two textures sharing one image (so the texels are
+/// written once), alpha masking, a normal map, a point light and a lat-long environment.
+fn textured_scene(dir: &Path) -> PathBuf {
+    let mut b = Builder::new();
+    let png = png_rgba(
+        2,
+        2,
+        &[
+            [255, 0, 0, 255],
+            [0, 255, 0, 128],
+            [0, 0, 255, 255],
+            [255, 255, 255, 0],
+        ],
+    );
+    let colour = b.png_texture(&png, json!({"magFilter": 9728, "wrapS": 33648}));
+    let normal = b.png_texture(&png_rgba(1, 1, &[[128, 128, 255, 255]]), json!({}));
+    let m = b.add(
+        "materials",
+        json!({
+            "pbrMetallicRoughness": {"baseColorTexture": {"index": colour, "extensions": {
+                "KHR_texture_transform": {"offset": [0.1, 0.2], "rotation": 0.3, "scale": [2, 3]}}},
+                "metallicFactor": 0.2, "roughnessFactor": 0.6},
+            "normalTexture": {"index": normal, "scale": 0.5},
+            "alphaMode": "MASK", "alphaCutoff": 0.4, "doubleSided": true,
+            "emissiveFactor": [0.1, 0.0, 0.05]
+        }),
+    );
+    let mut quad = b.quad_primitive(Some(m));
+    let normals = b.floats(
+        "VEC3",
+        &[0.0, 0.0, 1.0, 0.0, 0.1, 1.0, 0.1, 0.0, 1.0, 0.0, 0.0, 1.0],
+    );
+    let colours = b.floats(
+        "VEC4",
+        &[
+            1.0, 0.5, 0.5, 1.0, 0.5, 1.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 0.2, 0.2, 0.2, 1.0,
+        ],
+    );
+    quad["attributes"]["NORMAL"] = json!(normals);
+    quad["attributes"]["COLOR_0"] = json!(colours);
+    let mesh = b.mesh(json!([quad]));
+    b.root(json!({"mesh": mesh, "rotation": [0.1, 0.2, 0.0, 0.9747]}));
+    b.add("cameras", json!({"type": "perspective", "perspective": {"yfov": 0.9, "aspectRatio": 1.25, "znear": 0.05}}));
+    b.root(json!({"camera": 0, "translation": [0.2, 0.1, 3.0]}));
+    b.write_glb(dir, "textured")
+}
+
+fn shipped(scene: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(scene)
+}
+
+/// Renders both scenes with the same seed and asserts identical layers.
+fn assert_same_image(a: Scene, b: Scene, what: &str) {
+    let settings = Settings {
+        seed: 5,
+        ..Default::default()
+    };
+    let (fa, _) = render(a, (24, 18), 4, settings.clone(), 2);
+    let (fb, _) = render(b, (24, 18), 4, settings, 2);
+    for aov in ALL {
+        assert!(
+            fa.planes(aov) == fb.planes(aov),
+            "{what}: {} differs",
+            aov.name()
+        );
+    }
+}
+
+#[test]
+fn round_trip_renders_identically() {
+    let dir = temp_dir("round-trip");
+    let sources = [
+        shipped("cornell-box/cornell-box.gltf"),
+        shipped("mis-plates/mis-plates.glb"),
+        shipped("indirect-room/indirect-room.glb"),
+        textured_scene(&dir),
+    ];
+    for source in &sources {
+        let mut original = ingest::load(source, &Default::default()).unwrap();
+        ingest::set_constant_environment(&mut original, glam::Vec3::new(0.1, 0.2, 0.3));
+        let path = dir.join(format!(
+            "{}.lucerna",
+            source.file_stem().unwrap().to_string_lossy()
+        ));
+        file::write(&original, &path).unwrap();
+        let read = ingest::load(&path, &Default::default()).unwrap();
+        // Writing what was read gives the same files: nothing is lost or reinterpreted.
+        let again = dir.join("again").join(path.file_name().unwrap());
+        std::fs::create_dir_all(again.parent().unwrap()).unwrap();
+        file::write(&read, &again).unwrap();
+        for name in [path.clone(), path.with_extension("lucerna.bin")] {
+            let copy = again.with_file_name(name.file_name().unwrap());
+            assert!(
+                std::fs::read(&name).unwrap() == std::fs::read(&copy).unwrap(),
+                "{}",
+                name.display()
+            );
+        }
+        assert_same_image(original, read, &source.display().to_string());
+    }
+    // A third texture sharing the first one's image with another sampler (as two glTF
+    // textures of one image do) is written once and shared again when read.
+    let mut textured = ingest::load(&dir.join("textured.lucerna"), &Default::default()).unwrap();
+    let mut variant = textured.textures[0].clone();
+    variant.nearest = !variant.nearest;
+    textured.textures.push(variant);
+    textured.materials[0].emissive_texture = Some(lucerna::scene::TextureRef {
+        texture: 2,
+        tex_coord: 0,
+        transform: None,
+    });
+    let shared = dir.join("shared.lucerna");
+    file::write(&textured, &shared).unwrap();
+    let buffer_bytes = std::fs::metadata(dir.join("shared.lucerna.bin"))
+        .unwrap()
+        .len();
+    // 4 vertices × (position 3 + normal 3 + tangent 4 + uv 2 + colour 4 floats), 2 triangles,
+    // and 2×2 + 1×1 texels of 4 bytes.
+    assert_eq!(buffer_bytes, 4 * 16 * 4 + 2 * 12 + 5 * 4);
+    let read = ingest::load(&shared, &Default::default()).unwrap();
+    assert!(std::sync::Arc::ptr_eq(
+        &read.textures[0].texels,
+        &read.textures[2].texels
+    ));
+    assert_ne!(read.textures[0].nearest, read.textures[2].nearest);
+}
+
+/// Writes the Cornell box, lets `corrupt` change the manifest (and the buffer), and returns
+/// the error of reading it.
+fn error_after(name: &str, corrupt: impl FnOnce(&mut Value, &mut Vec<u8>)) -> lucerna::Error {
+    let dir = temp_dir(name);
+    let path = dir.join("box.lucerna");
+    file::write(&ingest::default_scene().unwrap(), &path).unwrap();
+    let mut manifest: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let bin = dir.join("box.lucerna.bin");
+    let mut buffer = std::fs::read(&bin).unwrap();
+    corrupt(&mut manifest, &mut buffer);
+    if manifest.is_object() {
+        manifest["buffer_bytes"] = json!(buffer.len());
+    }
+    std::fs::write(&path, serde_json::to_vec(&manifest).unwrap()).unwrap();
+    std::fs::write(&bin, &buffer).unwrap();
+    let error = ingest::load(&path, &Default::default()).expect_err(name);
+    assert_eq!(error.kind, ErrorKind::BadInput, "{error}");
+    error
+}
+
+#[test]
+fn malformed_scene_files_are_rejected_with_the_element() {
+    let offset =
+        |m: &Value, field: &str| m["meshes"][0][field]["offset"].as_u64().unwrap() as usize;
+    type Corruption = Box<dyn FnOnce(&mut Value, &mut Vec<u8>)>;
+    let cases: Vec<(&str, Corruption, &str)> = vec![
+        (
+            "version",
+            Box::new(|m, _| m["version"] = json!(99)),
+            "version",
+        ),
+        (
+            "format",
+            Box::new(|m, _| m["format"] = json!("gltf")),
+            "format",
+        ),
+        (
+            "unknown-field",
+            Box::new(|m, _| m["meshes"][0]["colour"] = json!(1)),
+            "manifest",
+        ),
+        ("not-json", Box::new(|m, _| *m = json!("{")), "manifest"),
+        (
+            "view-past-end",
+            Box::new(|m, _| m["meshes"][0]["triangles"]["count"] = json!(u64::MAX / 4)),
+            "meshes[0].triangles",
+        ),
+        (
+            "vertex-index",
+            Box::new(move |m, b| {
+                let at = offset(m, "triangles");
+                b[at..at + 4].copy_from_slice(&1000u32.to_le_bytes());
+            }),
+            "meshes[0].triangles[0]",
+        ),
+        (
+            "nan-position",
+            Box::new(move |m, b| {
+                let at = offset(m, "positions") + 12;
+                b[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+            }),
+            "meshes[0].positions[1]",
+        ),
+        (
+            "material-index",
+            Box::new(|m, _| m["meshes"][2]["material"] = json!(40)),
+            "meshes[2].material",
+        ),
+        (
+            "instance-mesh",
+            Box::new(|m, _| m["instances"][1]["mesh"] = json!(8)),
+            "instances[1].mesh",
+        ),
+        (
+            "camera-fov",
+            Box::new(|m, _| m["cameras"][0]["projection"]["perspective"]["yfov"] = json!(4.0)),
+            "cameras[0]",
+        ),
+        (
+            "disk-normal",
+            Box::new(|m, _| {
+                m["disks"] = json!([{"name": "d", "centre": [0, 1, 0], "normal": [0, 2, 0],
+                    "radius": 0.5, "material": 0}])
+            }),
+            "disks[0]",
+        ),
+        (
+            "cylinder-length",
+            Box::new(|m, _| {
+                m["cylinders"] = json!([{"name": "c", "centre": [0, 1, 0], "axis": [1, 0, 0],
+                    "radius": 0.5, "length": -1.0, "material": 0}])
+            }),
+            "cylinders[0]",
+        ),
+        (
+            "cylinder-material",
+            Box::new(|m, _| {
+                m["cylinders"] = json!([{"name": "c", "centre": [0, 1, 0], "axis": [1, 0, 0],
+                    "radius": 0.5, "length": 1.0, "material": 99}])
+            }),
+            "cylinders[0].material",
+        ),
+        (
+            "sun-angle",
+            Box::new(|m, _| {
+                m["lights"] = json!([{"name": "sun", "kind": {"directional": {
+                    "direction": [0, -1, 0], "irradiance": [1, 1, 1], "angle": 4.0}}}])
+            }),
+            "lights[0]",
+        ),
+        (
+            "buffer-outside",
+            Box::new(|m, _| m["buffer"] = json!("../box.lucerna.bin")),
+            "buffer",
+        ),
+        (
+            "buffer-parent",
+            Box::new(|m, _| m["buffer"] = json!("..")),
+            "buffer",
+        ),
+        (
+            "buffer-missing",
+            Box::new(|m, _| m["buffer"] = json!("gone.bin")),
+            "buffer",
+        ),
+        (
+            "normals-count",
+            Box::new(|m, _| m["meshes"][0]["normals"] = json!({"offset": 0, "count": 1})),
+            "meshes[0].normals",
+        ),
+        (
+            "camera-far",
+            Box::new(|m, _| m["cameras"][0]["clip_far"] = json!(0.0)),
+            "cameras[0]",
+        ),
+        (
+            "texel-count",
+            Box::new(|m, _| {
+                m["textures"] = json!([{"name": "t", "width": 3, "height": 3, "encoding": "rgba8",
+                    "texels": {"offset": 0, "count": 4}, "wrap_u": "repeat", "wrap_v": "repeat",
+                    "nearest": false}])
+            }),
+            "textures[0].texels",
+        ),
+        (
+            "emission",
+            Box::new(|m, _| m["materials"][0]["emissive"] = json!([-1.0, 0, 0])),
+            "materials[0]",
+        ),
+        (
+            "transmission",
+            Box::new(|m, _| m["materials"][0]["transmission"] = json!(1.5)),
+            "materials[0]",
+        ),
+        (
+            "absorption",
+            Box::new(|m, _| m["materials"][0]["volume"] = json!({"absorption": [0.1, -2.0, 0.0]})),
+            "materials[0]",
+        ),
+        (
+            "sheen-roughness",
+            Box::new(|m, _| {
+                m["materials"][0]["sheen"] = json!({"color": [1, 1, 1], "color_texture": null,
+                    "roughness": 2.0, "roughness_texture": null})
+            }),
+            "materials[0]",
+        ),
+        (
+            "transmission-texture",
+            Box::new(|m, _| {
+                m["materials"][0]["transmission_texture"] =
+                    json!({"texture": 7, "tex_coord": 0, "transform": null})
+            }),
+            "materials[0].transmission_texture",
+        ),
+    ];
+    for (name, corrupt, element) in cases {
+        let error = error_after(name, corrupt);
+        assert!(error.element.starts_with(element), "{name}: {error}");
+        assert!(error.file.ends_with("box.lucerna"), "{name}: {error}");
+    }
+    // A buffer shorter than the manifest says (a truncated copy).
+    let dir = temp_dir("truncated");
+    let path = dir.join("box.lucerna");
+    file::write(&ingest::default_scene().unwrap(), &path).unwrap();
+    let bin = dir.join("box.lucerna.bin");
+    let len = std::fs::metadata(&bin).unwrap().len();
+    std::fs::write(&bin, &std::fs::read(&bin).unwrap()[..len as usize - 4]).unwrap();
+    let error = ingest::load(&path, &Default::default()).unwrap_err();
+    assert_eq!(
+        (error.kind, error.element.as_str()),
+        (ErrorKind::BadInput, "buffer"),
+        "{error}"
+    );
+}
+
+/// A subdivision surface (cage, creases, corners, per-corner uvs and colours, kept faces)
+/// survives a round trip, and its refinement renders the same image; a cage index out of
+/// range is refused naming the surface.
+#[test]
+fn subdivision_surfaces_round_trip() {
+    use glam::{Vec2, Vec3, Vec4};
+    use lucerna::scene::{BoundaryInterpolation, SubdivisionScheme, SubdivisionSurface};
+    let mut scene = ingest::default_scene().unwrap();
+    let points: Vec<Vec3> = (0..8)
+        .map(|i| {
+            Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32) * 100.0 + 200.0
+        })
+        .collect();
+    #[rustfmt::skip]
+    let face_indices = vec![0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5];
+    let corners = face_indices.len();
+    scene.subdivision_surfaces.push(SubdivisionSurface {
+        mesh: 0,
+        scheme: SubdivisionScheme::CatmullClark,
+        boundary: BoundaryInterpolation::EdgeOnly,
+        points,
+        face_counts: vec![4; 6],
+        face_indices,
+        creases: vec![([0, 1], 2.5), ([1, 3], 10.0)],
+        corners: vec![(7, 3.0)],
+        uvs: Some(
+            (0..corners)
+                .map(|c| Vec2::new(c as f32 / 24.0, 0.5))
+                .collect(),
+        ),
+        colors: Some(vec![Vec4::new(0.5, 0.25, 1.0, 1.0); corners]),
+        keep: Some(vec![true, false, true, true, true, true]),
+    });
+    let dir = temp_dir("subdivision-round-trip");
+    let path = dir.join("sub.lucerna");
+    file::write(&scene, &path).unwrap();
+    let read = ingest::load(&path, &Default::default()).unwrap();
+    let (a, b) = (
+        &scene.subdivision_surfaces[0],
+        &read.subdivision_surfaces[0],
+    );
+    assert_eq!(
+        (
+            a.mesh,
+            a.scheme,
+            a.boundary,
+            &a.points,
+            &a.face_counts,
+            &a.face_indices
+        ),
+        (
+            b.mesh,
+            b.scheme,
+            b.boundary,
+            &b.points,
+            &b.face_counts,
+            &b.face_indices
+        )
+    );
+    assert_eq!(
+        (&a.creases, &a.corners, &a.uvs, &a.colors, &a.keep),
+        (&b.creases, &b.corners, &b.uvs, &b.colors, &b.keep)
+    );
+    assert_same_image(scene, read, "subdivision surface");
+
+    let error = error_after("subdivision-bad-index", |m, buffer| {
+        let view = |buffer: &Vec<u8>, count: u64| json!({"offset": buffer.len(), "count": count});
+        let points = view(buffer, 4);
+        buffer.extend(std::iter::repeat_n(0u8, 48));
+        let counts = view(buffer, 1);
+        buffer.extend(4u32.to_le_bytes());
+        let indices = view(buffer, 4);
+        for i in [0u32, 1, 2, 9] {
+            buffer.extend(i.to_le_bytes());
+        }
+        m["subdivision_surfaces"] = json!([{"mesh": 0, "scheme": "catmull_clark",
+            "boundary": "edge_and_corner", "points": points, "face_counts": counts,
+            "face_indices": indices}]);
+    });
+    let text = error.to_string();
+    assert!(
+        text.contains("subdivision_surfaces[0].face_indices"),
+        "{text}"
+    );
+}

@@ -1,0 +1,239 @@
+#!/usr/bin/env python3
+"""Generate the corpus of broken glTF files under tests/bad-gltf/.
+
+Each file breaks one thing; tests/bad-gltf/expected.json maps it to a fragment of the
+element and of the reason that lucerna's one-line error must name. tests/it/bad_input.rs
+renders every file and checks exit code 2, that single line, no panic and no output file.
+Standard library only:
+
+    python3 tools/generate/bad_gltf.py
+"""
+import base64
+import copy
+import json
+import struct
+import zlib
+from pathlib import Path
+
+OUT = Path(__file__).resolve().parents[2] / "tests" / "bad-gltf"
+
+
+def base_document():
+    """A valid document: one indexed triangle, positions and u16 indices in one buffer."""
+    positions = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
+    indices = struct.pack("<3H", 0, 1, 2) + b"\0\0"
+    blob = positions + indices
+    return {
+        "asset": {"version": "2.0"},
+        "scene": 0,
+        "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1}]}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 3, "type": "VEC3",
+             "min": [0, 0, 0], "max": [1, 1, 0]},
+            {"bufferView": 1, "componentType": 5123, "count": 3, "type": "SCALAR"},
+        ],
+        "bufferViews": [
+            {"buffer": 0, "byteOffset": 0, "byteLength": 36},
+            {"buffer": 0, "byteOffset": 36, "byteLength": 6},
+        ],
+        "buffers": [{"byteLength": len(blob), "uri": data_uri(blob)}],
+    }, blob
+
+
+def data_uri(blob):
+    return "data:application/octet-stream;base64," + base64.b64encode(blob).decode()
+
+
+def glb(doc, blob):
+    doc = copy.deepcopy(doc)
+    del doc["buffers"][0]["uri"]
+    js = json.dumps(doc).encode()
+    js += b" " * (-len(js) % 4)
+    blob = blob + b"\0" * (-len(blob) % 4)
+    total = 12 + 8 + len(js) + 8 + len(blob)
+    return (b"glTF" + struct.pack("<II", 2, total) + struct.pack("<I", len(js)) + b"JSON" + js
+            + struct.pack("<I", len(blob)) + b"BIN\0" + blob)
+
+
+def png_header_only(width, height):
+    """A PNG whose header declares width x height RGBA pixels, with one tiny IDAT: a few
+    hundred bytes that would decode to gigabytes."""
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+    ihdr = struct.pack(">IIBBBBB", width, height, 8, 6, 0, 0, 0)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+            + chunk(b"IDAT", zlib.compress(b"\0" * 64)) + chunk(b"IEND", b""))
+
+
+def cases():
+    """(file name, contents, element fragment, reason fragment)"""
+    doc, blob = base_document()
+
+    def variant(edit):
+        d = copy.deepcopy(doc)
+        edit(d)
+        return json.dumps(d, indent=1).encode()
+
+    def with_blob(new_blob, edit=lambda d: None):
+        def apply(d):
+            d["buffers"][0]["uri"] = data_uri(new_blob)
+            d["buffers"][0]["byteLength"] = len(new_blob)
+            edit(d)
+        return variant(apply)
+
+    full = glb(doc, blob)
+    yield "truncated.glb", full[: len(full) // 2], "GLB container", "file is truncated"
+    yield ("glb-chunk-too-long.glb", full[:12] + struct.pack("<I", 10**6) + full[16:],
+           "GLB container", "")
+    yield "empty.glb", b"", "JSON", "EOF"
+    yield "not-json.gltf", b"this is not a glTF file\n", "JSON", "expected"
+    yield ("missing-buffer-file.gltf",
+           variant(lambda d: d["buffers"][0].update(uri="missing.bin")),
+           "buffers[0].uri", "cannot read")
+    yield ("buffer-shorter-than-byte-length.gltf",
+           variant(lambda d: d["buffers"][0].update(uri=data_uri(blob[:20]))),
+           "buffers[0]", "truncated")
+    yield ("accessor-past-buffer-view.gltf",
+           variant(lambda d: d["accessors"][0].update(count=300)),
+           "accessors[0]", "past the end of bufferViews[0]")
+    yield ("buffer-view-past-buffer.gltf",
+           variant(lambda d: d["bufferViews"][1].update(byteLength=4000)),
+           "accessors[1]", "past the end of its buffer")
+    yield ("accessor-index-out-of-range.gltf",
+           variant(lambda d: d["meshes"][0]["primitives"][0]["attributes"].update(POSITION=7)),
+           "attributes.POSITION", "accessor 7 does not exist")
+    yield ("vertex-index-out-of-range.gltf",
+           with_blob(blob[:36] + struct.pack("<3H", 0, 1, 99) + b"\0\0"),
+           "indices", "index 99 at position 2 is out of range")
+    yield ("nan-positions.gltf",
+           with_blob(struct.pack("<9f", 0, 0, 0, float("nan"), 0, 0, 0, 1, 0) + blob[36:]),
+           "attributes.POSITION", "NaN or infinite")
+    yield ("zero-triangles.gltf",
+           variant(lambda d: d["meshes"][0]["primitives"][0].update(mode=0)),
+           "scenes[0]", "contains no triangles")
+    yield ("degenerate-triangles-only.gltf",
+           with_blob(blob[:36] + struct.pack("<3H", 0, 1, 1) + b"\0\0"),
+           "scenes[0]", "contains no triangles")
+    yield ("dotdot-uri.gltf",
+           variant(lambda d: d["buffers"][0].update(uri="../outside.bin")),
+           "buffers[0].uri", "leaves the scene's directory")
+    yield ("absolute-uri.gltf",
+           variant(lambda d: d["buffers"][0].update(uri="/etc/passwd")),
+           "buffers[0].uri", "absolute path")
+    yield ("http-uri.gltf",
+           variant(lambda d: d["buffers"][0].update(uri="http://example.com/scene.bin")),
+           "buffers[0].uri", "scheme \"http\" is not allowed")
+    yield ("unsupported-required-extension.gltf",
+           variant(lambda d: d.update(extensionsUsed=["ADOBE_materials_thin_transparency"],
+                                      extensionsRequired=["ADOBE_materials_thin_transparency"])),
+           "extensionsRequired[0]", "required extension is not supported")
+    yield ("wrong-accessor-type.gltf",
+           variant(lambda d: d["accessors"][0].update(type="VEC2", count=3, min=[0, 0], max=[1, 1])),
+           "attributes.POSITION", "expected [Vec3]")
+    yield ("stride-smaller-than-element.gltf",
+           variant(lambda d: d["bufferViews"][0].update(byteStride=4)),
+           "attributes.POSITION", "byteStride 4 is smaller than the element size 12")
+    yield ("huge-count.gltf",
+           variant(lambda d: d["accessors"][0].update(count=4000000000)),
+           "accessors[0]", "past the end")
+    yield ("node-cycle.gltf",
+           variant(lambda d: d.update(nodes=[{"mesh": 0, "children": [1]}, {"children": [0]}])),
+           "nodes[0]", "cycle")
+    yield ("bad-image.gltf",
+           variant(lambda d: d.update(
+               images=[{"uri": data_uri(b"GIF89a not really an image")}],
+               textures=[{"source": 0}],
+               materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "images[0]", "unsupported image format")
+    yield ("unknown-bsdf-in-extras.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "velvet"}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna", "unknown bsdf \"velvet\"")
+    # What glTF-Validator calls errors and lucerna accepted quietly before.
+    yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
+           "asset.version", "lucerna reads glTF 2.x")
+    yield ("min-version-2.1.gltf", variant(lambda d: d["asset"].update(minVersion="2.1")),
+           "asset.minVersion", "a later glTF than 2.0")
+    yield "glb-trailing-bytes.glb", full + b"\0" * 8, "GLB container", "the header declares"
+    yield ("animation-missing-node.gltf",
+           variant(lambda d: d.update(animations=[{
+               "samplers": [{"input": 1, "output": 0}],
+               "channels": [{"sampler": 0, "target": {"node": 5, "path": "translation"}}]}])),
+           "animations[0].channels[0].target.node", "node 5 does not exist")
+    sparse_blob = blob[:44] + struct.pack("<H", 99) + b"\0\0"
+
+    def sparse(d):
+        d["bufferViews"].append({"buffer": 0, "byteOffset": 44, "byteLength": 2})
+        d["accessors"][0]["sparse"] = {
+            "count": 1, "indices": {"bufferView": 2, "componentType": 5123},
+            "values": {"bufferView": 0}}
+    yield ("sparse-index-out-of-range.gltf", with_blob(sparse_blob, sparse),
+           "attributes.POSITION", "sparse.indices[0] = 99 is past the accessor's 3 elements")
+
+    def with_material(material):
+        def apply(d):
+            d["materials"] = [material]
+            d["meshes"][0]["primitives"][0]["material"] = 0
+        return variant(apply)
+    yield ("negative-roughness.gltf",
+           with_material({"pbrMetallicRoughness": {"roughnessFactor": -0.5}}),
+           "materials[0]", "roughnessFactor is outside its range")
+    yield ("base-color-above-one.gltf",
+           with_material({"pbrMetallicRoughness": {"baseColorFactor": [2, 0.5, 0.5, 1]}}),
+           "materials[0]", "baseColorFactor is outside its range")
+
+    def with_camera(perspective):
+        def apply(d):
+            d["cameras"] = [{"type": "perspective", "perspective": perspective}]
+            d["nodes"].append({"camera": 0, "translation": [0, 0, 3]})
+            d["scenes"][0]["nodes"].append(1)
+        return variant(apply)
+    yield ("znear-beyond-zfar.gltf", with_camera({"yfov": 0.8, "znear": 10, "zfar": 1}),
+           "cameras[0]", "zfar 1 must be greater than znear 10")
+    yield ("aspect-ratio-zero.gltf",
+           with_camera({"yfov": 0.8, "znear": 0.1, "aspectRatio": 0}),
+           "cameras[0]", "aspectRatio 0 must be positive")
+
+    def spot(d):
+        d["extensionsUsed"] = ["KHR_lights_punctual"]
+        d["extensions"] = {"KHR_lights_punctual": {"lights": [
+            {"type": "spot", "intensity": 10,
+             "spot": {"innerConeAngle": 1.0, "outerConeAngle": 0.5}}]}}
+        d["nodes"].append({"extensions": {"KHR_lights_punctual": {"light": 0}}})
+        d["scenes"][0]["nodes"].append(1)
+    yield ("spot-inner-beyond-outer.gltf", variant(spot),
+           "KHR_lights_punctual.lights[0]", "must satisfy 0 <= inner < outer")
+    yield ("png-header-65535-square.gltf",
+           variant(lambda d: d.update(
+               images=[{"uri": "data:image/png;base64,"
+                        + base64.b64encode(png_header_only(65535, 65535)).decode()}],
+               textures=[{"source": 0}],
+               materials=[{"pbrMetallicRoughness": {"baseColorTexture": {"index": 0}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "images[0]", "larger than the limit")
+    # 1e39 overflows f32: the JSON reader (exact float parsing) rejects it with its position.
+    yield ("infinite-transform.gltf",
+           variant(lambda d: d["nodes"][0].update(translation=[1e39, 0, 0])),
+           "JSON", "number out of range at line")
+
+
+def main():
+    OUT.mkdir(parents=True, exist_ok=True)
+    expected = {}
+    for name, contents, element, reason in cases():
+        (OUT / name).write_bytes(contents)
+        expected[name] = {"element": element, "reason": reason}
+    (OUT / "expected.json").write_text(json.dumps(expected, indent=1, sort_keys=True) + "\n")
+    print(f"wrote {len(expected)} files to {OUT}")
+
+
+if __name__ == "__main__":
+    main()
