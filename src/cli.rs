@@ -504,6 +504,10 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
         Command::Setup { venv, no_denoiser } => {
             let venv = crate::install::setup(venv.as_deref(), !no_denoiser)?;
             log::info!("Python environment ready: {}", venv.display());
+            log::info!(
+                "OpenImageIO's command line, to look into EXRs: {}",
+                venv.join("bin/oiiotool").display()
+            );
             Ok(0)
         }
         Command::Completions { shell } => {

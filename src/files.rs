@@ -64,7 +64,7 @@ pub fn check_inside(path: &Path, base: &Path) -> std::result::Result<(), String>
 }
 
 /// Checks, before rendering, that `path` can be written: an existing `path` is a regular
-/// file, and its directory (created if missing) takes a new file.
+/// file, and its directory (created if missing, and said so) takes a new file.
 pub fn check_output(path: &Path, element: &str) -> Result<()> {
     if path.file_name().is_none() {
         return Err(Error::bad_input(path, element, "names no file"));
@@ -85,8 +85,11 @@ pub fn check_output(path: &Path, element: &str) -> Result<()> {
         .parent()
         .filter(|d| !d.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::other(dir, element, format!("cannot create the directory: {e}")))?;
+    if !dir.exists() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::other(dir, element, format!("cannot create the directory: {e}")))?;
+        log::info!("{}: created the directory for {element}", dir.display());
+    }
     tempfile::Builder::new()
         .prefix(".lucerna-probe-")
         .tempfile_in(dir)

@@ -520,3 +520,40 @@ fn stats_json_has_the_figures_as_integers() {
         assert_eq!(v["frame"].as_f64(), Some(f.parse::<f64>().unwrap()));
     }
 }
+
+/// An output into a directory that does not exist yet is written, and the directory made
+/// for it is said (a typo in a path is seen at once, not after the render).
+#[test]
+fn a_missing_output_directory_is_made_and_said() {
+    let dir = temp_dir("missing-output-directory");
+    let out = dir.join("shot").join("frame.exr");
+    let (ok, stderr) = lucerna_stderr(&[
+        "render",
+        "--spp",
+        "1",
+        "--resolution",
+        "8x8",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{stderr}");
+    assert!(out.is_file());
+    assert!(
+        stderr.contains(&format!(
+            "{}: created the directory for --output",
+            dir.join("shot").display()
+        )),
+        "{stderr}"
+    );
+    // Once it exists, nothing is said.
+    let (ok, stderr) = lucerna_stderr(&[
+        "render",
+        "--spp",
+        "1",
+        "--resolution",
+        "8x8",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok && !stderr.contains("created the directory"), "{stderr}");
+}
