@@ -1,4 +1,4 @@
-//! The `lucerna` command line: parses the arguments and calls the library (src/job.rs for
+//! The `lucerna` command line: parses the arguments and calls the library (src/job/ for
 //! `render`, src/commands.rs for the others). The binary (src/main.rs) and the Python
 //! package's `lucerna` command both run [`main_with`].
 //!

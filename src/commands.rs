@@ -1,4 +1,4 @@
-//! The commands besides `render` (src/job.rs) as library calls: `inspect`, `convert`,
+//! The commands besides `render` (src/job/) as library calls: `inspect`, `convert`,
 //! `merge` and `batch`. The command line and the Python package call them. They do not
 //! install signal handlers (the command line does: a signal then ends a conversion at once,
 //! stopping the USD plugin, and a merge without leaving its temporary output).

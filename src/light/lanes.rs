@@ -5,7 +5,7 @@
 //! [`Light::sample`]; and the alias table of selection by power, so
 //! that eight lanes choose their lights at once. A lane's sample is the scalar code's to
 //! the bit: [`AreaLights::sample`] performs `Light::sample`'s and
-//! `integrator::path::sample_chosen_light`'s operations in their order, and
+//! `integrator::estimator::sample_chosen_light`'s operations in their order, and
 //! [`PowerSelection::select`] `LightSet::select`'s.
 //!
 //! Built once per render, the first time the packet kernel runs (see

@@ -46,7 +46,7 @@ pub(super) struct PassArgs<'a> {
 const TILES_PER_JOB: usize = 1;
 
 /// Renders one pass over every tile with the kernel variant `<ROUTED, EMITTERS, DATA>`
-/// (see `plan::Kernel`); returns what each tile learned for efficiency-aware roulette and
+/// (see `render::plan::Kernel`); returns what each tile learned for efficiency-aware roulette and
 /// for learned splitting.
 pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: bool>(
     film: &mut Film,
@@ -147,7 +147,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
         .collect()
 }
 
-/// Renders one pass over every tile with the packet kernel (see `plan::Kernel::packet`):
+/// Renders one pass over every tile with the packet kernel (see `render::plan::Kernel::packet`):
 /// the beauty only, and no roulette learning. Returns what a pass that learns the split
 /// counts learned, tile by tile in tile order, as [`run_pass`] does.
 #[cfg(target_arch = "x86_64")]
