@@ -4,7 +4,7 @@
 # package built from python/, and the USD plugin's tests (plugins/usd/tests, usd-core).
 # Python packages go into a virtual environment (.venv, or $LUCERNA_VENV) made on first use.
 #
-# On a fresh clone of a 2-core machine it takes about 8 minutes, most of it compiling; each
+# On a fresh clone of a 2-core machine it takes about 7 minutes, most of it compiling; each
 # step says what it does and how long it took.
 set -euo pipefail
 cd "$(dirname "$0")/.."
