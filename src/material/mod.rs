@@ -459,6 +459,9 @@ fn build(
             } else {
                 0.0
             };
+            if let Some(b) = reduced_bsdf(m, base, metallic, roughness, transmission) {
+                return Built::Compact(b);
+            }
             if m.transmits()
                 && let Some(b) = dielectric_bsdf(m, base, metallic, roughness, transmission, ctx)
             {
@@ -486,14 +489,49 @@ fn build(
     }
 }
 
+/// The simpler BSDF a glTF material is at a point where its other lobes weigh nothing, or
+/// `None`: where the specular layer's weight is zero (KHR_materials_specular
+/// `specularFactor` 0) and the point is neither metal nor transmitting nor coated nor
+/// sheened, the layered model is exactly Lambert's (its diffuse base, under a layer that
+/// reflects nothing); where the point is all metal, uncoated, without sheen, iridescence or
+/// anisotropy, it is exactly `gltf_pbr`'s conductor (the specular extension does not apply
+/// to metals). Factors multiply their textures, so a zero factor is zero everywhere; the
+/// unit tests compare each reduction with the model it replaces.
+fn reduced_bsdf(
+    m: &Material,
+    base: Vec3,
+    metallic: f32,
+    roughness: f32,
+    transmission: f32,
+) -> Option<Bsdf<'static>> {
+    let uncoated = m.clearcoat == 0.0;
+    let unsheened = m.sheen.is_none_or(|s| s.color == Vec3::ZERO);
+    if !(uncoated && unsheened) {
+        return None;
+    }
+    if m.specular.weight == 0.0 && metallic <= 0.0 && transmission <= 0.0 {
+        return Some(Bsdf::Lambert(Lambert {
+            albedo: base.clamp(Vec3::ZERO, Vec3::ONE),
+        }));
+    }
+    let plain_metal = metallic >= 1.0
+        && !m.transmits()
+        && m.iridescence.is_none_or(|i| i.factor == 0.0)
+        && m.anisotropy.is_none();
+    if plain_metal && (!m.specular.is_default() || needs_layers(m)) {
+        return Some(Bsdf::GltfPbr(GltfPbr::new(base, 1.0, roughness, m.ior)));
+    }
+    None
+}
+
 /// True if material `m` needs the layered model (beyond `gltf_pbr`'s base and coat) even
 /// where it does not transmit.
 fn needs_layers(m: &Material) -> bool {
-    m.sheen.is_some()
-        || m.iridescence.is_some()
+    m.sheen.is_some_and(|s| s.color != Vec3::ZERO)
+        || m.iridescence.is_some_and(|i| i.factor != 0.0)
         || m.anisotropy.is_some()
         || !m.specular.is_default()
-        || m.clearcoat_normal_texture.is_some()
+        || (m.clearcoat_normal_texture.is_some() && m.clearcoat != 0.0)
 }
 
 /// Where a BSDF is built: the textures, the point's attributes and its context.
@@ -658,6 +696,7 @@ fn dielectric_bsdf(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::scene::Specular;
 
     /// `is_black` holds exactly for the surfaces that reflect nothing: their f · cos θi and
     /// sample weights vanish in every direction, while every surface it rejects reflects
@@ -700,6 +739,132 @@ mod tests {
                     })
             });
             assert_eq!(bsdf.is_black(), !reflects, "case {i}");
+        }
+    }
+
+    /// Directions over the upper hemisphere, grazing ones included.
+    fn hemisphere() -> Vec<Vec3> {
+        (1..12)
+            .flat_map(|i| {
+                let z = i as f32 / 12.0;
+                let r = (1.0 - z * z).sqrt();
+                (0..8).map(move |k| {
+                    let phi = k as f32 * 0.785 + 0.1;
+                    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+                })
+            })
+            .collect()
+    }
+
+    /// The layered model of `m` at a point, built whatever the reductions say.
+    fn layered(m: &Material) -> Layered {
+        let attrs = SurfaceAttributes {
+            uv: [Vec2::ZERO; 2],
+            color: Vec4::ONE,
+        };
+        let ctx = ShadingContext::default();
+        let at = Point {
+            textures: &[],
+            attrs: &attrs,
+            ctx: &ctx,
+        };
+        let base = m.base_color.truncate();
+        Layered::new(layered_params(m, &at, base, m.metallic, m.roughness, 0.0))
+    }
+
+    /// A glTF material whose specular layer weighs nothing and that is neither metal nor
+    /// coated reduces to Lambert, and an uncoated all-metal one to `gltf_pbr`'s conductor,
+    /// and each reduction is the layered model it replaces: the same f · cos θi in every
+    /// pair of directions (to float rounding: the two compute GGX in another order), and the
+    /// material-level classification that the render plan reports agrees.
+    #[test]
+    fn zero_weight_lobes_reduce_to_the_same_bsdf() {
+        let colour = Vec4::new(0.8, 0.4, 0.2, 1.0);
+        let lambertian = Material {
+            base_color: colour,
+            metallic: 0.0,
+            roughness: 0.4,
+            specular: Specular {
+                weight: 0.0,
+                ..Specular::default()
+            },
+            sheen: Some(crate::scene::Sheen {
+                color: Vec3::ZERO,
+                color_texture: None,
+                roughness: 0.5,
+                roughness_texture: None,
+            }),
+            ..Material::default()
+        };
+        let metal = Material {
+            base_color: colour,
+            metallic: 1.0,
+            roughness: 0.3,
+            specular: Specular {
+                weight: 0.5,
+                color: Vec3::new(1.0, 0.5, 0.5),
+                ..Specular::default()
+            },
+            ..Material::default()
+        };
+        let mut storage = BsdfStorage::default();
+        let attrs = SurfaceAttributes {
+            uv: [Vec2::ZERO; 2],
+            color: Vec4::ONE,
+        };
+        for (m, reduced) in [
+            (&lambertian, crate::scene::Reduced::Lambert),
+            (&metal, crate::scene::Reduced::Conductor),
+        ] {
+            assert_eq!(m.reduced(), Some(reduced));
+            let simple = bsdf(m, &[], &attrs, &mut storage);
+            match (reduced, &simple) {
+                (crate::scene::Reduced::Lambert, Bsdf::Lambert(_))
+                | (crate::scene::Reduced::Conductor, Bsdf::GltfPbr(_)) => {}
+                _ => panic!("{reduced:?}: built {simple:?}"),
+            }
+            let full = layered(m);
+            for &wo in &hemisphere() {
+                for &wi in &hemisphere() {
+                    let (a, b) = (simple.eval(wo, wi), full.eval(wo, wi));
+                    assert!(
+                        (a - b).abs().max_element() <= 1e-4 * b.max_element().max(1e-3),
+                        "{reduced:?} at {wo} {wi}: {a} against {b}"
+                    );
+                }
+            }
+        }
+        // A specular layer of some weight, a coat, a sheen or a metallic texture keep the
+        // full model.
+        for m in [
+            Material {
+                specular: Specular {
+                    weight: 0.1,
+                    ..lambertian.specular
+                },
+                ..lambertian.clone()
+            },
+            Material {
+                clearcoat: 0.5,
+                ..lambertian.clone()
+            },
+            Material {
+                sheen: Some(crate::scene::Sheen {
+                    color: Vec3::splat(0.5),
+                    ..lambertian.sheen.unwrap()
+                }),
+                ..lambertian.clone()
+            },
+            Material {
+                metallic: 0.5,
+                ..metal.clone()
+            },
+        ] {
+            assert_eq!(m.reduced(), None, "{m:?}");
+            assert!(matches!(
+                bsdf(&m, &[], &attrs, &mut storage),
+                Bsdf::Layered(_)
+            ));
         }
     }
 }

@@ -196,8 +196,12 @@ impl fmt::Display for RenderPlan {
         )?;
         writeln!(
             f,
-            "  materials in use: {} textured, {} normal-mapped, {} with alpha (tested during traversal only for their primitives)",
-            s.textured_materials, s.normal_mapped_materials, s.alpha_materials
+            "  materials in use: {} textured, {} normal-mapped, {} with alpha (tested during traversal only for their primitives); glTF PBR with zero-weight lobes skipped: {} rendered as Lambert, {} as a conductor",
+            s.textured_materials,
+            s.normal_mapped_materials,
+            s.alpha_materials,
+            s.reduced_to_lambert,
+            s.reduced_to_conductor
         )?;
         writeln!(
             f,

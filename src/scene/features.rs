@@ -5,7 +5,7 @@
 //! attributes that no material reads are stripped here before a render
 //! ([`strip_unused_attributes`]).
 
-use super::material::SMOOTH_ALPHA;
+use super::material::{Reduced, SMOOTH_ALPHA};
 use super::{AlphaMode, BsdfModel, LightKind, Material, Scene};
 
 /// The BSDF lobes a scene's materials can produce.
@@ -34,10 +34,15 @@ impl Lobes {
                 glossy: specular.max_element() > 0.0,
                 ..Self::default()
             },
+            BsdfModel::GltfPbr if m.reduced() == Some(Reduced::Lambert) => Self {
+                diffuse: true,
+                ..Self::default()
+            },
             BsdfModel::GltfPbr => {
                 // A roughness texture can lower the roughness to 0 anywhere.
                 let textured = m.metallic_roughness_texture.is_some();
-                let coat = m.clearcoat > 0.0 || m.clearcoat_texture.is_some();
+                // The coat's texture multiplies its factor.
+                let coat = m.clearcoat > 0.0;
                 // A transmission of 1 (untextured) leaves no diffuse base.
                 let all_glass = m.transmission >= 1.0 && m.transmission_texture.is_none();
                 Self {
@@ -100,6 +105,10 @@ pub struct SceneFeatures {
     pub meshes_with_uvs: usize,
     pub meshes_with_tangents: usize,
     pub meshes_with_colors: usize,
+    /// glTF PBR materials in use whose zero-weight lobes are skipped: they render as
+    /// Lambert and as a conductor ([`Material::reduced`]).
+    pub reduced_to_lambert: usize,
+    pub reduced_to_conductor: usize,
     /// Materials in use whose BSDF has a GGX lobe (a rough glTF surface): work the packet
     /// kernel's lanes speed up.
     pub microfacet_materials: usize,
@@ -202,6 +211,8 @@ impl SceneFeatures {
                 .count(),
             meshes_with_tangents: meshes.iter().filter(|m| m.tangents.is_some()).count(),
             meshes_with_colors: meshes.iter().filter(|m| m.colors.is_some()).count(),
+            reduced_to_lambert: count(&|m| m.reduced() == Some(Reduced::Lambert)),
+            reduced_to_conductor: count(&|m| m.reduced() == Some(Reduced::Conductor)),
             microfacet_materials: count(&|m| m.model == BsdfModel::GltfPbr && Lobes::of(m).glossy),
             uniform_meshes: scene
                 .meshes

@@ -128,6 +128,16 @@ impl Specular {
     }
 }
 
+/// What a glTF PBR material reduces to where some of its lobes weigh nothing
+/// ([`Material::reduced`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reduced {
+    /// The diffuse base alone.
+    Lambert,
+    /// The metal alone: GGX with Schlick's Fresnel of the base colour.
+    Conductor,
+}
+
 /// KHR_materials_sheen: a retro-reflective layer of fibres over the base.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Sheen {
@@ -209,6 +219,30 @@ impl Material {
     /// camera but lights nothing).
     pub fn is_emissive(&self) -> bool {
         self.emissive.max_element() > 0.0 && !self.unlit
+    }
+
+    /// The simpler model a glTF PBR material is everywhere because some of its lobes weigh
+    /// nothing (factors multiply their textures, so a zero factor is zero everywhere):
+    /// Lambert where the specular layer's weight is zero (KHR_materials_specular
+    /// `specularFactor` 0) and it is neither metal nor transmitting nor coated nor
+    /// sheened; a conductor where it is all metal (factor 1, no metallic texture), uncoated,
+    /// without sheen, iridescence or anisotropy. `None` otherwise. The BSDF built at a
+    /// point reduces the same way, and also where a texture makes the point all metal.
+    pub fn reduced(&self) -> Option<Reduced> {
+        let uncoated = self.clearcoat == 0.0;
+        let unsheened = self.sheen.is_none_or(|s| s.color == Vec3::ZERO);
+        if self.model != BsdfModel::GltfPbr || self.unlit || !(uncoated && unsheened) {
+            return None;
+        }
+        if self.specular.weight == 0.0 && self.metallic == 0.0 && !self.transmits() {
+            return Some(Reduced::Lambert);
+        }
+        let metal = self.metallic >= 1.0 && self.metallic_roughness_texture.is_none();
+        (metal
+            && !self.transmits()
+            && self.iridescence.is_none_or(|i| i.factor == 0.0)
+            && self.anisotropy.is_none())
+        .then_some(Reduced::Conductor)
     }
 
     /// True if some point of the material can transmit light (its glTF BSDF has a

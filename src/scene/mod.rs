@@ -9,7 +9,7 @@ pub mod texture;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 pub use material::{
-    AlphaMode, Anisotropy, BsdfModel, Iridescence, Material, Sheen, Specular, TextureRef,
+    AlphaMode, Anisotropy, BsdfModel, Iridescence, Material, Reduced, Sheen, Specular, TextureRef,
     UvTransform, Volume,
 };
 use serde::{Deserialize, Serialize};

@@ -39,7 +39,9 @@ def render(binary, scene, resolution, flags, spp, out):
     cmd = [binary, "render", str(lt.ROOT / scene), "-o", str(out), "-q", "--resolution", resolution,
            "--spp", str(spp), "--seed", "1", "--stats-json", str(out.with_suffix(".json"))]
     cmd += flags.split()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    run = subprocess.run(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    if run.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed:\n{run.stderr}")
     stats = json.loads(out.with_suffix(".json").read_text())
     rays = (stats["rays_closest"] + stats["rays_shadow"]) / stats["render_seconds"]
     channels, _ = lt.read_exr(out)
@@ -64,8 +66,10 @@ def main():
         scenes = []
         for spec in args.scene:
             name, rest = spec.split("=", 1)
-            parts = rest.split(",", 2) + ["256x256", ""]
-            scenes.append((name, parts[0], parts[1], parts[2]))
+            parts = rest.split(",", 2)
+            resolution = parts[1] if len(parts) > 1 else "256x256"
+            flags = parts[2] if len(parts) > 2 else ""
+            scenes.append((name, parts[0], resolution, flags))
     lines = [f"# A/B: {args.a} (A) against {args.b} (B)", "",
              f"{args.repeats} interleaved pairs a scene, {args.spp} spp, seed 1; medians; "
              "ratios B/A with the range of the per-pair ratios.", "",

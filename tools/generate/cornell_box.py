@@ -84,18 +84,24 @@ def oriented(quad, reference, mode):
     return quad
 
 
-def material(name, colour, emissive=None):
+def material(name, colour, emissive=None, pbr=False):
+    """A Lambertian material: lucerna's `lambert` model named in `extras`, or (`pbr`) as a
+    plain glTF file says it, metallic-roughness with KHR_materials_specular's specularFactor
+    0, which is exactly Lambert too (every renderer reads it)."""
     m = {
         "name": name,
         "pbrMetallicRoughness": {"baseColorFactor": colour + [1.0], "metallicFactor": 0.0,
                                  "roughnessFactor": 1.0},
         "doubleSided": emissive is None,
-        "extras": {"lucerna": {"bsdf": "lambert"}},
     }
+    if pbr:
+        m["extensions"] = {"KHR_materials_specular": {"specularFactor": 0.0}}
+    else:
+        m["extras"] = {"lucerna": {"bsdf": "lambert"}}
     if emissive is not None:
         peak = max(emissive)
         m["emissiveFactor"] = [c / peak for c in emissive]
-        m["extensions"] = {"KHR_materials_emissive_strength": {"emissiveStrength": peak}}
+        m.setdefault("extensions", {})["KHR_materials_emissive_strength"] = {"emissiveStrength": peak}
     return m
 
 
@@ -127,9 +133,10 @@ def animate(nodes, accessors, views, blob):
                      {"sampler": 1, "target": {"node": camera, "path": "translation"}}]}]
 
 
-def build(animated=False):
-    materials = [material("white", WHITE), material("red", RED), material("green", GREEN),
-                 material("light", LIGHT_ALBEDO, LIGHT_RADIANCE)]
+def build(animated=False, pbr=False):
+    materials = [material("white", WHITE, pbr=pbr), material("red", RED, pbr=pbr),
+                 material("green", GREEN, pbr=pbr),
+                 material("light", LIGHT_ALBEDO, LIGHT_RADIANCE, pbr=pbr)]
     material_index = {"white": 0, "red": 1, "green": 2, "light": 3}
     blob = bytearray()
     accessors, views, meshes, nodes = [], [], [], []
@@ -166,7 +173,8 @@ def build(animated=False):
     uri = "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()
     doc = {
         "asset": {"version": "2.0", "generator": "lucerna tools/generate/cornell_box.py"},
-        "extensionsUsed": ["KHR_materials_emissive_strength"],
+        "extensionsUsed": ["KHR_materials_emissive_strength"]
+        + (["KHR_materials_specular"] if pbr else []),
         "scene": 0,
         "scenes": [{"name": "cornell-box", "nodes": list(range(len(nodes)))}],
         "nodes": nodes,
@@ -184,15 +192,16 @@ def build(animated=False):
 
 
 def main():
-    # cornell_box.py [--animated] [OUT]
+    # cornell_box.py [--animated | --pbr] [OUT]
     args = sys.argv[1:]
     animated = "--animated" in args
-    args = [a for a in args if a != "--animated"]
-    name = "cornell-box-animated.gltf" if animated else "cornell-box.gltf"
+    pbr = "--pbr" in args
+    args = [a for a in args if a not in ("--animated", "--pbr")]
+    name = "cornell-box-animated.gltf" if animated else "cornell-box-pbr.gltf" if pbr else "cornell-box.gltf"
     out = Path(args[0]) if args else \
         Path(__file__).resolve().parents[2] / "scenes" / "cornell-box" / name
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(build(animated), indent=1) + "\n")
+    out.write_text(json.dumps(build(animated, pbr), indent=1) + "\n")
     print(f"wrote {out}")
 
 
