@@ -97,6 +97,44 @@ pub fn check_output(path: &Path, element: &str) -> Result<()> {
     Ok(())
 }
 
+/// Whether process `pid` is gone (no process of that number exists). A live process that
+/// took the number over keeps what it might own: only the absence of a process is sure.
+pub fn process_is_gone(pid: u32) -> bool {
+    pid != std::process::id() && !Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// Removes what processes that are gone left in `dir` under names `PREFIX<pid>` or
+/// `PREFIX<pid>-...` (temporary files of an output, scratch folders of the USD plugin): a
+/// process killed with SIGKILL cannot clean up after itself, so the next one does.
+pub fn remove_stale(dir: &Path, prefix: &str) {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return;
+    };
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(rest) = name.to_str().and_then(|n| n.strip_prefix(prefix)) else {
+            continue;
+        };
+        let digits = rest.split('-').next().unwrap_or("");
+        let Ok(pid) = digits.parse::<u32>() else {
+            continue;
+        };
+        if process_is_gone(pid) {
+            let path = entry.path();
+            let removed = match entry.file_type() {
+                Ok(t) if t.is_dir() => std::fs::remove_dir_all(&path),
+                _ => std::fs::remove_file(&path),
+            };
+            if removed.is_ok() {
+                log::info!(
+                    "removed {}, left by process {pid}, which is gone",
+                    path.display()
+                );
+            }
+        }
+    }
+}
+
 /// Writes a file atomically: `write` fills a temporary file next to `path`, which is then
 /// renamed over `path`. A failed or killed write never leaves a partial file at `path`.
 pub fn write_atomically<F>(path: &std::path::Path, write: F) -> crate::Result<()>
@@ -115,6 +153,7 @@ where
         name.to_string_lossy(),
         std::process::id()
     ));
+    remove_stale(dir, &format!(".{}.tmp-", name.to_string_lossy()));
     // Never rename over a device node, FIFO or directory (the render checked this before
     // it started; this holds for every writer).
     if let Ok(meta) = std::fs::metadata(path)

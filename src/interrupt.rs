@@ -5,7 +5,7 @@
 //!
 //! - While the scene is read, converted (the USD plugin) or prepared (BVH, lights), there is
 //!   nothing worth saving: a signal ends the process at once with 128 + signal. The USD
-//!   plugin's process is killed and scratch folders are removed first ([`watch_child`],
+//!   plugin's process is killed and scratch folders are removed first ([`spawn_watched`],
 //!   [`watch_scratch`]).
 //! - While samples are taken ([`defer`]), a signal only sets the stop flag: the render stops
 //!   at its next tile and writes a checkpoint that `--resume` continues. A second signal ends
@@ -167,9 +167,11 @@ enum Cleanup {
 /// child reaped, the folder removed or the file renamed).
 pub struct CleanupGuard(u64);
 
+/// Ids of cleanup guards.
+static NEXT_CLEANUP: AtomicUsize = AtomicUsize::new(0);
+
 fn register(cleanup: Cleanup) -> CleanupGuard {
-    static NEXT: AtomicUsize = AtomicUsize::new(0);
-    let id = NEXT.fetch_add(1, Ordering::Relaxed) as u64;
+    let id = NEXT_CLEANUP.fetch_add(1, Ordering::Relaxed) as u64;
     state()
         .cleanups
         .lock()
@@ -188,9 +190,17 @@ impl Drop for CleanupGuard {
     }
 }
 
-/// Kills child `pid` if a signal ends this process (register before waiting for it).
-pub fn watch_child(pid: u32) -> CleanupGuard {
-    register(Cleanup::Child(pid))
+/// Starts `command` and registers it to be killed if a signal ends this process, with the
+/// signal handler held off in between: a signal that arrives while the child starts still
+/// finds it registered (else the child would outlive this process).
+pub fn spawn_watched(
+    command: &mut std::process::Command,
+) -> std::io::Result<(std::process::Child, CleanupGuard)> {
+    let mut cleanups = state().cleanups.lock().unwrap_or_else(|e| e.into_inner());
+    let child = command.spawn()?;
+    let id = NEXT_CLEANUP.fetch_add(1, Ordering::Relaxed) as u64;
+    cleanups.push((id, Cleanup::Child(child.id())));
+    Ok((child, CleanupGuard(id)))
 }
 
 /// Removes scratch folder or temporary file `path` if a signal ends this process.

@@ -18,7 +18,7 @@
 use super::{LoadOptions, tangents};
 use crate::error::{Error, Result};
 use crate::scene::{self, Scene};
-use std::io::Read;
+use std::io::BufRead;
 use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -27,6 +27,21 @@ use std::time::{Duration, Instant};
 pub const EXTENSIONS: [&str; 4] = ["usd", "usda", "usdc", "usdz"];
 
 const ERROR_PREFIX: &str = "lucerna-usd: error: ";
+/// The plugin's sign of life (at most one a second, as it converts prims and images).
+const HEARTBEAT: &str = "lucerna-usd: heartbeat";
+/// A plugin silent for this long is stuck (its slowest single step, composing a stage or
+/// decoding one image, takes far less), whatever `--usd-timeout` allows in all;
+/// `$LUCERNA_USD_STALL_SECONDS` sets another limit.
+const STALL_LIMIT: Duration = Duration::from_secs(300);
+
+/// The stall limit: [`STALL_LIMIT`], or `$LUCERNA_USD_STALL_SECONDS`.
+fn stall_limit() -> Duration {
+    std::env::var("LUCERNA_USD_STALL_SECONDS")
+        .ok()
+        .and_then(|s| s.parse::<f64>().ok())
+        .filter(|s| s.is_finite() && *s > 0.0)
+        .map_or(STALL_LIMIT, Duration::from_secs_f64)
+}
 
 /// Converts the stage at `path` with the plugin and reads the result.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
@@ -43,8 +58,11 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         python.display(),
         plugin.join("requirements.txt").display()
     );
+    // Scratch folders name their process, so that those of processes that are gone (killed
+    // before they could remove theirs) are removed here.
+    crate::files::remove_stale(&std::env::temp_dir(), "lucerna-usd-p");
     let scratch = tempfile::Builder::new()
-        .prefix("lucerna-usd-")
+        .prefix(&format!("lucerna-usd-p{}-", std::process::id()))
         .tempdir()
         .map_err(|e| Error::other(path, "temporary folder", e.to_string()))?;
     let _removed_on_signal = crate::interrupt::watch_scratch(scratch.path().to_path_buf());
@@ -102,32 +120,55 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
             ),
         )
     };
-    let mut child = command.spawn().map_err(cannot_run)?;
-    let _killed_on_signal = crate::interrupt::watch_child(child.id());
-    let mut pipe = child.stderr.take().expect("stderr is piped");
-    let reader = std::thread::spawn(move || {
-        let mut bytes = Vec::new();
-        let _ = pipe.read_to_end(&mut bytes);
-        bytes
-    });
+    let (mut child, _killed_on_signal) =
+        crate::interrupt::spawn_watched(&mut command).map_err(cannot_run)?;
+    let pipe = child.stderr.take().expect("stderr is piped");
     let start = Instant::now();
-    let status = loop {
-        match child.try_wait().map_err(cannot_run)? {
-            Some(status) => break status,
-            None if start.elapsed() > options.plugin_timeout => {
-                let _ = child.kill();
-                let _ = child.wait();
-                return Err(Error::other(
-                    path,
-                    "usd plugin",
-                    format!(
-                        "still converting after {} s: stopped (raise the limit with --usd-timeout)",
-                        options.plugin_timeout.as_secs()
-                    ),
-                ));
+    // Milliseconds after `start` of the plugin's last heartbeat (or other line).
+    let alive = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let reader = {
+        let alive = alive.clone();
+        std::thread::spawn(move || {
+            let mut lines = Vec::new();
+            for line in std::io::BufReader::new(pipe)
+                .split(b'\n')
+                .map_while(|l| l.ok())
+            {
+                alive.store(
+                    start.elapsed().as_millis() as u64,
+                    std::sync::atomic::Ordering::Relaxed,
+                );
+                if line != HEARTBEAT.as_bytes() {
+                    lines.extend_from_slice(&line);
+                    lines.push(b'\n');
+                }
             }
-            None => std::thread::sleep(Duration::from_millis(20)),
-        }
+            lines
+        })
+    };
+    let stall = stall_limit();
+    let status = loop {
+        let silent = start.elapsed().saturating_sub(Duration::from_millis(
+            alive.load(std::sync::atomic::Ordering::Relaxed),
+        ));
+        let stopped = match child.try_wait().map_err(cannot_run)? {
+            Some(status) => break status,
+            None if start.elapsed() > options.plugin_timeout => format!(
+                "still converting after {} s: stopped (raise the limit with --usd-timeout)",
+                options.plugin_timeout.as_secs()
+            ),
+            None if silent > stall => format!(
+                "no sign of progress for {} s: the conversion is stuck and was stopped",
+                silent.as_secs()
+            ),
+            None => {
+                std::thread::sleep(Duration::from_millis(20));
+                continue;
+            }
+        };
+        let _ = child.kill();
+        let _ = child.wait();
+        return Err(Error::other(path, "usd plugin", stopped));
     };
     let stderr_bytes = reader.join().unwrap_or_default();
     let result = std::process::Output {
@@ -182,10 +223,52 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
             ));
         }
     }
-    let mut scene = scene::file::read(&output)?;
+    if !output.is_file() {
+        return Err(Error::other(
+            path,
+            "usd plugin",
+            "the plugin ended without error but wrote no scene file",
+        ));
+    }
+    let mut scene = scene::file::read(&output).map_err(|e| stage_error(path, &output, e))?;
     scene.source = path.display().to_string();
     add_tangents(&mut scene);
     Ok(scene)
+}
+
+/// An error in the scene file the plugin wrote for stage `path`, told as the stage's: the
+/// file is the stage, and an element of the scene file (`materials[3].emissive`) is named by
+/// the prim it came from (elements carry their prim's path as their name), so that no
+/// message points at the deleted temporary file.
+fn stage_error(path: &Path, scene_file: &Path, e: Error) -> Error {
+    let names = std::fs::read(scene_file)
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<serde_json::Value>(&bytes).ok());
+    let prim = e.element.split_once('[').and_then(|(list, rest)| {
+        let index: usize = rest.split_once(']')?.0.parse().ok()?;
+        names
+            .as_ref()?
+            .get(list)?
+            .get(index)?
+            .get("name")?
+            .as_str()
+            .map(str::to_string)
+    });
+    let element = match prim {
+        Some(prim) => format!("{prim} ({})", e.element),
+        None => e.element.clone(),
+    };
+    let reason = if e.element == "manifest" {
+        format!("the converted scene is unreadable: {}", e.reason)
+    } else {
+        e.reason.clone()
+    };
+    Error {
+        file: path.display().to_string(),
+        element,
+        reason,
+        ..e
+    }
 }
 
 /// MikkTSpace tangents for normal-mapped meshes (the plugin leaves them to the renderer,
@@ -201,5 +284,43 @@ fn add_tangents(scene: &mut Scene) {
                 mesh.name
             ));
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// What the renderer refuses in a converted scene is told against the stage and the
+    /// prim the element came from, never the temporary scene file.
+    #[test]
+    fn scene_file_errors_name_the_stage_and_the_prim() {
+        let dir = tempfile::tempdir().unwrap();
+        let scene_file = dir.path().join("scene.lucerna");
+        std::fs::write(
+            &scene_file,
+            r#"{"materials": [{"name": "displayColor"}, {"name": "/Looks/Hot"}]}"#,
+        )
+        .unwrap();
+        let stage = Path::new("shot.usda");
+        let e = stage_error(
+            stage,
+            &scene_file,
+            Error::bad_input(&scene_file, "materials[1].emissive", "not finite"),
+        );
+        assert_eq!(
+            e.to_string(),
+            "shot.usda: /Looks/Hot (materials[1].emissive): not finite"
+        );
+        assert_eq!(e.exit_code(), 2);
+        let e = stage_error(
+            stage,
+            &scene_file,
+            Error::bad_input(&scene_file, "manifest", "number out of range at line 3"),
+        );
+        assert_eq!(
+            e.to_string(),
+            "shot.usda: manifest: the converted scene is unreadable: number out of range at line 3"
+        );
     }
 }

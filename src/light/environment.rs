@@ -8,8 +8,8 @@ use super::sample::LightSample;
 use crate::color::luminance;
 use crate::sampling::distribution::Distribution2D;
 use crate::sampling::warp::{UNIFORM_SPHERE_PDF, square_to_uniform_sphere};
-use crate::scene::Texture;
-use glam::{Mat3, Vec2, Vec3};
+use crate::scene::{self, Scene, Texels, Texture};
+use glam::{DMat3, Mat3, Vec2, Vec3};
 use std::f32::consts::PI;
 
 /// An environment light in render space.
@@ -167,6 +167,55 @@ impl Environment {
             pdf: s.pdf,
             delta: false,
         })
+    }
+}
+
+impl Environment {
+    /// The environment of `scene` in render space, if it has one. A map's texels that are
+    /// not radiance (NaN, infinite or negative in some channel) are made black, with a
+    /// warning that says how many: one such texel would otherwise poison the map's sampling
+    /// distribution and every path that escapes towards it.
+    pub fn of_scene(scene: &Scene) -> Option<Self> {
+        match scene.environment.as_ref()? {
+            scene::Environment::Constant(l) => Some(Self::Constant(*l)),
+            scene::Environment::LatLong {
+                texture,
+                scale,
+                rotation,
+            } => {
+                let to_world = DMat3::from_mat4(*rotation).as_mat3();
+                Some(Self::Map(Box::new(EnvironmentMap::new(
+                    finite_radiance(&scene.textures[*texture as usize]),
+                    *scale,
+                    to_world,
+                ))))
+            }
+        }
+    }
+}
+
+/// `texture` with every texel that is not radiance made black, warning how many there were.
+fn finite_radiance(texture: &Texture) -> Texture {
+    let Texels::RgbaF32(texels) = texture.texels.as_ref() else {
+        return texture.clone(); // Integer texels are always finite.
+    };
+    let bad = |t: &[f32; 4]| !t[..3].iter().all(|c| c.is_finite() && *c >= 0.0);
+    let count = texels.iter().filter(|t| bad(t)).count();
+    if count == 0 {
+        return texture.clone();
+    }
+    log::warn!(
+        "{}: environment map: {count} of {} texels are NaN, infinite or negative: rendered as black",
+        texture.name,
+        texels.len()
+    );
+    let fixed = texels
+        .iter()
+        .map(|t| if bad(t) { [0.0, 0.0, 0.0, 1.0] } else { *t })
+        .collect();
+    Texture {
+        texels: std::sync::Arc::new(Texels::RgbaF32(fixed)),
+        ..texture.clone()
     }
 }
 

@@ -15,7 +15,7 @@ use crate::geometry::triangle::geometric_normal;
 use crate::geometry::{ALPHA_TESTED, Bvh, CULL_BACK, Primitive, quadric};
 use crate::light::LightSelect;
 use crate::light::emission_texture::{self, EmissionPyramid, TriangleEmission};
-use crate::light::environment::{Environment, EnvironmentMap};
+use crate::light::environment::Environment;
 use crate::light::{
     DirectionalLight, DistantCone, Light, LightSet, PointLight, QuadricLight, SphereLight,
     SpotLight, TriangleLight,
@@ -143,24 +143,6 @@ fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
         colors: mesh.colors.clone(),
         triangles,
         material: mesh.material,
-    }
-}
-
-fn build_environment(scene: &Scene) -> Option<Environment> {
-    match scene.environment.as_ref()? {
-        scene::Environment::Constant(l) => Some(Environment::Constant(*l)),
-        scene::Environment::LatLong {
-            texture,
-            scale,
-            rotation,
-        } => {
-            let to_world = DMat3::from_mat4(*rotation).as_mat3();
-            Some(Environment::Map(Box::new(EnvironmentMap::new(
-                scene.textures[*texture as usize].clone(),
-                *scale,
-                to_world,
-            ))))
-        }
     }
 }
 
@@ -831,7 +813,7 @@ impl World {
                 first_quadric,
             }
         };
-        let environment = build_environment(&scene);
+        let environment = Environment::of_scene(&scene);
         if environment.is_some() {
             light_names.push("environment".into());
         }

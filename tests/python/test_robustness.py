@@ -293,3 +293,136 @@ def test_a_hung_usd_plugin_is_stopped_after_the_timeout(tmp_path):
     assert result.returncode == 1 and "still converting after 1 s" in result.stderr, result.stderr
     assert time.monotonic() - start < 5
     assert not list(tmp_path.glob("lucerna-usd-*"))
+
+
+# 6. Round 3: USD errors name the stage and the prim; no stale files; small acceptances
+
+
+def light_stage(tmp_path, name, attribute):
+    stage = tmp_path / f"{name}.usda"
+    stage.write_text(f"""#usda 1.0
+(
+    upAxis = "Y"
+)
+
+def Mesh "Floor"
+{{
+    point3f[] points = [(-1,0,-1),(1,0,-1),(1,0,1),(-1,0,1)]
+    int[] faceVertexCounts = [4]
+    int[] faceVertexIndices = [0,3,2,1]
+}}
+
+def SphereLight "Key"
+{{
+    {attribute}
+    float inputs:radius = 0.1
+    double3 xformOp:translate = (0, 1, 0)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}}
+""")
+    return stage
+
+
+@pytest.mark.parametrize("name,attribute,reason", [
+    ("nan", "float inputs:intensity = nan", "inputs:intensity is nan"),
+    ("inf", "float inputs:intensity = inf", "inputs:intensity is inf"),
+    ("negative", "float inputs:intensity = -5", "inputs:intensity is -5"),
+    ("overflow", "float inputs:exposure = 200", "more than 1e+18"),
+    ("colour", "color3f inputs:color = (1, -1, 0)", "inputs:color is"),
+])
+def test_a_light_the_renderer_cannot_hold_is_refused_naming_stage_and_prim(tmp_path, name, attribute,
+                                                                           reason):
+    stage = light_stage(tmp_path, name, attribute)
+    result = run("render", stage, "-o", tmp_path / "o.exr", "--spp", "1", "--resolution", "8x8")
+    assert result.returncode == 2, result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {stage}: /Key: ") and reason in last, last
+    assert "lucerna-usd-" not in last and "Traceback" not in result.stderr, result.stderr
+    assert not (tmp_path / "o.exr").exists()
+
+
+def fake_plugin(tmp_path, main):
+    """A plugin folder whose `convert` runs `main` (Python source) instead."""
+    package = tmp_path / "plugin" / "lucerna_usd"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    (package / "__main__.py").write_text(main)
+    (package.parent / "requirements.txt").write_text("")
+    return package.parent
+
+
+def test_a_plugin_that_writes_nothing_is_reported_against_the_stage(tmp_path):
+    plugin = fake_plugin(tmp_path, "import sys\nsys.exit(0)\n")
+    env = dict(os.environ, LUCERNA_USD_PLUGIN=str(plugin))
+    result = run("render", USD_TWIN, "-o", tmp_path / "o.exr", env=env)
+    assert result.returncode == 1, result.stderr
+    last = result.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {USD_TWIN}: usd plugin: ") and "wrote no scene file" in last, last
+
+
+def test_a_silent_plugin_is_stopped_when_it_shows_no_progress(tmp_path):
+    plugin = fake_plugin(tmp_path, "import time\ntime.sleep(60)\n")
+    env = dict(os.environ, LUCERNA_USD_PLUGIN=str(plugin), LUCERNA_USD_STALL_SECONDS="1",
+               TMPDIR=str(tmp_path))
+    start = time.monotonic()
+    result = run("render", USD_TWIN, "-o", tmp_path / "o.exr", env=env)
+    assert result.returncode == 1 and "no sign of progress" in result.stderr, result.stderr
+    assert time.monotonic() - start < 10
+    assert not list(tmp_path.glob("lucerna-usd-*"))
+
+
+def test_a_beating_plugin_is_not_stopped_for_silence(tmp_path):
+    # Heartbeats every 0.2 s for 2 s, then a clean refusal: the stall limit of 1 s never
+    # fires, and the plugin's own error comes through.
+    plugin = fake_plugin(tmp_path, """import sys, time
+for _ in range(10):
+    print("lucerna-usd: heartbeat", file=sys.stderr, flush=True)
+    time.sleep(0.2)
+print(f"lucerna-usd: error: {sys.argv[2]}: /World: done beating", file=sys.stderr)
+sys.exit(2)
+""")
+    env = dict(os.environ, LUCERNA_USD_PLUGIN=str(plugin), LUCERNA_USD_STALL_SECONDS="1")
+    result = run("render", USD_TWIN, "-o", tmp_path / "o.exr", env=env)
+    assert result.returncode == 2 and "/World: done beating" in result.stderr, result.stderr
+    assert "heartbeat" not in result.stderr, result.stderr
+
+
+def test_stale_temporary_files_and_scratch_folders_are_removed(tmp_path):
+    out = tmp_path / "frame.exr"
+    dead = 2**22 + 12345  # beyond pid_max's default: no such process
+    while Path(f"/proc/{dead}").exists():
+        dead += 1
+    stale = tmp_path / f".frame.exr.tmp-{dead}"
+    stale.write_bytes(b"half a file")
+    alive = tmp_path / f".frame.exr.tmp-{os.getpid()}"
+    alive.write_bytes(b"another writer's")
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    left = scratch / f"lucerna-usd-p{dead}-abcdef"
+    left.mkdir()
+    (left / "scene.lucerna").write_text("{}")
+    env = dict(os.environ, TMPDIR=str(scratch))
+    result = run("render", USD_TWIN, "-o", out, "--spp", "1", "--resolution", "16x16", env=env)
+    assert result.returncode == 0, result.stderr
+    assert out.exists() and not stale.exists() and alive.exists()
+    assert not left.exists(), list(scratch.iterdir())
+    assert f"left by process {dead}, which is gone" in result.stderr, result.stderr
+
+
+def test_an_environment_map_with_nan_texels_renders_finite_and_says_so(tmp_path):
+    sky = tmp_path / "sky.exr"
+    pixels = np.full((8, 16, 3), 0.5, dtype=np.float32)
+    pixels[2, 3] = np.nan
+    pixels[4, 5, 1] = np.inf
+    pixels[6, 7, 2] = -1.0
+    out = oiio.ImageOutput.create(str(sky))
+    assert out.open(str(sky), oiio.ImageSpec(16, 8, 3, oiio.FLOAT)), oiio.geterror()
+    out.write_image(pixels)
+    out.close()
+    result = run("render", "-o", tmp_path / "o.exr", "--env-map", sky, "--spp", "4",
+                 "--resolution", "16x16")
+    assert result.returncode == 0, result.stderr
+    assert "3 of 128 texels are NaN, infinite or negative: rendered as black" in result.stderr, \
+        result.stderr
+    _, image = read_exr(tmp_path / "o.exr")
+    assert np.isfinite(image).all()

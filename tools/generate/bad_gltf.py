@@ -130,6 +130,9 @@ def cases():
            variant(lambda d: d.update(extensionsUsed=["ADOBE_materials_thin_transparency"],
                                       extensionsRequired=["ADOBE_materials_thin_transparency"])),
            "extensionsRequired[0]", "required extension is not supported")
+    yield ("position-unsigned-int.gltf",
+           variant(lambda d: d["accessors"][0].update(componentType=5125)),
+           "attributes.POSITION", "UNSIGNED_INT components is not allowed")
     yield ("wrong-accessor-type.gltf",
            variant(lambda d: d["accessors"][0].update(type="VEC2", count=3, min=[0, 0], max=[1, 1])),
            "attributes.POSITION", "expected [Vec3]")

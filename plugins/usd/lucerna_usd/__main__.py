@@ -58,6 +58,9 @@ def _captured_stderr(sink):
 def _open(path, payloads=True):
     from pxr import Tf, Usd
 
+    from . import heartbeat
+
+    heartbeat()
     if not os.path.isfile(path):
         return None, "no such file"
     captured = []
@@ -228,7 +231,11 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             print(f"lucerna-usd: warning: {text}", file=sys.stderr)
         _error(path, "stage", "nothing to render (no meshes, spheres or lights)")
         return EXIT_BAD_INPUT
-    writer.write(output)
+    try:
+        writer.write(output)
+    except StageError as e:
+        _error(path, e.element, e.reason)
+        return EXIT_BAD_INPUT
     if not quiet:
         print(f"lucerna-usd: {path} -> {output}: {len(writer.meshes)} meshes, "
               f"{len(writer.instances)} instances, {len(writer.materials)} materials, "
@@ -265,6 +272,9 @@ def main(argv=None):
     v = commands.add_parser("validate", help="print the validators' findings")
     v.add_argument("stage")
     args = parser.parse_args(argv)
+    from . import start_heartbeat
+
+    start_heartbeat()
     try:
         import numpy  # noqa: F401
         import OpenImageIO  # noqa: F401

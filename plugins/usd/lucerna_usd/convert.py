@@ -173,6 +173,9 @@ class Converter:
         not the stage, as in husk and usdview."""
         from pxr import Tf
 
+        from . import heartbeat
+
+        heartbeat()
         try:
             return convert(*args)
         except (ValueError, TypeError, IndexError, KeyError, AttributeError, ZeroDivisionError,

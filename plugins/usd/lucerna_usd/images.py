@@ -87,6 +87,9 @@ def _read_file(path):
 
 def read(asset_path):
     """Reads the image an `Sdf.AssetPath` names. Raises OSError with the reason."""
+    from . import heartbeat
+
+    heartbeat()
     resolved = asset_path.resolvedPath
     if not resolved:
         raise OSError(f"cannot resolve {asset_path.path!r}")

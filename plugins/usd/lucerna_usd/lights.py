@@ -61,16 +61,41 @@ def value(prim, name, time, fallback=None):
     return fallback
 
 
+# The most radiance a light may have: sums of samples and pixels need headroom in 32-bit
+# floats (the renderer's --env takes at most this too).
+MAX_RADIANCE = 1e18
+
+
 def emission(prim, time):
-    """The light's scalar-times-colour emission before normalisation (RGB)."""
-    intensity = value(prim, "intensity", time, 1.0)
-    exposure = value(prim, "exposure", time, 0.0)
+    """The light's scalar-times-colour emission before normalisation (RGB). A value that
+    cannot render (not a number, infinite, negative, or so large that it overflows) is a
+    `StageError` naming the prim and the attribute."""
+    from . import StageError
+
+    path = str(prim.GetPath())
+    intensity = float(value(prim, "intensity", time, 1.0))
+    exposure = float(value(prim, "exposure", time, 0.0))
     color = np.asarray(value(prim, "color", time, (1.0, 1.0, 1.0)), dtype=float)
-    result = float(intensity) * 2.0 ** float(exposure) * color
+    for name, v in (("intensity", intensity), ("exposure", exposure)):
+        if not math.isfinite(v):
+            raise StageError(path, f"inputs:{name} is {v}: a light's {name} must be a finite number")
+    if intensity < 0.0:
+        raise StageError(path, f"inputs:intensity is {intensity:g}: a light's intensity must be "
+                               "at least 0 (lucerna has no negative lights)")
+    if not (np.all(np.isfinite(color)) and np.all(color >= 0.0)):
+        raise StageError(path, f"inputs:color is {tuple(float(c) for c in color)}: a light's colour "
+                               "must be finite and not negative")
+    if exposure > 1024.0:
+        raise StageError(path, f"inputs:exposure is {exposure:g}: 2^exposure overflows")
+    result = intensity * 2.0 ** exposure * color
     if value(prim, "enableColorTemperature", time, False):
         kelvin = float(value(prim, "colorTemperature", time, 6500.0))
         rgb = np.asarray(UsdLux.BlackbodyTemperatureAsRgb(kelvin), dtype=float)
         result = result * rgb / np.asarray(UsdLux.BlackbodyTemperatureAsRgb(6500.0), dtype=float)
+    if not (np.all(np.isfinite(result)) and float(np.max(result, initial=0.0)) <= MAX_RADIANCE):
+        raise StageError(path, f"intensity {intensity:g} x 2^exposure {exposure:g} x colour is "
+                               f"{float(np.max(result)):.3g}, more than {MAX_RADIANCE:g}, the most a "
+                               "light may emit")
     return result
 
 

@@ -5,6 +5,7 @@ with the renderer's field names. Both files are written through a temporary file
 rename, the buffer first, so a reader never sees a manifest without its buffer."""
 
 import json
+import math
 import os
 
 import numpy as np
@@ -204,9 +205,50 @@ class SceneWriter:
             "render_settings": self.render_settings,
             "subdivision_surfaces": self.subdivision_surfaces,
         }
+        _check_numbers(manifest)
         text = json.dumps(manifest, indent=1, allow_nan=False)
         _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._chunks)
         _write_atomically(path, [text.encode()])
+
+
+# The largest magnitude a 32-bit float holds: the renderer reads every number as one.
+FLOAT32_MAX = 3.4028234663852886e38
+
+
+def _check_numbers(manifest):
+    """Refuses a manifest number that is not finite or does not fit a 32-bit float, naming
+    the prim of the element that holds it (elements carry their prim's path as their name)
+    and the field, so that no value the renderer would refuse reaches it unnamed."""
+    from . import StageError
+
+    def walk(value, where):
+        if isinstance(value, float) and not (math.isfinite(value) and abs(value) <= FLOAT32_MAX):
+            return where, value
+        if isinstance(value, dict):
+            for k, v in value.items():
+                found = walk(v, where + [str(k)])
+                if found:
+                    return found
+        if isinstance(value, list):
+            for i, v in enumerate(value):
+                found = walk(v, where + [str(i)])
+                if found:
+                    return found
+        return None
+
+    for key in ("meshes", "instances", "spheres", "disks", "cylinders", "materials", "lights",
+                "cameras", "environment", "render_settings", "subdivision_surfaces"):
+        items = manifest.get(key)
+        if items is None:
+            continue
+        for i, item in enumerate(items if isinstance(items, list) else [items]):
+            found = walk(item, [])
+            if found:
+                field, v = found
+                name = item.get("name") if isinstance(item, dict) else None
+                element = name if isinstance(name, str) and name.startswith("/") else f"{key}[{i}]"
+                raise StageError(element, f"{'.'.join(field)} is {v}: not a number the renderer "
+                                          "holds (finite, within 32-bit float range)")
 
 
 def _write_atomically(path, chunks):

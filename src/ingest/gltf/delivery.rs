@@ -349,47 +349,103 @@ fn encode_components(values: &[f32], kind: json::accessor::ComponentType) -> Vec
 
 /// Rewrites integer vertex attributes read as floats (positions, normals, tangents, texture
 /// coordinates, in primitives and morph targets) as float accessors; returns whether any
-/// were rewritten.
+/// were rewritten. Each attribute's component type must be one glTF allows for it: floats,
+/// and for texture coordinates normalized unsigned bytes and shorts; with
+/// `KHR_mesh_quantization` also the integer types that extension lists (never 32-bit
+/// integers). Anything else is refused, naming the attribute.
 fn dequantize(
     root: &mut json::Root,
     buffers: &[Vec<u8>],
     out: &mut Appended,
     source: &str,
 ) -> Result<bool> {
+    use json::accessor::ComponentType as C;
     use json::mesh::Semantic as S;
-    let float_semantic =
-        |s: &S| matches!(s, S::Positions | S::Normals | S::Tangents | S::TexCoords(_));
-    let mut accessors = std::collections::BTreeSet::new();
-    for mesh in &root.meshes {
-        for primitive in &mesh.primitives {
+    let quantization = root
+        .extensions_used
+        .iter()
+        .any(|e| e == "KHR_mesh_quantization");
+    // (accessor, the attribute's name in messages, what it is)
+    let mut uses: Vec<(usize, String, &'static str)> = Vec::new();
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, primitive) in mesh.primitives.iter().enumerate() {
+            let at = format!("meshes[{m}].primitives[{p}]");
             for (semantic, accessor) in &primitive.attributes {
-                if matches!(semantic, Checked::Valid(s) if float_semantic(s)) {
-                    accessors.insert(accessor.value());
-                }
+                let kind = match semantic {
+                    Checked::Valid(S::Positions) => "POSITION",
+                    Checked::Valid(S::Normals) => "NORMAL",
+                    Checked::Valid(S::Tangents) => "TANGENT",
+                    Checked::Valid(S::TexCoords(_)) => "TEXCOORD",
+                    _ => continue,
+                };
+                let name = match semantic {
+                    Checked::Valid(s) => s.to_string(),
+                    _ => kind.to_string(),
+                };
+                uses.push((accessor.value(), format!("{at}.attributes.{name}"), kind));
             }
-            for target in primitive.targets.iter().flatten() {
-                for accessor in [&target.positions, &target.normals, &target.tangents]
-                    .into_iter()
-                    .flatten()
-                {
-                    accessors.insert(accessor.value());
+            for (t, target) in primitive.targets.iter().flatten().enumerate() {
+                for (accessor, kind) in [
+                    (&target.positions, "POSITION"),
+                    (&target.normals, "NORMAL"),
+                    (&target.tangents, "TANGENT"),
+                ] {
+                    if let Some(accessor) = accessor {
+                        uses.push((accessor.value(), format!("{at}.targets[{t}].{kind}"), kind));
+                    }
                 }
             }
         }
     }
-    let mut any = false;
-    for a in accessors {
-        let Some(acc) = root.accessors.get(a) else {
+    let mut rewrite = std::collections::BTreeSet::new();
+    for (a, element, kind) in &uses {
+        let Some(acc) = root.accessors.get(*a) else {
             continue; // Reported by the importer's checks.
         };
-        if matches!(
-            acc.component_type,
-            Checked::Valid(json::accessor::GenericComponentType(
-                json::accessor::ComponentType::F32
-            ))
-        ) {
+        let Checked::Valid(json::accessor::GenericComponentType(component)) = acc.component_type
+        else {
             continue;
+        };
+        let normalized = acc.normalized;
+        let allowed = match (component, *kind) {
+            (C::F32, _) => true,
+            (C::U8 | C::U16, "TEXCOORD") if normalized => true,
+            (C::U32, _) => false,
+            _ if !quantization => false,
+            (_, "POSITION" | "TEXCOORD") => true,
+            (C::I8 | C::I16, "NORMAL" | "TANGENT") => normalized,
+            _ => false,
+        };
+        if !allowed {
+            let name = match component {
+                C::I8 => "BYTE",
+                C::U8 => "UNSIGNED_BYTE",
+                C::I16 => "SHORT",
+                C::U16 => "UNSIGNED_SHORT",
+                C::U32 => "UNSIGNED_INT",
+                C::F32 => "FLOAT",
+            };
+            let normalized = if normalized { "normalized " } else { "" };
+            let rule = if quantization {
+                "KHR_mesh_quantization allows bytes and shorts"
+            } else {
+                "glTF allows FLOAT (integers need KHR_mesh_quantization)"
+            };
+            return Err(Error::bad_input(
+                source,
+                element.as_str(),
+                format!("{kind} of {normalized}{name} components is not allowed ({rule})"),
+            ));
         }
+        if component != C::F32 {
+            rewrite.insert(*a);
+        }
+    }
+    let mut any = false;
+    for a in rewrite {
+        let Some(acc) = root.accessors.get(a) else {
+            continue;
+        };
         let values = read_floats(root, buffers, a)
             .map_err(|r| Error::bad_input(source, format!("accessors[{a}]"), r))?;
         let count = acc.count.0 as usize;
