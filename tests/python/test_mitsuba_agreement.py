@@ -36,3 +36,13 @@ def test_glass_box_agrees_with_mitsuba():
     # `tools/lucerna_tools/mitsuba_compare.py --seeds 16` measures the means' difference to 0.2 %.
     for lucerna, mitsuba in zip(r["mean_lucerna"], r["mean_mitsuba"]):
         assert abs(lucerna - mitsuba) <= 0.01 * mitsuba, r
+
+
+def test_specular_free_gltf_pbr_agrees_with_mitsuba():
+    """glTF PBR of metallic 0 and KHR_materials_specular specularFactor 0 is exactly Lambert:
+    lucerna builds it as such, the export gives Mitsuba a diffuse BSDF."""
+    scene = ROOT / "scenes" / "cornell-box" / "cornell-box-pbr.gltf"
+    r = mitsuba_compare.compare(spp=256, width=64, height=64, scene=scene)
+    assert r["ratio"] <= 2.0, r
+    for lucerna, mitsuba in zip(r["mean_lucerna"], r["mean_mitsuba"]):
+        assert abs(lucerna - mitsuba) <= 0.01 * mitsuba, r

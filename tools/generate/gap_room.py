@@ -29,7 +29,8 @@ def build():
     walls = lambert("walls", (0.75, 0.75, 0.72))
     floor = lambert("floor", (0.6, 0.55, 0.5))
     red = lambert("red", (0.7, 0.15, 0.1))
-    light = w.material("panel", base=(0, 0, 0), emissive=[400.0, 380.0, 340.0], double_sided=False)
+    # A black emitter without a specular layer: it reflects nothing, in any renderer.
+    light = lambert("panel", (0, 0, 0), emissive=[400.0, 380.0, 340.0], double_sided=False)
 
     def add_box(name, lo, hi, material, outward=True):
         v, t = box(lo, hi, outward)

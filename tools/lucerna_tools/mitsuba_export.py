@@ -4,7 +4,9 @@ so that Mitsuba renders exactly the geometry, materials, lights and camera lucer
 Only models on which the two renderers agree are exported; anything else is an error that
 names the element (never a silent approximation):
 
-- `lambert` materials -> `diffuse`; glTF PBR with metallic 1, base colour 1, no textures ->
+- `lambert` materials -> `diffuse`; glTF PBR with metallic 0 and a specular weight of 0
+  (KHR_materials_specular specularFactor 0, no texture) is exactly Lambert -> `diffuse`;
+  glTF PBR with metallic 1, base colour 1, no textures ->
   `roughconductor` (GGX, alpha = roughness^2, Fresnel 1: `material = "none"`, visible-normal
   sampling); `double_sided` -> `twosided`.
 - glass (glTF transmission 1, metallic 0, no other layer, no texture): with a clear volume
@@ -105,7 +107,10 @@ def bsdf(material, element):
     if material.get("unlit") or material.get("sheen") or material.get("iridescence") or material.get("anisotropy"):
         raise Unsupported(f"{element}: unlit, sheen, iridescence and anisotropy are not exported")
     base = material["base_color"][:3]
-    if material["model"] == "lambert":
+    specular = material.get("specular") or {}
+    no_specular = (material["model"] == "gltf_pbr" and material["metallic"] == 0.0
+                   and specular.get("weight") == 0.0 and not specular.get("weight_texture"))
+    if material["model"] == "lambert" or no_specular:
         b = {"type": "diffuse", "reflectance": {"type": "rgb", "value": base}}
     elif material["model"] == "gltf_pbr" and material["metallic"] == 1.0 and base == [1.0, 1.0, 1.0]:
         alpha = max(material["roughness"] ** 2, 1e-4)
