@@ -297,6 +297,11 @@ struct RenderArgs {
     /// shapes by area), area, or solid-angle (spherical triangles too). [default: auto]
     #[arg(long, help_heading = "Integrator")]
     light_sampling: Option<String>,
+    /// Path guiding: off, on (directions learned from the first samples and mixed with BSDF
+    /// sampling; runs in the scalar kernel), or auto (on where the scalar kernel runs anyway
+    /// and the first samples find mostly indirect light). [default: off]
+    #[arg(long, help_heading = "Integrator")]
+    guiding: Option<String>,
     /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1, or auto (learned
     /// from the first samples of every pixel). [default: nee=1,bsdf=1]
     #[arg(long, help_heading = "Integrator")]

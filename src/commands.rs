@@ -264,7 +264,8 @@ pub fn inspect(
             options.settings.rr,
             crate::integrator::RussianRoulette::Efficiency(_)
         ),
-    );
+    )
+    .with_guiding(options.settings.guiding);
     let _ = writeln!(out, "{plan}");
     Ok(out)
 }

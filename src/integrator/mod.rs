@@ -5,6 +5,7 @@
 
 pub mod ears;
 pub mod estimator;
+pub mod guiding;
 pub(crate) mod media;
 pub mod mis;
 #[cfg(target_arch = "x86_64")]

@@ -29,6 +29,10 @@ use super::ears::{self, Ears, Learning, MAX_BRANCHES};
 use super::estimator::{
     Emitter, PathState, RayCounts, emitters_at_infinity, sample_light, surface_emitter,
 };
+use super::guiding::mixture::guided_sample;
+use super::guiding::record::PathRecords;
+use super::guiding::sdtree::Cell;
+use super::guiding::{Distribution, GUIDE_PROBABILITY, Guide};
 use super::mis::{Mis, Technique};
 use super::roulette::RussianRoulette;
 use super::settings::Settings;
@@ -44,7 +48,7 @@ use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 
 /// State of one pixel sample's walk through the scene: fixed choices and bookkeeping.
-struct Walk<'l> {
+struct Walk<'l, 'g> {
     mis: Mis,
     single: bool,
     /// Whether contributions carry their lobe shares.
@@ -58,9 +62,11 @@ struct Walk<'l> {
     parts: Option<&'l mut SampleParts>,
     /// Where the sample's first-vertex split points lie.
     split_points: SamplePoints,
+    /// Where a path-guiding training pass records the radiance found along continuations.
+    guiding: Option<&'l mut PathRecords<'g>>,
 }
 
-impl Walk<'_> {
+impl Walk<'_, '_> {
     /// The learning sample's parts, where the path is at its first vertex (the one that
     /// splits); `None` elsewhere and outside learning.
     #[inline]
@@ -80,9 +86,27 @@ struct Vertex<'v> {
     wo: Vec3,
     origin: Vec3,
     arrived: f32,
+    /// The learned distribution continuations mix with BSDF sampling here, if any.
+    guide: Option<Distribution<'v>>,
+    /// The vertex's cell of the guiding tree (while paths are guided or record).
+    cell: Option<Cell>,
 }
 
 impl Vertex<'_> {
+    /// Density with which the vertex's continuations are sampled in local direction `wi`
+    /// (for MIS): the BSDF's, or its mixture with the guide's.
+    #[inline]
+    fn continuation_pdf(&self, wi: Vec3) -> f32 {
+        let p_bsdf = self.bsdf.pdf(self.wo, wi);
+        match &self.guide {
+            Some(g) => {
+                GUIDE_PROBABILITY * g.pdf(self.it.frame.to_world(wi))
+                    + (1.0 - GUIDE_PROBABILITY) * p_bsdf
+            }
+            None => p_bsdf,
+        }
+    }
+
     /// Where a ray leaving the vertex starts: off the surface on the side it leaves to.
     #[inline]
     fn origin(&self, below: bool) -> Vec3 {
@@ -117,6 +141,8 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     ears: Option<&'a Ears>,
     /// How the first vertex splits in this pass.
     split: FirstSplit,
+    /// The learned distributions continuations are guided by, if any.
+    guide: Option<Guide<'a>>,
 }
 
 impl PathState {
@@ -190,7 +216,13 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             settings,
             ears,
             split,
+            guide: None,
         }
+    }
+
+    /// The same tracer, its continuations guided by `guide`.
+    pub fn guided_by(self, guide: Option<Guide<'a>>) -> Self {
+        Self { guide, ..self }
     }
 
     /// Traces the paths of camera ray `ray` for pixel `pixel` using `sampler`'s current
@@ -207,6 +239,23 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         learning: Option<&mut Learning>,
         parts: Option<&mut SampleParts>,
     ) {
+        self.trace_recording(ray, pixel, sampler, rec, rays, learning, parts, None);
+    }
+
+    /// [`PathTracer::trace`], with `guiding` receiving what a path-guiding training pass
+    /// learns.
+    #[allow(clippy::too_many_arguments)]
+    pub fn trace_recording<R: Recorder>(
+        &self,
+        ray: Ray,
+        pixel: usize,
+        sampler: &mut Sampler,
+        rec: &mut R,
+        rays: &mut RayCounts,
+        learning: Option<&mut Learning>,
+        parts: Option<&mut SampleParts>,
+        guiding: Option<&mut PathRecords>,
+    ) {
         let mut walk = Walk {
             mis: self.settings.mis,
             single: rec.wants_single_technique(),
@@ -218,6 +267,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             split_points: self
                 .split
                 .sample_points(sampler.pixel(), sampler.sample_index()),
+            guiding,
         };
         let camera = PathState::camera(ray.origin);
         self.trace_from(ray, camera, None, &mut walk, sampler, rec, rays);
@@ -249,6 +299,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             learning: None,
             parts,
             split_points,
+            guiding: None,
         };
         self.trace_from(ray, path, Some(hit), &mut walk, sampler, rec, rays);
     }
@@ -268,9 +319,13 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         rays: &mut RayCounts,
     ) {
         let mark = walk.learning.as_ref().map(|l| l.mark());
+        let guide_mark = walk.guiding.as_ref().map(|g| g.mark());
         self.walk_path(ray, path, hit, walk, sampler, rec, rays);
         if let (Some(learning), Some(mark)) = (walk.learning.as_deref_mut(), mark) {
             learning.close(mark, rays.closest + rays.shadow);
+        }
+        if let (Some(guiding), Some(mark)) = (walk.guiding.as_deref_mut(), guide_mark) {
+            guiding.close(mark);
         }
     }
 
@@ -352,6 +407,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     rays.closest + rays.shadow,
                 );
             }
+            // The vertex's cell of the guiding tree, where paths are guided or record.
+            let guide_cell = if self.guide.is_some() || walk.guiding.is_some() {
+                let n = facing(it.ng, ray.dir);
+                match (&self.guide, walk.guiding.as_deref()) {
+                    (Some(g), _) => Some(g.cell(it.p, n)),
+                    (None, Some(r)) => Some(r.cell(it.p, n)),
+                    (None, None) => None,
+                }
+            } else {
+                None
+            };
             let vertex = Vertex {
                 it: &it,
                 material: m,
@@ -359,6 +425,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 wo,
                 origin: offset_ray_origin(it.p, it.ng),
                 arrived,
+                guide: guide_cell.and_then(|c| self.guide.and_then(|g| g.at(c))),
+                cell: guide_cell,
             };
             let vs = sampler.vertex(path.vertex, path.branch);
             let first = path.vertex == 0;
@@ -432,6 +500,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     walk.paths += 1;
                     walk.paths - 1
                 };
+                // A branch's continuation record closes with the branch; the last
+                // continuation's, with the path.
+                let guide_mark = walk.guiding.as_ref().map(|g| g.mark());
                 let Some(child) =
                     self.scatter(&vertex, &path, walk, &sample, &continuation, n_nee, branch)
                 else {
@@ -441,6 +512,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     next = Some(child);
                 } else {
                     self.trace_from(child.0, child.1, None, walk, sampler, rec, rays);
+                    if let (Some(guiding), Some(mark)) = (walk.guiding.as_deref_mut(), guide_mark) {
+                        guiding.close(mark);
+                    }
                 }
             }
             let Some((next_ray, next_path)) = next else {
@@ -506,14 +580,17 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         &self,
         v: &Vertex,
         path: &PathState,
-        walk: &Walk,
+        walk: &mut Walk,
         vs: &VertexSample,
         c: &Continuation,
         n_nee: u32,
         branch: u32,
     ) -> Option<(Ray, PathState)> {
         let Vertex { it, bsdf, wo, .. } = *v;
-        let bs = bsdf.sample(wo, vs.lobe, vs.bsdf)?;
+        let bs = match &v.guide {
+            Some(guide) => guided_sample(bsdf, wo, &it.frame, guide, vs)?,
+            None => bsdf.sample(wo, vs.lobe, vs.bsdf)?,
+        };
         let wi = it.frame.to_world(bs.wi);
         // Reflection must leave on the side of the surface the path arrived from, and
         // transmission cross it, by the geometric normal too.
@@ -566,6 +643,18 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         } else {
             path.lobes
         };
+        if let Some(guiding) = walk.guiding.as_deref_mut()
+            && let Some(cell) = v.cell
+            && !bs.is_delta()
+        {
+            guiding.open(
+                cell,
+                wi.normalize(),
+                path.depth,
+                luminance(beta),
+                bs.pdf / bs.wi.z.abs(),
+            );
+        }
         let next = PathState {
             beta,
             depth,
@@ -646,7 +735,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         let p_bsdf = if ls.delta || !EMITTERS {
             0.0
         } else {
-            bsdf.pdf(wo, wi)
+            v.continuation_pdf(wi)
         };
         let value = path.beta * f * radiance / (p_light * n_nee as f32);
         record(
@@ -660,6 +749,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         );
         1
     }
+}
+
+/// Geometric normal `ng` turned to the side a ray of direction `dir` arrives from.
+#[inline]
+fn facing(ng: Vec3, dir: Vec3) -> Vec3 {
+    if ng.dot(dir) > 0.0 { -ng } else { ng }
 }
 
 /// Records `value`, found by `technique` with density `own`, where the other technique's
@@ -683,6 +778,9 @@ fn record<R: Recorder>(
     }
     if let Some(learning) = walk.learning.as_deref_mut() {
         learning.gathered(weighted, depth);
+    }
+    if let Some(guiding) = walk.guiding.as_deref_mut() {
+        guiding.gathered(weighted, depth, technique);
     }
     rec.contribution(Contribution {
         value: weighted,

@@ -5,6 +5,7 @@
 //! Each setting has one textual form (`name[:parameter]`), used on the command line, in
 //! TOML settings files and in the EXR header, so a render can be reproduced from its file.
 
+use super::guiding::GuidingMode;
 use super::mis::Mis;
 use super::roulette::RussianRoulette;
 use crate::light::sample::LightSampling;
@@ -58,6 +59,8 @@ pub struct Settings {
     pub max_depth: Option<u32>,
     pub light_select: LightSelect,
     pub light_sampling: LightSampling,
+    /// Path guiding (`integrator::guiding`).
+    pub guiding: GuidingMode,
     pub split: SplitChoice,
     pub sampler: SamplerKind,
     pub seed: u32,
@@ -75,6 +78,7 @@ impl Default for Settings {
             max_depth: None,
             light_select: LightSelect::Power,
             light_sampling: LightSampling::Auto,
+            guiding: GuidingMode::Off,
             split: SplitChoice::Fixed(Split { nee: 1, bsdf: 1 }),
             sampler: SamplerKind::Sobol,
             seed: 0,
@@ -114,12 +118,13 @@ impl Split {
 }
 
 /// Names of the integrator's settings, in the order they are written.
-pub const SETTING_NAMES: [&str; 8] = [
+pub const SETTING_NAMES: [&str; 9] = [
     "mis",
     "rr",
     "max-depth",
     "light-select",
     "light-sampling",
+    "guiding",
     "split",
     "sampler",
     "seed",
@@ -141,6 +146,7 @@ impl Settings {
             }
             "light-select" => self.light_select = LightSelect::parse(value)?,
             "light-sampling" => self.light_sampling = LightSampling::parse(value)?,
+            "guiding" => self.guiding = GuidingMode::parse(value)?,
             "split" => self.split = SplitChoice::parse(value)?,
             "sampler" => {
                 self.sampler = SamplerKind::parse(value)
@@ -164,6 +170,7 @@ impl Settings {
             "max-depth" => self.max_depth.map_or("unlimited".into(), |d| d.to_string()),
             "light-select" => self.light_select.describe().into(),
             "light-sampling" => self.light_sampling.describe().into(),
+            "guiding" => self.guiding.describe().into(),
             "split" => self.split.describe(),
             "sampler" => self.sampler.name().into(),
             "seed" => self.seed.to_string(),

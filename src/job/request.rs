@@ -368,14 +368,14 @@ impl RenderJob {
             return Err(Error::bad_input(
                 "",
                 "--resume",
-                "adaptive sampling, rr = efficiency and split = auto keep state an EXR does not hold; they cannot be resumed",
+                "adaptive sampling, rr = efficiency, split = auto and guiding keep state an EXR does not hold; they cannot be resumed",
             ));
         }
         if self.checkpoint_interval.is_some() && self.options.decides_from_whole_image() {
             return Err(Error::bad_input(
                 "",
                 "--checkpoint-interval",
-                "adaptive sampling, rr = efficiency and split = auto keep state an EXR does not hold; their checkpoints could not be continued",
+                "adaptive sampling, rr = efficiency, split = auto and guiding keep state an EXR does not hold; their checkpoints could not be continued",
             ));
         }
         check_lossless_data(self.storage, &self.options.aovs)?;

@@ -16,8 +16,12 @@
 use super::schedule::PassSamples;
 use crate::film::Film;
 use crate::integrator::ears::{self, Ears, Learning};
+use crate::integrator::guiding::record::TileRecords;
+use crate::integrator::guiding::sdtree::SdTree;
+use crate::integrator::guiding::{AUTO_INDIRECT_SHARE, Guide, GuidingMode, TRAINING_SAMPLES};
 use crate::integrator::split::{self, FirstSplit, LearningPixels, SplitStats};
 use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
+use crate::world::World;
 
 /// What one pass lets the techniques learn.
 #[derive(Clone, Copy, Debug, Default)]
@@ -26,6 +30,8 @@ pub(super) struct PassLearning {
     pub ears: bool,
     /// This pass takes this many samples in each learning pixel to learn the split counts.
     pub split: Option<u32>,
+    /// Path guiding records what this pass's paths find (the pass's samples per pixel).
+    pub guiding: Option<(u32, u32)>,
 }
 
 /// What one tile learned in a pass.
@@ -33,6 +39,7 @@ pub(super) struct PassLearning {
 pub(super) struct TileLearning {
     pub ears: Option<Learning>,
     pub split: Option<SplitStats>,
+    pub guiding: Option<TileRecords>,
 }
 
 /// The learned state of a render.
@@ -46,12 +53,36 @@ pub(super) struct LearnedState {
     first_split: FirstSplit,
     learned_split: Option<Split>,
     learning_pixels: LearningPixels,
+    /// Path guiding's SD-tree, while guiding is on.
+    guiding: Option<Guiding>,
+}
+
+/// Path guiding's state between passes.
+struct Guiding {
+    tree: SdTree,
+    /// `auto`: decided after the first pass that records.
+    auto: bool,
+    /// Whether some pass has been learned from (paths then sample from the tree).
+    trained: bool,
+    /// Samples per pixel when the current training iteration began.
+    iteration_start: u32,
 }
 
 impl LearnedState {
-    /// Nothing learned yet, for a render with `settings` into `film`.
-    pub(super) fn new(settings: &Settings, film: &Film) -> Self {
+    /// Nothing learned yet, for a render with `settings` of `world` into `film`, its paths
+    /// guided if `guided` (the plan's decision).
+    pub(super) fn new(settings: &Settings, guided: bool, world: &World, film: &Film) -> Self {
+        let guiding = guided.then(|| Guiding {
+            tree: SdTree::new(
+                glam::Vec3::splat(-world.radius),
+                glam::Vec3::splat(2.0 * world.radius),
+            ),
+            auto: settings.guiding == GuidingMode::Auto,
+            trained: false,
+            iteration_start: 0,
+        });
         Self {
+            guiding,
             ears: match settings.rr {
                 RussianRoulette::Efficiency(max_split) => {
                     Some(Ears::new(film.width, film.height, max_split))
@@ -88,14 +119,36 @@ impl LearnedState {
     /// everything learned before it), and what the pass learns.
     pub(super) fn limit_pass(&self, done: u32, n: u32) -> (u32, PassLearning) {
         let learning = self.ears.is_some() && done < ears::LEARNING_SAMPLES;
-        let n = if learning { n.min(done.max(1)) } else { n };
+        // Path guiding trains in passes of 1, 1, 2, 4, ... too, each sampling from what
+        // the one before learned.
+        let training = self.guiding.is_some() && done < TRAINING_SAMPLES;
+        let n = if learning || training {
+            n.min(done.max(1))
+        } else {
+            n
+        };
         (
             n,
             PassLearning {
                 ears: learning,
                 split: None,
+                guiding: training.then_some((n, done + n)),
             },
         )
+    }
+
+    /// The learned distributions paths are guided by, once some pass has been learned
+    /// from.
+    pub(super) fn guide(&self) -> Option<Guide<'_>> {
+        self.guiding
+            .as_ref()
+            .filter(|g| g.trained)
+            .map(|g| Guide::new(&g.tree))
+    }
+
+    /// The tree a training pass records into.
+    pub(super) fn guiding_tree(&self) -> Option<&SdTree> {
+        self.guiding.as_ref().map(|g| &g.tree)
     }
 
     /// Efficiency-aware roulette's statistics so far.
@@ -129,6 +182,39 @@ impl LearnedState {
             let counts = stats.choose();
             self.first_split = FirstSplit::after_learning(counts, n, self.learning_pixels);
             self.learned_split = Some(counts);
+        }
+        if let (Some(g), Some((_, after))) = (self.guiding.as_mut(), pass.guiding) {
+            let (mut direct, mut indirect) = (0.0, 0.0);
+            for t in tiles.iter().filter_map(|t| t.guiding.as_ref()) {
+                g.tree.absorb(t);
+                direct += t.direct;
+                indirect += t.indirect;
+            }
+            if g.auto {
+                g.auto = false;
+                let share = indirect / (direct + indirect);
+                if !(share >= AUTO_INDIRECT_SHARE) {
+                    log::info!(
+                        "guiding auto: off ({:.0} % of the light the first samples found is indirect; guiding pays from {:.0} %)",
+                        100.0 * share,
+                        100.0 * AUTO_INDIRECT_SHARE
+                    );
+                    self.guiding = None;
+                    return;
+                }
+                log::info!(
+                    "guiding auto: on ({:.0} % of the light the first samples found is indirect)",
+                    100.0 * share
+                );
+            }
+            // A training iteration ends where the samples taken double (PPG's schedule:
+            // each iteration as long as all before it), so that the distribution paths
+            // sample from is learned from as many samples as all earlier ones together.
+            if after.is_power_of_two() {
+                g.tree.update(after - g.iteration_start);
+                g.iteration_start = after;
+                g.trained = true;
+            }
         }
     }
 }

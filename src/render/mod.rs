@@ -65,7 +65,7 @@ pub fn render_with(
     } else {
         target
     };
-    let mut learned = LearnedState::new(&options.settings, &film);
+    let mut learned = LearnedState::new(&options.settings, plan.guiding, world, &film);
     let pixels = film.width as u64 * film.height as u64;
     let counts = Mutex::new(RayCounts::default());
     let start = Instant::now();
@@ -102,6 +102,7 @@ pub fn render_with(
             let learning = PassLearning {
                 ears: false,
                 split: Some(n),
+                guiding: None,
             };
             (learned.split_learning_samples(&film, n), learning)
         } else if done < uniform_spp {
@@ -137,13 +138,16 @@ pub fn render_with(
             learning: learning.ears,
             split: learned.first_split(),
             split_learning: learning.split.is_some(),
+            guide: learned.guide(),
+            guiding_records: learning.guiding.and(learned.guiding_tree()),
             rays: &counts,
             progress: progress.tiles(),
         };
         let k = plan.kernel;
+        let packet = k.packet && !learning.ears;
         let tiles = match (k.routing, k.emitter_hits, k.first_hit_data) {
             #[cfg(target_arch = "x86_64")]
-            (false, emitters, false) if k.packet && !learning.ears => {
+            (false, emitters, false) if packet => {
                 if emitters {
                     run_packet_pass::<true>(&mut film, &tracer_args)
                 } else {

@@ -8,6 +8,7 @@ use super::progress::ProgressLines;
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
 use crate::film::{Film, Window};
+use crate::integrator::guiding::GuidingMode;
 use crate::integrator::settings::{SETTING_NAMES, read_settings_toml, write_settings_toml};
 use crate::integrator::{RussianRoulette, Settings, SplitChoice};
 use crate::light::groups::LightGroups;
@@ -231,6 +232,7 @@ impl RenderOptions {
         self.noise_threshold.is_some()
             || matches!(self.settings.rr, RussianRoulette::Efficiency(_))
             || self.settings.split == SplitChoice::Auto
+            || self.settings.guiding != GuidingMode::Off
     }
 
     /// Rejects combinations a split render cannot honour: a pass must be a fixed range of
@@ -249,7 +251,7 @@ impl RenderOptions {
             }
         }
         if (self.pass.is_some() || self.crop.is_some()) && self.decides_from_whole_image() {
-            return Err("crop and pass: adaptive sampling, rr = efficiency and split = auto decide from the whole image and all its samples, so a split render would differ from the whole one".into());
+            return Err("crop and pass: adaptive sampling, rr = efficiency, split = auto and guiding decide from the whole image and all its samples, so a split render would differ from the whole one".into());
         }
         Ok(())
     }
@@ -321,6 +323,7 @@ impl RenderOptions {
             self.noise_threshold.is_some(),
             matches!(self.settings.rr, RussianRoulette::Efficiency(_)),
         )
+        .with_guiding(self.settings.guiding)
     }
 }
 

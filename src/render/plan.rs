@@ -12,6 +12,7 @@
 //! wherever it can run, or never.
 
 use crate::film::aov::{Aov, AovSet, MEAN_DATA};
+use crate::integrator::guiding::GuidingMode;
 use crate::scene::features::SceneFeatures;
 use std::fmt;
 
@@ -107,6 +108,9 @@ pub struct RenderPlan {
     /// Whether per-pixel sums of squares are kept (variance AOV or adaptive sampling).
     pub squares: bool,
     pub kernel: Kernel,
+    /// Path guiding (`integrator::guiding`) learns and guides this render's paths; in
+    /// `--guiding auto` the first training pass may still turn it off.
+    pub guiding: bool,
 }
 
 impl RenderPlan {
@@ -152,7 +156,26 @@ impl RenderPlan {
                 PlanMode::Auto | PlanMode::Packet | PlanMode::Scalar => specialised,
                 PlanMode::General => Kernel::GENERAL,
             },
+            guiding: false,
         }
+    }
+
+    /// The plan with path guiding as `mode` asks: `on` guides (in the scalar kernel, which
+    /// alone has it), `auto` guides only where the scalar kernel runs anyway (light layers,
+    /// data AOVs, learning roulette, or a scene the lanes do not speed up) and some lobe is
+    /// not a delta: against the packet kernel, guided paths lose at equal time (see
+    /// `integrator::guiding`).
+    pub fn with_guiding(mut self, mode: GuidingMode) -> Self {
+        let scatters = self.features.lobes.diffuse || self.features.lobes.glossy;
+        self.guiding = match mode {
+            GuidingMode::Off => false,
+            GuidingMode::On => true,
+            GuidingMode::Auto => !self.kernel.packet && scatters,
+        };
+        if self.guiding {
+            self.kernel.packet = false;
+        }
+        self
     }
 }
 
@@ -224,10 +247,11 @@ impl fmt::Display for RenderPlan {
         let k = &self.kernel;
         write!(
             f,
-            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}, {} kernel",
+            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}, path guiding {}, {} kernel",
             on_off(k.emitter_hits),
             on_off(k.first_hit_data),
             on_off(k.routing),
+            on_off(self.guiding),
             if k.packet {
                 "packet (8 lanes, AVX2)"
             } else {

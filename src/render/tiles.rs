@@ -10,6 +10,9 @@ use super::schedule::PassSamples;
 use crate::film::{Film, PixelAccumulator, SampleRecord};
 use crate::integrator::ears::{Ears, Learning};
 use crate::integrator::estimator::RayCounts;
+use crate::integrator::guiding::Guide;
+use crate::integrator::guiding::record::PathRecords;
+use crate::integrator::guiding::sdtree::SdTree;
 use crate::integrator::path::PathTracer;
 use crate::integrator::split::{FirstSplit, PixelParts, SampleParts, SplitStats};
 use crate::sampling::sampler::Sampler;
@@ -33,6 +36,9 @@ pub(super) struct PassArgs<'a> {
     /// How the first vertex splits, and whether this pass learns the counts.
     pub split: FirstSplit,
     pub split_learning: bool,
+    /// What paths are guided by, and where a guiding training pass records.
+    pub guide: Option<Guide<'a>>,
+    pub guiding_records: Option<&'a SdTree>,
     pub rays: &'a Mutex<RayCounts>,
     /// What finished tiles advance.
     pub progress: TileProgress<'a>,
@@ -61,12 +67,15 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
         learning,
         split,
         split_learning,
+        guide,
+        guiding_records,
         rays: counts,
         progress,
     } = *args;
     let router = &film.router;
     let crypto = film.aovs.wants_crypto();
-    let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears, split);
+    let tracer =
+        PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears, split).guided_by(guide);
     let window = film.window;
     let camera = &world.camera;
     let interrupt = options.interrupt.as_deref();
@@ -80,6 +89,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
             let mut rays = RayCounts::default();
             let mut tile_learning = learning.then(Learning::default);
             let mut tile_split = split_learning.then(SplitStats::default);
+            let mut tile_guiding = guiding_records.map(PathRecords::new);
             let mut taken = 0u64;
             for ty in 0..tile.height {
                 for tx in 0..tile.width {
@@ -107,7 +117,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                             rays: [before; 4],
                             ..SampleParts::default()
                         });
-                        tracer.trace(
+                        tracer.trace_recording(
                             ray,
                             index_in_image,
                             &mut sampler,
@@ -115,6 +125,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                             &mut rays,
                             tile_learning.as_mut(),
                             parts.as_mut(),
+                            tile_guiding.as_mut(),
                         );
                         if let (Some(stats), Some(parts)) = (tile_split.as_mut(), parts.as_mut()) {
                             parts.rays[3] = rays.closest + rays.shadow;
@@ -142,6 +153,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
             TileLearning {
                 ears: tile_learning,
                 split: tile_split,
+                guiding: tile_guiding.map(|g| g.tile),
             }
         })
         .collect()
@@ -227,6 +239,7 @@ pub(super) fn run_packet_pass<const EMITTERS: bool>(
             TileLearning {
                 ears: None,
                 split: split_learning.then_some(buffers.split_stats),
+                guiding: None,
             }
         })
         .collect()

@@ -1,7 +1,7 @@
 //! Every technique configuration converges to the same image.
 //!
 //! Each setting (each MIS heuristic, each Russian roulette mode, splitting fixed and learned, each
-//! light selection and light sampling strategy, each sampler) renders the Cornell box, the
+//! light selection and light sampling strategy, each sampler, path guiding) renders the Cornell box, the
 //! MIS plates (also under a sun with an angular size), the indirect room, the glass box
 //! (smooth and rough glass, a thin pane) and the Cornell box lit by a textured screen (light
 //! samples that follow the texture, or uniform ones) at a small resolution; every 4×4-pixel block's mean
@@ -57,6 +57,12 @@ const CONFIGURATIONS: &[&[(&str, &str)]] = &[
     &[("light-sampling", "solid-angle")],
     &[("light-sampling", "area")],
     &[("sampler", "sobol")],
+    &[("guiding", "on")],
+    &[
+        ("guiding", "on"),
+        ("split", "nee=2,bsdf=2"),
+        ("sampler", "sobol"),
+    ],
 ];
 
 /// Sample-count factor for a configuration on a scene. BSDF sampling alone finds the

@@ -6,6 +6,7 @@ use common::scenes::render;
 use lucerna::film::aov::ALL;
 use lucerna::ingest;
 use lucerna::integrator::Settings;
+use lucerna::integrator::guiding::GuidingMode;
 use lucerna::sampling::sampler::SamplerKind;
 
 #[test]
@@ -53,4 +54,32 @@ fn identical_images_with_one_and_two_threads() {
             "the seed changes the noise"
         );
     }
+}
+
+/// Path guiding learns from every tile in tile order: a guided render is the same with one
+/// thread and with two, and it is guided (it differs from the unguided render).
+#[test]
+fn guided_images_are_identical_with_one_and_two_threads() {
+    let settings = Settings {
+        seed: 5,
+        guiding: GuidingMode::On,
+        ..Default::default()
+    };
+    let scene = || ingest::default_scene().unwrap();
+    let (one, _) = render(scene(), (40, 30), 40, settings.clone(), 1);
+    let (two, _) = render(scene(), (40, 30), 40, settings.clone(), 2);
+    let beauty = ALL[0];
+    assert!(
+        one.planes(beauty) == two.planes(beauty),
+        "guided renders differ"
+    );
+    let unguided = Settings {
+        guiding: GuidingMode::Off,
+        ..settings
+    };
+    let (plain, _) = render(scene(), (40, 30), 40, unguided, 2);
+    assert!(
+        one.planes(beauty) != plain.planes(beauty),
+        "guiding changed nothing"
+    );
 }

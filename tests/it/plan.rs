@@ -477,3 +477,29 @@ fn adaptive_sampling_is_unbiased() {
     eprintln!("adaptive mean {mean:.6}, uniform {m_ref:.6}, z {z:.2}");
     assert!(z.abs() < 4.5, "adaptive mean {mean} vs {m_ref}: z = {z}");
 }
+
+/// Path guiding runs in the scalar kernel: `on` keeps the packet kernel out; `auto` guides
+/// only where the scalar kernel runs anyway (here: light layers) and never a scene whose
+/// every lobe is a delta.
+#[test]
+fn guiding_plans_keep_to_the_scalar_kernel() {
+    use lucerna::integrator::guiding::GuidingMode;
+    let scene = cornell();
+    let beauty = plan_for(&scene, "beauty", PlanMode::Packet);
+    let packet = beauty.kernel.packet;
+    let auto = beauty.clone().with_guiding(GuidingMode::Auto);
+    assert_eq!((auto.guiding, auto.kernel.packet), (!packet, packet));
+    let on = beauty.clone().with_guiding(GuidingMode::On);
+    assert!(on.guiding && !on.kernel.packet);
+    let off = beauty.with_guiding(GuidingMode::Off);
+    assert_eq!((off.guiding, off.kernel.packet), (false, packet));
+    let comp = plan_for(&scene, "comp", PlanMode::Auto).with_guiding(GuidingMode::Auto);
+    assert!(comp.guiding && !comp.kernel.packet);
+    assert!(comp.to_string().contains("path guiding on"), "{comp}");
+    let mut mirrors = plan_for(&scene, "comp", PlanMode::Auto);
+    mirrors.features.lobes = Lobes {
+        specular: true,
+        ..Lobes::default()
+    };
+    assert!(!mirrors.with_guiding(GuidingMode::Auto).guiding);
+}
