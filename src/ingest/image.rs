@@ -1,6 +1,8 @@
 //! Image decoding for textures and environment maps, into lucerna's texel storage: PNG and
-//! JPEG (the glTF core formats), WebP (EXT_texture_webp), and the formats production
-//! textures and HDRIs come in: OpenEXR, Radiance HDR and TIFF (8-bit, 16-bit and float).
+//! JPEG (the glTF core formats), WebP (EXT_texture_webp), KTX2 with Basis Universal
+//! payloads (KHR_texture_basisu: ETC1S and UASTC, transcoded at load), and the formats
+//! production textures and HDRIs come in: OpenEXR, Radiance HDR and TIFF (8-bit, 16-bit and
+//! float).
 //! Every decoder reads the image's header first and checks its size against the pixel and
 //! memory limits before it allocates the pixels.
 
@@ -51,19 +53,156 @@ pub fn decode(bytes: &[u8]) -> Result<DecodedImage, String> {
         decode_with_image(bytes, image::ImageFormat::Hdr, "Radiance HDR")
     } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
         decode_with_image(bytes, image::ImageFormat::Tiff, "TIFF")
-    } else if bytes.starts_with(b"\xabKTX 20\xbb") {
-        Err(
-            "KTX2 (Basis Universal) images cannot be decoded: lucerna has no Basis \
-             Universal transcoder; export PNG, JPEG or WebP textures"
-                .into(),
-        )
+    } else if bytes.starts_with(KTX2_MAGIC) {
+        decode_ktx2(bytes)
     } else {
         Err(
-            "unsupported image format (PNG, JPEG, WebP, OpenEXR, Radiance HDR and TIFF are \
-             supported)"
+            "unsupported image format (PNG, JPEG, WebP, KTX2 with Basis Universal, OpenEXR, \
+             Radiance HDR and TIFF are supported)"
                 .into(),
         )
     }
+}
+
+const KTX2_MAGIC: &[u8] = b"\xabKTX 20\xbb\r\n\x1a\n";
+
+/// Checks a KTX2 file's index before the transcoder reads it: every region it names (the
+/// data format descriptor, key/value data, supercompression global data and each level)
+/// lies inside the file, and no level claims to inflate to more than the largest payload
+/// its size allows (16 bytes a 4 x 4 block per layer and face, UASTC's and ASTC's rate).
+/// The transcoder trusts these numbers (a level's inflated size is allocated as written),
+/// so a corrupt index would otherwise end the process.
+fn check_ktx2_layout(bytes: &[u8], width: u32, height: u32) -> Result<(), String> {
+    let invalid = |what: &str| Err(format!("invalid KTX2: {what}"));
+    let u32_at = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as u64)
+    };
+    let u64_at = |at: usize| {
+        bytes
+            .get(at..at + 8)
+            .map(|b| u64::from_le_bytes(b.try_into().unwrap()))
+    };
+    let (Some(layers), Some(faces), Some(levels)) = (u32_at(32), u32_at(36), u32_at(40)) else {
+        return invalid("truncated header");
+    };
+    if faces != 1 && faces != 6 || layers > 2048 || levels > 32 {
+        return invalid("the header's layer, face or level count is out of range");
+    }
+    let len = bytes.len() as u64;
+    let inside = |offset: Option<u64>, length: Option<u64>| match (offset, length) {
+        (Some(o), Some(l)) => o.checked_add(l).is_some_and(|end| end <= len),
+        _ => false,
+    };
+    if !inside(u32_at(48), u32_at(52))
+        || !inside(u32_at(56), u32_at(60))
+        || !inside(u64_at(64), u64_at(72))
+    {
+        return invalid("a header region lies outside the file");
+    }
+    for level in 0..levels.max(1) {
+        let at = 80 + 24 * level as usize;
+        if !inside(u64_at(at), u64_at(at + 8)) {
+            return invalid(&format!("level {level} lies outside the file"));
+        }
+        let blocks = |n: u32| ((n >> level).max(1) as u64).div_ceil(4);
+        let most = blocks(width) * blocks(height) * 16 * layers.max(1) * faces;
+        match u64_at(at + 16) {
+            Some(inflated) if inflated <= most => {}
+            _ => {
+                return invalid(&format!(
+                    "level {level} claims more data than its size holds"
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// KTX2 images whose payload is Basis Universal (ETC1S with BasisLZ, UASTC with or without
+/// Zstandard: what KHR_texture_basisu allows), transcoded by the pure-Rust `basisu`
+/// transcoder: the base level to 8-bit RGBA (LDR sources) or half floats (UASTC HDR). The
+/// texel values are the file's (sRGB-encoded colour stays encoded, as a PNG's does); the
+/// material decides how a slot's texels are read. Other mip levels are not read.
+///
+/// The transcoder is young and corrupt files are what it is least tested on, so a panic
+/// inside it is caught and reported as an invalid file rather than ending the render.
+fn decode_ktx2(bytes: &[u8]) -> Result<DecodedImage, String> {
+    use basisu::{DecodeFlags, SourceFormat, TargetFormat, Transcoder};
+    // Fields of the 80-byte header: vkFormat at 12, pixelWidth and pixelHeight at 20 and 24.
+    let field = |at: usize| {
+        bytes
+            .get(at..at + 4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    };
+    let vk_format = field(12).ok_or("invalid KTX2: truncated header")?;
+    if vk_format != 0 {
+        return Err(format!(
+            "KTX2 image of Vulkan format {vk_format}: only Basis Universal payloads \
+             (vkFormat 0, as KHR_texture_basisu requires) are supported"
+        ));
+    }
+    // The declared size is checked before the transcoder parses (and allocates for) it.
+    let (width, height) = match (field(20), field(24)) {
+        (Some(w), Some(h)) => (w, h),
+        _ => return Err("invalid KTX2: truncated header".into()),
+    };
+    check_size(width, height, 4 + 4)?;
+    check_ktx2_layout(bytes, width, height)?;
+    let outcome = std::panic::catch_unwind(|| -> Result<DecodedImage, String> {
+        let invalid = |e: basisu::Error| format!("invalid KTX2 (Basis Universal): {e:?}");
+        let transcoder = Transcoder::new(bytes).map_err(invalid)?;
+        if transcoder.is_video() || transcoder.layer_count() > 1 || transcoder.face_count() > 1 {
+            return Err(
+                "KTX2 image is a video, an array or a cube map: only 2D textures are supported"
+                    .into(),
+            );
+        }
+        let info = transcoder.image_level_info(0).map_err(invalid)?;
+        if (info.width, info.height) != (width, height) {
+            return Err("invalid KTX2: the base level's size is not the header's".into());
+        }
+        let hdr = matches!(
+            transcoder.source_format(),
+            SourceFormat::UastcHdr4x4 | SourceFormat::AstcHdr6x6 | SourceFormat::UastcHdr6x6
+        );
+        // The transcoder's output and lucerna's texels.
+        check_size(width, height, if hdr { 8 + 16 } else { 4 + 4 })?;
+        let target = if hdr {
+            TargetFormat::RgbaHalf
+        } else {
+            TargetFormat::Rgba32
+        };
+        let out = transcoder
+            .transcode(0, target, DecodeFlags::NONE)
+            .map_err(invalid)?;
+        let texels = if hdr {
+            Texels::RgbaF32(
+                out.chunks_exact(8)
+                    .map(|p| {
+                        std::array::from_fn(|c| {
+                            half::f16::from_le_bytes([p[2 * c], p[2 * c + 1]]).to_f32()
+                        })
+                    })
+                    .collect(),
+            )
+        } else {
+            Texels::Rgba8(
+                out.chunks_exact(4)
+                    .map(|p| [p[0], p[1], p[2], p[3]])
+                    .collect(),
+            )
+        };
+        Ok(DecodedImage {
+            width,
+            height,
+            texels,
+        })
+    });
+    outcome.unwrap_or_else(|_| {
+        Err("invalid KTX2 (Basis Universal): the transcoder failed on its data".into())
+    })
 }
 
 const EXR_MAGIC: [u8; 4] = [0x76, 0x2f, 0x31, 0x01];

@@ -1,6 +1,6 @@
 //! Inputs the fuzz targets (tools/fuzz) found crashing, each kept under
 //! tests/fuzz-regressions/<target>/ after its bug was fixed. Every file goes through what its
-//! target does (load, prepare, render 4x4 at 1 spp) and must give the outcome that
+//! target does (load, prepare, render 4x4 at 1 spp; `image_decode` decodes) and must give the outcome that
 //! tests/fuzz-regressions/expected.json records: an error containing a fragment, or a render
 //! with finite pixels (and no NaN contribution discarded, unless `discards` says so). Never
 //! a panic.
@@ -28,8 +28,13 @@ fn load(target: &str, bytes: &[u8]) -> lucerna::Result<lucerna::scene::Scene> {
 }
 
 /// What the fuzz targets do with an input: `Err(message)` if it is refused, else the
-/// rendered pixels are checked finite.
+/// rendered pixels are checked finite (an image is only decoded).
 fn run(target: &str, bytes: &[u8], discards: bool) -> Result<(), String> {
+    if target == "image_decode" {
+        let image = lucerna::ingest::image::decode(bytes)?;
+        assert!(image.width > 0 && image.height > 0);
+        return Ok(());
+    }
     let scene = load(target, bytes).map_err(|e| e.to_string())?;
     let world =
         World::build(scene, None, Some((4, 4)), LightSelect::Power).map_err(|e| e.to_string())?;
@@ -58,7 +63,7 @@ fn fuzz_findings_stay_fixed() {
         serde_json::from_slice(&std::fs::read(dir.join("expected.json")).unwrap()).unwrap();
     let expected = expected.as_object().unwrap();
     let mut checked = 0;
-    for target in ["gltf_ingest", "scene_file"] {
+    for target in ["gltf_ingest", "scene_file", "image_decode"] {
         let Ok(entries) = std::fs::read_dir(dir.join(target)) else {
             continue;
         };

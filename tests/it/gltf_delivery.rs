@@ -1,5 +1,5 @@
 //! glTF as pipelines deliver it: compressed and quantized geometry (Draco, meshopt,
-//! KHR_mesh_quantization), WebP and KTX2 textures, GPU instancing, material variants, and
+//! KHR_mesh_quantization), WebP and KTX2 (Basis Universal) textures, GPU instancing, material variants, and
 //! deformed meshes (skins and morph targets), checked against the plain asset's render or
 //! against hand computations.
 
@@ -78,11 +78,16 @@ fn compressed_avocados_render_the_plain_image() {
     }
 }
 
-/// A texture that is KTX2 only is refused naming KHR_texture_basisu; with a PNG fallback
-/// the fallback renders, with a warning.
+/// KHR_texture_basisu: a texture's KTX2 image is transcoded, whether or not a PNG fallback
+/// is beside it (the fallback is for clients without the extension); a KTX2 image that
+/// cannot be decoded is an error naming the image.
 #[test]
-fn ktx2_textures_are_refused_or_fall_back() {
-    let build = |fallback: bool| {
+fn ktx2_textures_are_transcoded() {
+    let ktx2 = std::fs::read(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/assets/ktx2/etc1s_basecolor.ktx2"),
+    )
+    .unwrap();
+    let build = |fallback: bool, ktx2: &[u8]| {
         let mut b = Builder::new();
         let png = common::gltf_builder::png_rgba(1, 1, &[[255, 0, 0, 255]]);
         let view = b.view(&png);
@@ -90,7 +95,7 @@ fn ktx2_textures_are_refused_or_fall_back() {
             "images",
             json!({"bufferView": view, "mimeType": "image/png"}),
         );
-        let ktx = b.view(b"\xabKTX 20\xbb\r\n\x1a\n");
+        let ktx = b.view(ktx2);
         b.add(
             "images",
             json!({"bufferView": ktx, "mimeType": "image/ktx2"}),
@@ -108,23 +113,30 @@ fn ktx2_textures_are_refused_or_fall_back() {
         let mesh = b.mesh(json!([prim]));
         b.root(json!({"mesh": mesh}));
         b.json["extensionsUsed"] = json!(["KHR_texture_basisu"]);
+        if !fallback {
+            b.json["extensionsRequired"] = json!(["KHR_texture_basisu"]);
+        }
         b.glb()
     };
-    let err = ingest::gltf::import(&build(false), "ktx2.glb", None)
+    for fallback in [false, true] {
+        let scene = ingest::gltf::import(&build(fallback, &ktx2), "ktx2.glb", None)
+            .unwrap_or_else(|e| panic!("fallback {fallback}: {e}"));
+        assert_eq!(scene.textures.len(), 1);
+        let t = &scene.textures[0];
+        assert_eq!((t.width, t.height), (512, 512), "fallback {fallback}");
+        assert!(
+            !scene
+                .warnings
+                .iter()
+                .any(|w| w.contains("KHR_texture_basisu")),
+            "{:?}",
+            scene.warnings
+        );
+    }
+    let err = ingest::gltf::import(&build(true, &ktx2[..ktx2.len() / 2]), "ktx2.glb", None)
         .unwrap_err()
         .to_string();
-    assert!(err.contains("KHR_texture_basisu"), "{err}");
-    assert!(err.contains("textures[0]"), "{err}");
-    let scene = ingest::gltf::import(&build(true), "ktx2.glb", None).unwrap();
-    assert!(
-        scene
-            .warnings
-            .iter()
-            .any(|w| w.contains("KHR_texture_basisu") && w.contains("fallback")),
-        "{:?}",
-        scene.warnings
-    );
-    assert_eq!(scene.textures.len(), 1);
+    assert!(err.contains("images[1]") && err.contains("KTX2"), "{err}");
 }
 
 /// EXT_mesh_gpu_instancing: one instance per TRANSLATION/ROTATION/SCALE element, each

@@ -114,9 +114,9 @@ impl<'a> Importer<'a> {
         Ok(index)
     }
 
-    /// The image a texture shows: its EXT_texture_webp image where it has one, else its
-    /// core `source` (a KHR_texture_basisu texture's PNG/JPEG fallback; KTX2 itself cannot be
-    /// transcoded).
+    /// The image a texture shows: its EXT_texture_webp or KHR_texture_basisu (KTX2) image
+    /// where it has one, else its core `source` (for those extensions, the fallback PNG or
+    /// JPEG that clients without them read).
     pub(super) fn texture_image(&mut self, texture: &gltf::Texture) -> Result<gltf::Image<'a>> {
         let element = format!("textures[{}]", texture.index());
         let extension_source = |name: &str| {
@@ -126,29 +126,21 @@ impl<'a> Importer<'a> {
                 .and_then(|e| e.get("source"))
                 .and_then(serde_json::Value::as_u64)
         };
-        if let Some(i) = extension_source("EXT_texture_webp") {
-            return self.doc.images().nth(i as usize).ok_or_else(|| {
-                self.err(
-                    format!("{element}.extensions.EXT_texture_webp.source"),
-                    format!("image {i} does not exist"),
-                )
-            });
-        }
-        let basisu = extension_source("KHR_texture_basisu").is_some();
-        match texture.source().and_then(|i| self.doc.images().nth(i.index())) {
-            Some(image) => {
-                if basisu {
-                    self.warn(
-                        &element,
-                        "KHR_texture_basisu: KTX2 textures cannot be transcoded; the fallback image is used",
-                    );
-                }
-                Ok(image)
+        for extension in ["EXT_texture_webp", "KHR_texture_basisu"] {
+            if let Some(i) = extension_source(extension) {
+                return self.doc.images().nth(i as usize).ok_or_else(|| {
+                    self.err(
+                        format!("{element}.extensions.{extension}.source"),
+                        format!("image {i} does not exist"),
+                    )
+                });
             }
-            None if basisu => Err(self.err(
-                &element,
-                "KHR_texture_basisu: the texture is KTX2 (Basis Universal) only, which lucerna cannot transcode; export PNG, JPEG or WebP textures (e.g. gltf-transform png/webp)",
-            )),
+        }
+        match texture
+            .source()
+            .and_then(|i| self.doc.images().nth(i.index()))
+        {
+            Some(image) => Ok(image),
             None => Err(self.err(&element, "has no image (no source)")),
         }
     }
