@@ -111,6 +111,32 @@ fn child_of(p: Vec2) -> (usize, Vec2) {
     )
 }
 
+/// The child (`ix + 2 iy`) that sample numbers `u` choose among four children of energy
+/// shares `share` (summing to 1): the column (x) first, then the row (y) within it, each
+/// with its own number, which is rescaled to [0, 1) for the levels below.
+#[inline]
+fn choose_child(u: &mut Vec2, share: [f32; 4]) -> usize {
+    let p_right = share[1] + share[3];
+    let ix = if u.x < 1.0 - p_right {
+        u.x /= (1.0 - p_right).max(f32::MIN_POSITIVE);
+        0
+    } else {
+        u.x = (u.x - (1.0 - p_right)) / p_right.max(f32::MIN_POSITIVE);
+        1
+    };
+    let (low, high) = (share[ix], share[ix + 2]);
+    let p_high = high / (low + high);
+    let iy = if u.y < 1.0 - p_high {
+        u.y /= (1.0 - p_high).max(f32::MIN_POSITIVE);
+        0
+    } else {
+        u.y = (u.y - (1.0 - p_high)) / p_high.max(f32::MIN_POSITIVE);
+        1
+    };
+    *u = u.clamp(Vec2::ZERO, Vec2::splat(0.999_999_9));
+    ix + 2 * iy
+}
+
 /// A quadtree frozen for sampling: each inner node holds its four children's shares of its
 /// energy and their indices (0 where the child is a leaf: the root is nobody's child), so
 /// that a descent reads one 32-byte node a level and divides nothing. No nodes: uniform.
@@ -147,32 +173,13 @@ impl SamplingTree {
         loop {
             let n = &self.nodes[q];
             let e = n.share;
-            // The column (x) first, then the row (y) within it, each with its own number.
-            let p_right = e[1] + e[3];
-            let ix = if u.x < 1.0 - p_right {
-                u.x /= (1.0 - p_right).max(f32::MIN_POSITIVE);
-                0
-            } else {
-                u.x = (u.x - (1.0 - p_right)) / p_right.max(f32::MIN_POSITIVE);
-                1
-            };
-            let (low, high) = (e[ix], e[ix + 2]);
-            let p_high = high / (low + high);
-            let iy = if u.y < 1.0 - p_high {
-                u.y /= (1.0 - p_high).max(f32::MIN_POSITIVE);
-                0
-            } else {
-                u.y = (u.y - (1.0 - p_high)) / p_high.max(f32::MIN_POSITIVE);
-                1
-            };
-            u = u.clamp(Vec2::ZERO, Vec2::splat(0.999_999_9));
-            let c = ix + 2 * iy;
+            let c = choose_child(&mut u, e);
             if !(e[c] > 0.0) {
                 return None;
             }
             pdf *= 4.0 * e[c];
             size *= 0.5;
-            origin += Vec2::new(ix as f32, iy as f32) * size;
+            origin += Vec2::new((c & 1) as f32, (c >> 1) as f32) * size;
             if n.child[c] == 0 {
                 break;
             }
@@ -297,36 +304,16 @@ impl DTree {
         let (mut origin, mut size, mut pdf) = (Vec2::ZERO, 1.0f32, 1.0f32);
         while self.nodes[node].children != 0 {
             let first = self.nodes[node].children as usize;
-            let e = [0, 1, 2, 3].map(|c| self.nodes[first + c].sum);
-            // The column (x) first, then the row (y) within it, each with its own number.
-            let (left, right) = (e[0] + e[2], e[1] + e[3]);
-            let p_right = (right / (left + right)) as f32;
-            let ix = if u.x < 1.0 - p_right {
-                u.x /= (1.0 - p_right).max(f32::MIN_POSITIVE);
-                0
-            } else {
-                u.x = (u.x - (1.0 - p_right)) / p_right.max(f32::MIN_POSITIVE);
-                1
-            };
-            let (low, high) = (e[ix], e[ix + 2]);
-            let p_high = (high / (low + high)) as f32;
-            let iy = if u.y < 1.0 - p_high {
-                u.y /= (1.0 - p_high).max(f32::MIN_POSITIVE);
-                0
-            } else {
-                u.y = (u.y - (1.0 - p_high)) / p_high.max(f32::MIN_POSITIVE);
-                1
-            };
-            u = u.clamp(Vec2::ZERO, Vec2::splat(0.999_999_9));
-            let c = ix + 2 * iy;
+            let total = self.nodes[node].sum;
+            let share = [0, 1, 2, 3].map(|c| (self.nodes[first + c].sum / total) as f32);
+            let c = choose_child(&mut u, share);
             let child = first + c;
-            let share = (self.nodes[child].sum / self.nodes[node].sum) as f32;
-            if !(share > 0.0) {
+            if !(share[c] > 0.0) {
                 return None;
             }
-            pdf *= 4.0 * share;
+            pdf *= 4.0 * share[c];
             size *= 0.5;
-            origin += Vec2::new(ix as f32, iy as f32) * size;
+            origin += Vec2::new((c & 1) as f32, (c >> 1) as f32) * size;
             node = child;
         }
         Some(((origin + u * size).min(Vec2::splat(0.999_999_9)), pdf))
