@@ -26,7 +26,8 @@
 //! learning roulette; `render::plan::RenderPlan::with_guiding`), and there only when the
 //! first training pass finds the light mostly indirect (two or more bounces:
 //! [`AUTO_INDIRECT_SHARE`]), the case guiding is for; where direct light dominates, paths
-//! find it by light sampling and guiding would only cost.
+//! find it by light sampling and guiding would only cost. The share does not tell every
+//! case: light through a narrow gap is indirect too, and there guiding loses.
 
 pub mod dtree;
 pub mod mixture;
