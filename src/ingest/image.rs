@@ -66,6 +66,13 @@ pub fn decode(bytes: &[u8]) -> Result<DecodedImage, String> {
 
 const KTX2_MAGIC: &[u8] = b"\xabKTX 20\xbb\r\n\x1a\n";
 
+/// The little-endian u32 at byte `at`, if the bytes reach that far.
+fn le_u32(bytes: &[u8], at: usize) -> Option<u32> {
+    bytes
+        .get(at..at + 4)
+        .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
+}
+
 /// Checks a KTX2 file's index before the transcoder reads it: every region it names (the
 /// data format descriptor, key/value data, supercompression global data and each level)
 /// lies inside the file, and no level claims to inflate to more than the largest payload
@@ -74,11 +81,7 @@ const KTX2_MAGIC: &[u8] = b"\xabKTX 20\xbb\r\n\x1a\n";
 /// so a corrupt index would otherwise end the process.
 fn check_ktx2_layout(bytes: &[u8], width: u32, height: u32) -> Result<(), String> {
     let invalid = |what: &str| Err(format!("invalid KTX2: {what}"));
-    let u32_at = |at: usize| {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes(b.try_into().unwrap()) as u64)
-    };
+    let u32_at = |at: usize| le_u32(bytes, at).map(u64::from);
     let u64_at = |at: usize| {
         bytes
             .get(at..at + 8)
@@ -131,11 +134,7 @@ fn check_ktx2_layout(bytes: &[u8], width: u32, height: u32) -> Result<(), String
 fn decode_ktx2(bytes: &[u8]) -> Result<DecodedImage, String> {
     use basisu::{DecodeFlags, SourceFormat, TargetFormat, Transcoder};
     // Fields of the 80-byte header: vkFormat at 12, pixelWidth and pixelHeight at 20 and 24.
-    let field = |at: usize| {
-        bytes
-            .get(at..at + 4)
-            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    };
+    let field = |at: usize| le_u32(bytes, at);
     let vk_format = field(12).ok_or("invalid KTX2: truncated header")?;
     if vk_format != 0 {
         return Err(format!(

@@ -227,25 +227,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
 
     /// Traces the paths of camera ray `ray` for pixel `pixel` using `sampler`'s current
     /// pixel sample; `learning` receives statistics for efficiency-aware roulette, `parts`
-    /// what the sample's parts bring back for learned splitting.
+    /// what the sample's parts bring back for learned splitting, `guiding` what a
+    /// path-guiding training pass learns.
     #[allow(clippy::too_many_arguments)]
     pub fn trace<R: Recorder>(
-        &self,
-        ray: Ray,
-        pixel: usize,
-        sampler: &mut Sampler,
-        rec: &mut R,
-        rays: &mut RayCounts,
-        learning: Option<&mut Learning>,
-        parts: Option<&mut SampleParts>,
-    ) {
-        self.trace_recording(ray, pixel, sampler, rec, rays, learning, parts, None);
-    }
-
-    /// [`PathTracer::trace`], with `guiding` receiving what a path-guiding training pass
-    /// learns.
-    #[allow(clippy::too_many_arguments)]
-    pub fn trace_recording<R: Recorder>(
         &self,
         ray: Ray,
         pixel: usize,

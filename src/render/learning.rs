@@ -30,8 +30,9 @@ pub(super) struct PassLearning {
     pub ears: bool,
     /// This pass takes this many samples in each learning pixel to learn the split counts.
     pub split: Option<u32>,
-    /// Path guiding records what this pass's paths find (the pass's samples per pixel).
-    pub guiding: Option<(u32, u32)>,
+    /// Path guiding records what this pass's paths find (the samples per pixel taken
+    /// when the pass ends).
+    pub guiding: Option<u32>,
 }
 
 /// What one tile learned in a pass.
@@ -62,9 +63,8 @@ struct Guiding {
     tree: SdTree,
     /// `auto`: decided after the first pass that records.
     auto: bool,
-    /// Whether some pass has been learned from (paths then sample from the tree).
-    trained: bool,
-    /// Samples per pixel when the current training iteration began.
+    /// Samples per pixel when the current training iteration began; above 0 once some
+    /// iteration has been learned from (paths then sample from the tree).
     iteration_start: u32,
 }
 
@@ -78,7 +78,6 @@ impl LearnedState {
                 glam::Vec3::splat(2.0 * world.radius),
             ),
             auto: settings.guiding == GuidingMode::Auto,
-            trained: false,
             iteration_start: 0,
         });
         Self {
@@ -132,7 +131,7 @@ impl LearnedState {
             PassLearning {
                 ears: learning,
                 split: None,
-                guiding: training.then_some((n, done + n)),
+                guiding: training.then_some(done + n),
             },
         )
     }
@@ -142,7 +141,7 @@ impl LearnedState {
     pub(super) fn guide(&self) -> Option<Guide<'_>> {
         self.guiding
             .as_ref()
-            .filter(|g| g.trained)
+            .filter(|g| g.iteration_start > 0)
             .map(|g| Guide::new(&g.tree))
     }
 
@@ -183,7 +182,7 @@ impl LearnedState {
             self.first_split = FirstSplit::after_learning(counts, n, self.learning_pixels);
             self.learned_split = Some(counts);
         }
-        if let (Some(g), Some((_, after))) = (self.guiding.as_mut(), pass.guiding) {
+        if let (Some(g), Some(after)) = (self.guiding.as_mut(), pass.guiding) {
             let (mut direct, mut indirect) = (0.0, 0.0);
             for t in tiles.iter().filter_map(|t| t.guiding.as_ref()) {
                 g.tree.absorb(t);
@@ -213,7 +212,6 @@ impl LearnedState {
             if after.is_power_of_two() {
                 g.tree.update(after - g.iteration_start);
                 g.iteration_start = after;
-                g.trained = true;
             }
         }
     }

@@ -117,7 +117,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                             rays: [before; 4],
                             ..SampleParts::default()
                         });
-                        tracer.trace_recording(
+                        tracer.trace(
                             ray,
                             index_in_image,
                             &mut sampler,

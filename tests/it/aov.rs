@@ -239,7 +239,16 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
                     let ray = world
                         .camera
                         .generate_ray(Vec2::new(x as f32, y as f32) + cs.film, cs.lens);
-                    tracer.trace(ray, 0, &mut sampler, &mut stats, &mut rays, None, None);
+                    tracer.trace(
+                        ray,
+                        0,
+                        &mut sampler,
+                        &mut stats,
+                        &mut rays,
+                        None,
+                        None,
+                        None,
+                    );
                     stats.end_sample();
                 }
             }
