@@ -243,6 +243,23 @@ impl Camera {
         }
     }
 
+    /// The cone of a primary ray through one pixel: a perspective camera's spreads by the
+    /// angle a pixel spans at the image centre; an orthographic camera's is as wide as a
+    /// pixel and does not spread.
+    pub fn pixel_cone(&self) -> crate::world::footprint::RayCone {
+        use crate::world::footprint::RayCone;
+        match self.kind {
+            Kind::Perspective { tan_half_y, .. } => RayCone {
+                width: 0.0,
+                spread: 2.0 * tan_half_y / self.height as f32,
+            },
+            Kind::Orthographic { half_height, .. } => RayCone {
+                width: 2.0 * half_height / self.height as f32,
+                spread: 0.0,
+            },
+        }
+    }
+
     /// Camera-space vector `v` in render space (without the camera's position).
     #[inline]
     fn to_world(&self, v: Vec3) -> Vec3 {

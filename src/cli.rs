@@ -302,6 +302,11 @@ struct RenderArgs {
     /// and the first samples find mostly indirect light). [default: off]
     #[arg(long, help_heading = "Integrator")]
     guiding: Option<String>,
+    /// Texture lookups: bilinear (at a point, full resolution) or mip (filtered over the
+    /// footprint of each sample's ray cone through MIP maps: no aliasing at few samples,
+    /// 10-25 % more time a sample on textured assets). [default: bilinear]
+    #[arg(long, help_heading = "Integrator")]
+    texture_filter: Option<String>,
     /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1, or auto (learned
     /// from the first samples of every pixel). [default: nee=1,bsdf=1]
     #[arg(long, help_heading = "Integrator")]

@@ -17,6 +17,7 @@ use super::settings::Settings;
 use crate::geometry::ray::Ray;
 use crate::light::{Light, LightSample};
 use crate::material::PerLobe;
+use crate::world::footprint::RayCone;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 
@@ -67,11 +68,13 @@ pub(crate) struct PathState {
     /// Distance travelled through filters since the previous vertex (render space): the
     /// part of the way from `prev_p` to the next surface that light densities must add.
     pub(crate) crossed: f32,
+    /// The current ray's cone, which sizes texture footprints (`world::footprint`).
+    pub(crate) cone: RayCone,
 }
 
 impl PathState {
-    /// The state of a camera path whose ray starts at `origin`.
-    pub(crate) fn camera(origin: Vec3) -> Self {
+    /// The state of a camera path whose ray starts at `origin` with cone `cone`.
+    pub(crate) fn camera(origin: Vec3, cone: RayCone) -> Self {
         Self {
             beta: Vec3::ONE,
             depth: 0,
@@ -85,6 +88,7 @@ impl PathState {
             lobes: [Vec3::ZERO; 3],
             media: Media::default(),
             crossed: 0.0,
+            cone,
         }
     }
 

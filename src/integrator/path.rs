@@ -44,6 +44,7 @@ use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::scene::Material;
+use crate::world::footprint::RayCone;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 
@@ -254,7 +255,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 .sample_points(sampler.pixel(), sampler.sample_index()),
             guiding,
         };
-        let camera = PathState::camera(ray.origin);
+        let camera = PathState::camera(ray.origin, self.world.footprints.camera);
         self.trace_from(ray, camera, None, &mut walk, sampler, rec, rays);
     }
 
@@ -344,7 +345,13 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             if !path.media.is_empty() {
                 path.beta *= path.media.transmittance(&world.surfaces, arrived);
             }
-            let it = world.interaction(&ray, &hit);
+            // After a rough bounce, footprints are circles (one texture probe).
+            let it = world.interaction_in_cone(
+                &ray,
+                &hit,
+                path.cone.width_at(arrived),
+                !path.prev_delta,
+            );
             if EMITTERS && let Some(e) = surface_emitter(world, &it, &ray, hit.t) {
                 path.reached_emitter(self, walk, rec, e);
             }
@@ -595,6 +602,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 vertex: path.vertex + 1,
                 branch,
                 crossed: path.crossed + v.arrived,
+                cone: RayCone {
+                    width: path.cone.width_at(v.arrived),
+                    ..path.cone
+                },
                 ..*path
             };
             return Some((Ray::new(origin, wi), next));
@@ -653,6 +664,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             lobes,
             media,
             crossed: 0.0,
+            cone: path.cone.scattered(
+                v.arrived,
+                bs.pdf,
+                bs.is_delta(),
+                self.world.footprints.lobe_scale,
+            ),
         };
         Some((Ray::new(origin, wi), next))
     }

@@ -11,6 +11,7 @@ use super::views::View;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::film::aov::Aov;
+use crate::integrator::settings::TextureFilter;
 use crate::output::denoise::Denoiser;
 use crate::output::exr;
 use crate::render::RenderOptions;
@@ -37,7 +38,7 @@ pub fn memory_estimate(
         .and_then(|name| scene.camera(name))
         .or(scene.cameras.first());
     let (width, height) = crate::camera::resolve_resolution(resolution, camera);
-    memory::MemoryEstimate {
+    let mut estimate = memory::MemoryEstimate {
         film: Film::estimated_bytes(
             width,
             height,
@@ -45,7 +46,12 @@ pub fn memory_estimate(
             options.noise_threshold.is_some(),
         ),
         ..crate::world::build::estimate_memory(scene)
+    };
+    // MIP pyramids: a third of each image, in its format (one way of reading it).
+    if options.settings.texture_filter == TextureFilter::Mip {
+        estimate.scene += scene.texel_bytes() / 3;
     }
+    estimate
 }
 
 /// A view ready to render (beside the film it renders into).
@@ -114,6 +120,11 @@ pub(super) fn prepare(
             options.settings.light_select,
         )
     })?;
+    let mut world = world;
+    world.set_footprints(
+        options.settings.texture_filter == TextureFilter::Mip,
+        options.spp,
+    );
     let build_seconds = build_start.elapsed().as_secs_f64();
     let (width, height) = (world.camera.width(), world.camera.height());
     if let Some(crop) = options.crop.filter(|c| !c.fits(width, height)) {

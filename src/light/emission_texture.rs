@@ -366,6 +366,7 @@ mod tests {
             width,
             height,
             texels: Arc::new(Texels::Rgba8(texels)),
+            mips: Default::default(),
             wrap_u: wrap,
             wrap_v: wrap,
             nearest: false,

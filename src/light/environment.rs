@@ -215,6 +215,7 @@ fn finite_radiance(texture: &Texture) -> Texture {
         .collect();
     Texture {
         texels: std::sync::Arc::new(Texels::RgbaF32(fixed)),
+        mips: Default::default(),
         ..texture.clone()
     }
 }

@@ -279,6 +279,9 @@ pub struct SurfaceAttributes {
     pub uv: [Vec2; 2],
     /// Vertex colour (white where the mesh has none).
     pub color: Vec4,
+    /// For each UV set, the axes (full widths) of the footprint that lookups filter over
+    /// (`world::footprint`); zero for lookups at the point.
+    pub footprint: [[Vec2; 2]; 2],
 }
 
 /// Looks up a texture slot, applying its UV set and transform.
@@ -289,9 +292,21 @@ pub fn texture_lookup(
     attrs: &SurfaceAttributes,
     srgb: bool,
 ) -> Vec4 {
-    let uv = attrs.uv[(slot.tex_coord as usize).min(1)];
-    let uv = slot.transform.map_or(uv, |t| t.apply(uv));
-    textures[slot.texture as usize].sample(uv, srgb)
+    let set = (slot.tex_coord as usize).min(1);
+    let uv = attrs.uv[set];
+    let axes = attrs.footprint[set];
+    let texture = &textures[slot.texture as usize];
+    if axes == [Vec2::ZERO; 2] {
+        return texture.sample(slot.transform.map_or(uv, |t| t.apply(uv)), srgb);
+    }
+    let (uv, axes) = match slot.transform {
+        Some(t) => {
+            let at = t.apply(uv);
+            (at, axes.map(|a| t.apply(uv + a) - at))
+        }
+        None => (uv, axes),
+    };
+    texture.sample_footprint(uv, axes, srgb)
 }
 
 /// Base colour (factor × texture × vertex colour), linear RGBA.
@@ -761,6 +776,7 @@ mod tests {
         let attrs = SurfaceAttributes {
             uv: [Vec2::ZERO; 2],
             color: Vec4::ONE,
+            footprint: [[glam::Vec2::ZERO; 2]; 2],
         };
         let ctx = ShadingContext::default();
         let at = Point {
@@ -811,6 +827,7 @@ mod tests {
         let attrs = SurfaceAttributes {
             uv: [Vec2::ZERO; 2],
             color: Vec4::ONE,
+            footprint: [[glam::Vec2::ZERO; 2]; 2],
         };
         for (m, reduced) in [
             (&lambertian, crate::scene::Reduced::Lambert),

@@ -589,6 +589,7 @@ fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {
         width: entry.width,
         height: entry.height,
         texels,
+        mips: Default::default(),
         wrap_u: entry.wrap_u,
         wrap_v: entry.wrap_v,
         nearest: entry.nearest,

@@ -14,7 +14,7 @@ pub use material::{
 };
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-pub use texture::{Texels, Texture, Wrap};
+pub use texture::{MipChains, Texels, Texture, Wrap, share_mip_chains};
 
 /// A scene ready for [`crate::world::World::build`].
 #[derive(Clone, Debug, Default)]
@@ -367,18 +367,21 @@ impl Scene {
             .sum()
     }
 
-    /// Bytes of its bulk data: meshes, texels (shared texels once), instances and shapes.
-    pub fn data_bytes(&self) -> u64 {
-        use std::mem::size_of;
+    /// Bytes of its texels (shared texels once).
+    pub fn texel_bytes(&self) -> u64 {
         let mut seen = std::collections::HashSet::new();
-        let texel_bytes: u64 = self
-            .textures
+        self.textures
             .iter()
             .filter(|t| seen.insert(Arc::as_ptr(&t.texels)))
             .map(|t| t.memory_bytes() as u64)
-            .sum();
+            .sum()
+    }
+
+    /// Bytes of its bulk data: meshes, texels (shared texels once), instances and shapes.
+    pub fn data_bytes(&self) -> u64 {
+        use std::mem::size_of;
         self.meshes.iter().map(Mesh::data_bytes).sum::<u64>()
-            + texel_bytes
+            + self.texel_bytes()
             + (self.instances.len() * size_of::<Instance>()
                 + self.spheres.len() * size_of::<Sphere>()
                 + self.disks.len() * size_of::<Disk>()

@@ -1,9 +1,23 @@
-//! Textures: decoded images with their sampler state, looked up bilinearly.
+//! Textures: decoded images with their sampler state, looked up bilinearly at a point or
+//! filtered over a footprint through a MIP pyramid.
+//!
+//! A lookup with a footprint (the two axes of an ellipse in texture coordinates, from the
+//! ray's cone where it met the surface: `world::footprint`) takes trilinear probes at the
+//! MIP level of the ellipse's minor axis, spread along its major axis (up to
+//! [`MAX_ANISOTROPY`] of them): the anisotropic filtering of GPUs, which keeps a surface
+//! seen at a grazing angle sharp where an isotropic level would blur it. A footprint of at
+//! most one texel is the bilinear lookup of the full-resolution image, bit for bit.
+//!
+//! Pyramids are built on first use, by box filtering in linear values: one per image and
+//! way of reading it (an 8- or 16-bit image read as sRGB colour averages decoded values and
+//! stores them sRGB-encoded again, as GPUs do for sRGB formats; read as data, it averages
+//! the stored values). A level keeps the base image's texel format, so a pyramid costs a
+//! third of the image.
 
-use crate::color::{SRGB8_TO_LINEAR, srgb_to_linear};
+use crate::color::{SRGB8_TO_LINEAR, linear_to_srgb, srgb_to_linear};
 use glam::{Vec2, Vec4};
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// Texel storage. Integer images keep their stored values (8 or 16 bits a channel) and are
 /// sRGB-decoded per lookup where the material slot says so, because one image may serve
@@ -25,6 +39,39 @@ pub enum Wrap {
     ClampToEdge,
 }
 
+/// The most probes a footprint lookup takes along its major axis: footprints longer than
+/// this many times their width are widened (blurred) to this ratio, as pbrt-v4 clamps its
+/// EWA filter's eccentricity and GPUs their anisotropy.
+pub const MAX_ANISOTROPY: f32 = 8.0;
+
+/// The MIP pyramids of one image (levels 1 and up; level 0 is the image), built on first
+/// use: one for reading integer texels as sRGB colour, one for reading them as they are
+/// (float images use the second for both). Textures that share texels share this.
+#[derive(Debug, Default)]
+pub struct MipChains {
+    chains: [OnceLock<Vec<Level>>; 2],
+}
+
+/// One level of a MIP pyramid.
+#[derive(Debug)]
+struct Level {
+    width: u32,
+    height: u32,
+    texels: Texels,
+}
+
+impl MipChains {
+    /// Bytes held by the pyramids built so far.
+    pub fn memory_bytes(&self) -> usize {
+        self.chains
+            .iter()
+            .filter_map(OnceLock::get)
+            .flatten()
+            .map(|l| texels_bytes(&l.texels))
+            .sum()
+    }
+}
+
 /// A 2D image with its sampler.
 #[derive(Clone, Debug)]
 pub struct Texture {
@@ -33,9 +80,12 @@ pub struct Texture {
     pub height: u32,
     /// Shared: several textures (sampler variants) and the environment may use one image.
     pub texels: Arc<Texels>,
+    /// The image's MIP pyramids, shared by the textures that share its texels (the world
+    /// joins them: [`share_mip_chains`]).
+    pub mips: Arc<MipChains>,
     pub wrap_u: Wrap,
     pub wrap_v: Wrap,
-    /// Nearest-texel lookups instead of bilinear (glTF magFilter NEAREST).
+    /// Nearest-texel lookups instead of bilinear when magnified (glTF magFilter NEAREST).
     pub nearest: bool,
 }
 
@@ -56,35 +106,92 @@ fn wrap(i: i64, n: u32, mode: Wrap) -> usize {
     }) as usize
 }
 
+fn texels_bytes(texels: &Texels) -> usize {
+    match texels {
+        Texels::Rgba8(t) => t.len() * 4,
+        Texels::Rgba16(t) => t.len() * 8,
+        Texels::RgbaF32(t) => t.len() * 16,
+    }
+}
+
+/// An 8-bit texel, linear (colour channels sRGB-decoded where `srgb` is set).
+#[inline(always)]
+fn decode8([r, g, b, a]: [u8; 4], srgb: bool) -> Vec4 {
+    if srgb {
+        let lut = &*SRGB8_TO_LINEAR;
+        Vec4::new(
+            lut[r as usize],
+            lut[g as usize],
+            lut[b as usize],
+            a as f32 / 255.0,
+        )
+    } else {
+        Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0
+    }
+}
+
+/// A 16-bit texel, linear (colour channels sRGB-decoded where `srgb` is set).
+#[inline(always)]
+fn decode16(t: [u16; 4], srgb: bool) -> Vec4 {
+    let [r, g, b, a] = t.map(|v| v as f32 / 65535.0);
+    if srgb {
+        Vec4::new(srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a)
+    } else {
+        Vec4::new(r, g, b, a)
+    }
+}
+
+/// Texel `i` of `texels`, linear (sRGB-decoded where `srgb` is set and the texels are
+/// integers).
+#[inline]
+fn fetch(texels: &Texels, i: usize, srgb: bool) -> Vec4 {
+    match texels {
+        Texels::Rgba8(t) => decode8(t[i], srgb),
+        Texels::Rgba16(t) => decode16(t[i], srgb),
+        Texels::RgbaF32(t) => Vec4::from_array(t[i]),
+    }
+}
+
 impl Texture {
     #[inline]
     fn texel(&self, x: usize, y: usize, srgb: bool) -> Vec4 {
-        let i = y * self.width as usize + x;
-        match &*self.texels {
-            Texels::Rgba8(t) => {
-                let [r, g, b, a] = t[i];
-                if srgb {
-                    let lut = &*SRGB8_TO_LINEAR;
-                    Vec4::new(
-                        lut[r as usize],
-                        lut[g as usize],
-                        lut[b as usize],
-                        a as f32 / 255.0,
-                    )
-                } else {
-                    Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0
-                }
-            }
-            Texels::Rgba16(t) => {
-                let [r, g, b, a] = t[i].map(|v| v as f32 / 65535.0);
-                if srgb {
-                    Vec4::new(srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a)
-                } else {
-                    Vec4::new(r, g, b, a)
-                }
-            }
-            Texels::RgbaF32(t) => Vec4::from_array(t[i]),
-        }
+        fetch(&self.texels, y * self.width as usize + x, srgb)
+    }
+
+    /// Bilinear lookup of `uv` in an image of `width` × `height` `texels`.
+    #[inline]
+    fn bilinear(&self, texels: &Texels, (width, height): (u32, u32), uv: Vec2, srgb: bool) -> Vec4 {
+        let x = uv.x as f64 * width as f64 - 0.5;
+        let y = uv.y as f64 * height as f64 - 0.5;
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        let (x0, y0) = (x0 as i64, y0 as i64);
+        let xa = wrap(x0, width, self.wrap_u);
+        let xb = wrap(x0 + 1, width, self.wrap_u);
+        let ya = wrap(y0, height, self.wrap_v) * width as usize;
+        let yb = wrap(y0 + 1, height, self.wrap_v) * width as usize;
+        // One match for the four texels, so that each format's loads are inlined together.
+        let (c00, c10, c01, c11) = match texels {
+            Texels::Rgba8(t) => (
+                decode8(t[ya + xa], srgb),
+                decode8(t[ya + xb], srgb),
+                decode8(t[yb + xa], srgb),
+                decode8(t[yb + xb], srgb),
+            ),
+            Texels::Rgba16(t) => (
+                decode16(t[ya + xa], srgb),
+                decode16(t[ya + xb], srgb),
+                decode16(t[yb + xa], srgb),
+                decode16(t[yb + xb], srgb),
+            ),
+            Texels::RgbaF32(t) => (
+                Vec4::from_array(t[ya + xa]),
+                Vec4::from_array(t[ya + xb]),
+                Vec4::from_array(t[yb + xa]),
+                Vec4::from_array(t[yb + xb]),
+            ),
+        };
+        c00.lerp(c10, fx).lerp(c01.lerp(c11, fx), fy)
     }
 
     /// Looks up `uv` (glTF convention: (0, 0) is the image's top-left corner), decoding sRGB
@@ -93,23 +200,108 @@ impl Texture {
         if !uv.is_finite() {
             return self.texel(0, 0, srgb);
         }
-        let x = uv.x as f64 * self.width as f64 - 0.5;
-        let y = uv.y as f64 * self.height as f64 - 0.5;
         if self.nearest {
+            let x = uv.x as f64 * self.width as f64 - 0.5;
+            let y = uv.y as f64 * self.height as f64 - 0.5;
             let xi = wrap((x + 0.5).floor() as i64, self.width, self.wrap_u);
             let yi = wrap((y + 0.5).floor() as i64, self.height, self.wrap_v);
             return self.texel(xi, yi, srgb);
         }
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let (x0, y0) = (x0 as i64, y0 as i64);
-        let xa = wrap(x0, self.width, self.wrap_u);
-        let xb = wrap(x0 + 1, self.width, self.wrap_u);
-        let ya = wrap(y0, self.height, self.wrap_v);
-        let yb = wrap(y0 + 1, self.height, self.wrap_v);
-        let top = self.texel(xa, ya, srgb).lerp(self.texel(xb, ya, srgb), fx);
-        let bottom = self.texel(xa, yb, srgb).lerp(self.texel(xb, yb, srgb), fx);
-        top.lerp(bottom, fy)
+        self.bilinear(&self.texels, (self.width, self.height), uv, srgb)
+    }
+
+    /// The filtered value over the footprint centred on `uv` whose axes (full widths, in
+    /// texture coordinates) are `axes`: anisotropic trilinear filtering (see the module
+    /// notes); [`Texture::sample`] where the footprint is at most a texel.
+    pub fn sample_footprint(&self, uv: Vec2, axes: [Vec2; 2], srgb: bool) -> Vec4 {
+        let size = Vec2::new(self.width as f32, self.height as f32);
+        let (a, b) = (axes[0] * size, axes[1] * size);
+        let (la, lb) = (a.length(), b.length());
+        let (major, minor, along) = if la >= lb {
+            (la, lb, axes[0])
+        } else {
+            (lb, la, axes[1])
+        };
+        if !(major > 1.0) || !major.is_finite() || !uv.is_finite() {
+            return self.sample(uv, srgb);
+        }
+        let minor = minor.max(major / MAX_ANISOTROPY).max(1.0);
+        let lod = minor.log2();
+        let probes = ((major / minor).ceil() as usize).clamp(1, MAX_ANISOTROPY as usize);
+        let mut sum = Vec4::ZERO;
+        for i in 0..probes {
+            let offset = (i as f32 + 0.5) / probes as f32 - 0.5;
+            sum += self.trilinear(uv + along * offset, lod, srgb);
+        }
+        sum / probes as f32
+    }
+
+    /// Trilinear lookup of `uv` at (fractional) MIP level `lod` ≥ 0.
+    #[inline]
+    fn trilinear(&self, uv: Vec2, lod: f32, srgb: bool) -> Vec4 {
+        let chain = self.chain(srgb);
+        let top = chain.len() as f32;
+        let lod = lod.min(top);
+        let fine = lod.floor();
+        let t = lod - fine;
+        let at = |level: usize| match level {
+            0 => self.bilinear(&self.texels, (self.width, self.height), uv, srgb),
+            l => {
+                let l = &chain[l - 1];
+                self.bilinear(&l.texels, (l.width, l.height), uv, srgb)
+            }
+        };
+        let fine_value = at(fine as usize);
+        if t == 0.0 {
+            return fine_value;
+        }
+        fine_value.lerp(at(fine as usize + 1), t)
+    }
+
+    /// The MIP pyramid for reading the texels with `srgb`, built on first use.
+    fn chain(&self, srgb: bool) -> &[Level] {
+        let srgb = srgb && !matches!(*self.texels, Texels::RgbaF32(_));
+        self.mips.chains[srgb as usize].get_or_init(|| self.build_chain(srgb))
+    }
+
+    /// Levels 1 and up, each half the size of the one before (rounded down, at least one
+    /// texel), box-filtered from the one before in linear values, as GPUs generate MIP
+    /// maps: no level needs a copy of another at higher precision, and an 8-bit level's
+    /// rounding (half a step) is what the next one starts from.
+    fn build_chain(&self, srgb: bool) -> Vec<Level> {
+        let (mut w, mut h) = (self.width as usize, self.height as usize);
+        let mut levels: Vec<Level> = Vec::new();
+        while w > 1 || h > 1 {
+            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+            let source = levels.last().map_or(&*self.texels, |l| &l.texels);
+            let src = |i| fetch(source, i, srgb);
+            let (from, to) = ((w, h), (nw, nh));
+            let texels = match *self.texels {
+                Texels::Rgba8(_) => Texels::Rgba8(box_downsample(src, from, to, |v| {
+                    encode(v, 255.0, srgb).map(|x| x as u8)
+                })),
+                Texels::Rgba16(_) => Texels::Rgba16(box_downsample(src, from, to, |v| {
+                    encode(v, 65535.0, srgb).map(|x| x as u16)
+                })),
+                Texels::RgbaF32(_) => {
+                    Texels::RgbaF32(box_downsample(src, from, to, |v| v.to_array()))
+                }
+            };
+            (w, h) = (nw, nh);
+            levels.push(Level {
+                width: w as u32,
+                height: h as u32,
+                texels,
+            });
+        }
+        levels
+    }
+
+    /// Builds the MIP pyramid for reading the texels with `srgb` now, if it is not built
+    /// (a render builds those its materials read before it starts, in parallel, instead of
+    /// stalling its threads on the first lookups).
+    pub fn build_mips(&self, srgb: bool) {
+        self.chain(srgb);
     }
 
     /// Mean linear value over the image (for light power estimates).
@@ -124,19 +316,81 @@ impl Texture {
         (sum / n as f64).as_vec4()
     }
 
-    /// Bytes held by the texels.
+    /// Bytes held by the texels (the image; its MIP pyramids are counted by
+    /// [`MipChains::memory_bytes`]).
     pub fn memory_bytes(&self) -> usize {
-        match &*self.texels {
-            Texels::Rgba8(t) => t.len() * 4,
-            Texels::Rgba16(t) => t.len() * 8,
-            Texels::RgbaF32(t) => t.len() * 16,
-        }
+        texels_bytes(&self.texels)
     }
 
     /// Linear value of texel (`x`, `y`) without filtering (for building sampling tables).
     pub fn texel_linear(&self, x: u32, y: u32, srgb: bool) -> Vec4 {
         self.texel(x as usize, y as usize, srgb)
     }
+}
+
+/// Makes the textures that share texels share one set of MIP pyramids, so that sampler
+/// variants of an image build its pyramid once.
+pub fn share_mip_chains(textures: &mut [Texture]) {
+    let mut by_image: std::collections::HashMap<*const Texels, Arc<MipChains>> =
+        std::collections::HashMap::new();
+    for t in textures {
+        let shared = by_image
+            .entry(Arc::as_ptr(&t.texels))
+            .or_insert_with(|| t.mips.clone());
+        t.mips = shared.clone();
+    }
+}
+
+/// Box filter of a `from`-sized image whose texel `i` (row-major) is `src(i)` to `to` (each
+/// side at most as large as `from`'s), stored through `store`: every target texel the
+/// area-weighted mean of the source texels it covers. Rows in parallel.
+fn box_downsample<T: Copy + Default + Send>(
+    src: impl Fn(usize) -> Vec4 + Sync,
+    from: (usize, usize),
+    to: (usize, usize),
+    store: impl Fn(Vec4) -> T + Sync,
+) -> Vec<T> {
+    use rayon::prelude::*;
+    let weights = |n: usize, m: usize| -> Vec<Vec<(usize, f32)>> {
+        let scale = n as f64 / m as f64;
+        (0..m)
+            .map(|i| {
+                let (lo, hi) = (i as f64 * scale, (i + 1) as f64 * scale);
+                (lo.floor() as usize..(hi.ceil() as usize).min(n))
+                    .map(|j| {
+                        let cover = (hi.min(j as f64 + 1.0) - lo.max(j as f64)) / scale;
+                        (j, cover as f32)
+                    })
+                    .filter(|(_, w)| *w > 0.0)
+                    .collect()
+            })
+            .collect()
+    };
+    let (wx, wy) = (weights(from.0, to.0), weights(from.1, to.1));
+    let mut out = vec![T::default(); to.0 * to.1];
+    out.par_chunks_mut(to.0).zip(&wy).for_each(|(row, rows)| {
+        for (texel, columns) in row.iter_mut().zip(&wx) {
+            let mut sum = Vec4::ZERO;
+            for &(y, wy) in rows {
+                for &(x, wx) in columns {
+                    sum += src(y * from.0 + x) * (wx * wy);
+                }
+            }
+            *texel = store(sum);
+        }
+    });
+    out
+}
+
+/// A linear value as integer steps of `max`, rounded: colour channels sRGB-encoded where
+/// `srgb` is set, alpha never.
+#[inline]
+fn encode(v: Vec4, max: f32, srgb: bool) -> [f32; 4] {
+    let c = |x: f32| {
+        let x = if srgb { linear_to_srgb(x) } else { x };
+        (x.clamp(0.0, 1.0) * max).round()
+    };
+    [c(v.x), c(v.y), c(v.z), (v.w.clamp(0.0, 1.0) * max).round()]
 }
 
 #[cfg(test)]
@@ -161,6 +415,7 @@ mod tests {
             width: 2,
             height: 1,
             texels: Arc::new(Texels::RgbaF32(vec![[0.0; 4], [1.0; 4]])),
+            mips: Default::default(),
             wrap_u: Wrap::ClampToEdge,
             wrap_v: Wrap::ClampToEdge,
             nearest: false,
@@ -168,5 +423,83 @@ mod tests {
         assert!((t.sample(Vec2::new(0.25, 0.5), false).x - 0.0).abs() < 1e-6);
         assert!((t.sample(Vec2::new(0.5, 0.5), false).x - 0.5).abs() < 1e-6);
         assert!((t.sample(Vec2::new(0.75, 0.5), false).x - 1.0).abs() < 1e-6);
+    }
+
+    /// A `w` × `h` 8-bit image of `value(x, y)` grey texels.
+    fn grey(w: u32, h: u32, value: impl Fn(u32, u32) -> u8) -> Texture {
+        let texels = (0..w * h).map(|i| [value(i % w, i / w); 4]).collect();
+        Texture {
+            name: String::new(),
+            width: w,
+            height: h,
+            texels: Arc::new(Texels::Rgba8(texels)),
+            mips: Default::default(),
+            wrap_u: Wrap::Repeat,
+            wrap_v: Wrap::Repeat,
+            nearest: false,
+        }
+    }
+
+    #[test]
+    fn pyramids_average_in_linear_values_down_to_one_texel() {
+        // Black and white checks: the sRGB colour level averages decoded values (0.5,
+        // stored sRGB-encoded as 188), the data level the stored ones (0.5 of 255: 128).
+        let t = grey(4, 4, |x, y| if (x + y) % 2 == 1 { 255 } else { 0 });
+        let colour = t.chain(true);
+        assert_eq!(colour.len(), 2);
+        let Texels::Rgba8(c) = &colour[1].texels else {
+            panic!("levels keep the image's format")
+        };
+        assert_eq!(c[0][0], 188);
+        assert_eq!(c[0][3], 128, "alpha is never sRGB-encoded");
+        let Texels::Rgba8(d) = &t.chain(false)[1].texels else {
+            panic!()
+        };
+        assert_eq!(d[0][0], 128);
+    }
+
+    #[test]
+    fn odd_sizes_are_box_filtered_by_area() {
+        // 3 texels to 1: each covers a third.
+        let out = box_downsample(|i| Vec4::splat(i as f32), (3, 1), (1, 1), |v| v);
+        assert!((out[0].x - 1.0).abs() < 1e-6);
+        // 5 × 3 to 2 × 1: the middle column is shared half and half; the mean is kept.
+        let src = |i: usize| Vec4::splat((i * 7 % 11) as f32);
+        let out = box_downsample(src, (5, 3), (2, 1), |v| v);
+        let mean_in = (0..15).map(|i| src(i).x).sum::<f32>() / 15.0;
+        assert!(((out[0].x + out[1].x) / 2.0 - mean_in).abs() < 1e-5);
+        let t = grey(5, 3, |x, _| 50 * x as u8);
+        let sizes: Vec<(u32, u32)> = t.chain(false).iter().map(|l| (l.width, l.height)).collect();
+        assert_eq!(sizes, [(2, 1), (1, 1)]);
+    }
+
+    #[test]
+    fn footprints_of_a_texel_or_less_are_bilinear_lookups() {
+        let t = grey(8, 8, |x, y| (x * 30 + y * 3) as u8);
+        for uv in [Vec2::new(0.3, 0.7), Vec2::new(-1.2, 5.01)] {
+            let small = [Vec2::new(0.1, 0.0), Vec2::new(0.0, 0.05)];
+            assert_eq!(t.sample_footprint(uv, small, true), t.sample(uv, true));
+            assert_eq!(
+                t.sample_footprint(uv, [Vec2::ZERO; 2], true),
+                t.sample(uv, true)
+            );
+        }
+    }
+
+    #[test]
+    fn wide_footprints_see_the_mean_and_long_ones_only_along_their_axis() {
+        // Vertical stripes, one texel each: a footprint as wide as the image is their mean;
+        // one long in v and a texel wide in u keeps them apart (probes along v, a fine
+        // level), where an isotropic one of its length would blur them.
+        let t = grey(64, 64, |x, _| if x % 2 == 1 { 255 } else { 0 });
+        let mean = t.mean(false).x;
+        let wide = t
+            .sample_footprint(Vec2::splat(0.5), [Vec2::X, Vec2::Y], false)
+            .x;
+        assert!((wide - mean).abs() < 1e-2, "{wide} against {mean}");
+        let uv = Vec2::new(1.5 / 64.0, 0.5);
+        let long = [Vec2::new(1.0 / 64.0, 0.0), Vec2::new(0.0, 8.0 / 64.0)];
+        let along = t.sample_footprint(uv, long, false).x;
+        assert!((along - 1.0).abs() < 1e-6, "stripe kept: {along}");
     }
 }

@@ -843,7 +843,11 @@ impl World {
                     .map(|m| m.transmits() || m.can_filter())
                     .collect(),
                 materials: scene.materials,
-                textures: scene.textures,
+                textures: {
+                    let mut textures = scene.textures;
+                    crate::scene::share_mip_chains(&mut textures);
+                    textures
+                },
                 prims: refs,
                 prim_light,
             },
@@ -855,6 +859,7 @@ impl World {
             light_names,
             light_groups: std::mem::take(&mut scene.light_groups),
             objects,
+            footprints: super::footprint::Footprints::OFF,
             #[cfg(target_arch = "x86_64")]
             area_lights: std::sync::OnceLock::new(),
         })

@@ -127,6 +127,7 @@ impl Surfaces {
         let attrs = SurfaceAttributes {
             uv: [glam::Vec2::ZERO; 2],
             color: Vec4::ONE,
+            footprint: [[glam::Vec2::ZERO; 2]; 2],
         };
         material::compact_bsdf(m, &self.textures, &attrs, &Default::default())
             .filter(|b| !b.is_black())

@@ -8,6 +8,7 @@
 //! a shading point; `lanes` does so for eight hits at a time.
 
 pub mod build;
+pub mod footprint;
 pub(crate) mod lanes;
 pub mod surfaces;
 
@@ -46,6 +47,9 @@ pub struct World {
     pub light_groups: Vec<crate::scene::LightGroup>,
     /// The objects that hits belong to (Cryptomatte).
     pub objects: Objects,
+    /// How paths size their texture footprints (off until a render sets them:
+    /// [`World::set_footprints`]).
+    pub footprints: footprint::Footprints,
     /// The lights as the packet kernel's lanes sample them, built when it first runs.
     #[cfg(target_arch = "x86_64")]
     area_lights: std::sync::OnceLock<crate::light::lanes::AreaLights>,
@@ -267,10 +271,67 @@ impl World {
         self.bvh.bytes() + self.placed.as_ref().map_or(0, InstancedBvh::bytes)
     }
 
-    /// The shading point of `hit` along `ray`.
+    /// Sizes texture footprints for a render of `spp` samples per pixel (`None`: many), or
+    /// turns them off (`filter` false, or a scene without textures, where they would cost
+    /// without changing a pixel).
+    pub fn set_footprints(&mut self, filter: bool, spp: Option<u32>) {
+        self.footprints = if filter && !self.surfaces.textures.is_empty() {
+            footprint::Footprints::for_samples(self.camera.pixel_cone(), spp)
+        } else {
+            footprint::Footprints::OFF
+        };
+        if self.footprints.on() {
+            self.build_mips();
+        }
+    }
+
+    /// Builds the MIP pyramids the materials read (each image once per way it is read:
+    /// colour slots sRGB-decode integer texels, the others do not), in parallel.
+    fn build_mips(&self) {
+        use rayon::prelude::*;
+        const COLOUR_SLOTS: [&str; 4] = [
+            "base_color_texture",
+            "emissive_texture",
+            "specular.color_texture",
+            "sheen.color_texture",
+        ];
+        let textures = &self.surfaces.textures;
+        let mut wanted: Vec<(usize, bool)> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for m in &self.surfaces.materials {
+            for (name, slot) in m.texture_slots() {
+                let Some(t) = textures.get(slot.texture as usize) else {
+                    continue;
+                };
+                let srgb = COLOUR_SLOTS.contains(&name);
+                if seen.insert((std::sync::Arc::as_ptr(&t.mips), srgb)) {
+                    wanted.push((slot.texture as usize, srgb));
+                }
+            }
+        }
+        wanted
+            .par_iter()
+            .for_each(|&(t, srgb)| textures[t].build_mips(srgb));
+    }
+
+    /// The shading point of `hit` along `ray`, its textures looked up at the point.
     #[inline]
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
         self.surfaces.interaction(ray, hit)
+    }
+
+    /// The shading point of `hit` along `ray`, whose cone is `width` wide there (textures
+    /// filtered over its footprint; a circle with `isotropic`).
+    #[inline]
+    pub fn interaction_in_cone(
+        &self,
+        ray: &Ray,
+        hit: &Hit,
+        width: f32,
+        isotropic: bool,
+    ) -> Interaction {
+        self.surfaces
+            .interaction_in_cone(ray, hit, width, isotropic)
     }
 
     /// The materials' names, by index (Cryptomatte's material mattes).

@@ -2,6 +2,7 @@
 //! primitive is) and the shading point a hit becomes ([`Interaction`]): attributes
 //! interpolated, shading normals corrected towards the viewer, alpha decided for traversal.
 
+use super::footprint;
 use crate::geometry::frame::Frame;
 use crate::geometry::quadric::Quadric;
 use crate::geometry::ray::Ray;
@@ -114,6 +115,15 @@ impl Interaction {
     }
 }
 
+/// A ray's cone where it meets a surface: the ray's render-space direction, the cone's
+/// width there, and whether its footprint is taken as a circle.
+#[derive(Clone, Copy, Debug)]
+struct Cone {
+    dir: Vec3,
+    width: f32,
+    isotropic: bool,
+}
+
 /// What a surface hit yields before it is turned to the ray's side: point, front geometric
 /// normal, front shading normal, attributes, material and tangent frame.
 type SurfacePoint = (Vec3, Vec3, Vec3, SurfaceAttributes, u32, Option<[Vec3; 3]>);
@@ -172,6 +182,7 @@ impl Surfaces {
                 .colors
                 .as_ref()
                 .map_or(Vec4::ONE, |c| c[i0] * b0 + c[i1] * b1 + c[i2] * b2),
+            footprint: [[Vec2::ZERO; 2]; 2],
         }
     }
 
@@ -182,6 +193,7 @@ impl Surfaces {
         SurfaceAttributes {
             uv: [uv, uv],
             color: Vec4::ONE,
+            footprint: [[Vec2::ZERO; 2]; 2],
         }
     }
 
@@ -336,15 +348,33 @@ impl Surfaces {
         }
     }
 
-    /// The shading point of `hit` along `ray`.
+    /// The shading point of `hit` along `ray`, its textures looked up at the point.
     pub fn interaction(&self, ray: &Ray, hit: &Hit) -> Interaction {
+        self.interaction_in_cone(ray, hit, 0.0, false)
+    }
+
+    /// The shading point of `hit` along `ray`, whose cone is `width` wide there: the
+    /// textures of triangles are filtered over the footprint (`world::footprint`; a circle
+    /// with `isotropic`); those of spheres and quadrics are looked up at the point.
+    pub fn interaction_in_cone(
+        &self,
+        ray: &Ray,
+        hit: &Hit,
+        width: f32,
+        isotropic: bool,
+    ) -> Interaction {
         let wo = -ray.dir.normalize();
+        let cone = (width > 0.0).then_some(Cone {
+            dir: -wo,
+            width,
+            isotropic,
+        });
         let (p, n_front, ns_front, attrs, material, tangents) = if hit.instance != NOT_PLACED {
-            self.placed_surface(hit)
+            self.placed_surface(hit, cone)
         } else {
             match self.prims[hit.prim as usize] {
                 PrimRef::Triangle { mesh, tri } => {
-                    self.triangle_surface(&self.meshes[mesh as usize], tri, hit)
+                    self.triangle_surface(&self.meshes[mesh as usize], tri, hit, cone, None)
                 }
                 PrimRef::Sphere(s) => {
                     let s = &self.spheres[s as usize];
@@ -399,10 +429,11 @@ impl Surfaces {
 
     /// [`Surfaces::triangle_surface`] of a placed hit, moved from the shared mesh's object
     /// space into render space.
-    fn placed_surface(&self, hit: &Hit) -> SurfacePoint {
+    fn placed_surface(&self, hit: &Hit, cone: Option<Cone>) -> SurfacePoint {
         let placed = &self.placements[hit.instance as usize];
         let mesh = &self.shared_meshes[placed.mesh as usize];
-        let (p, n, ns, attrs, material, tangents) = self.triangle_surface(mesh, hit.prim, hit);
+        let (p, n, ns, attrs, material, tangents) =
+            self.triangle_surface(mesh, hit.prim, hit, cone, Some(&placed.to_render));
         let n = (placed.normal_matrix * n).normalize_or_zero();
         let tangents = tangents.map(|[t, b, normal]| {
             let linear = |v: Vec3| placed.to_render.transform_vector3(v).normalize_or_zero();
@@ -424,17 +455,44 @@ impl Surfaces {
 
     /// Position, front geometric normal, front shading normal (interpolated, then
     /// normal-mapped), attributes, material and tangent frame (where the mesh has tangents)
-    /// of a triangle hit.
-    fn triangle_surface(&self, mesh: &Mesh, tri: u32, hit: &Hit) -> SurfacePoint {
+    /// of a triangle hit. With `cone` (the render-space ray direction and the cone's width),
+    /// the attributes carry the footprint of each UV set; `to_render` places an object-space
+    /// mesh.
+    fn triangle_surface(
+        &self,
+        mesh: &Mesh,
+        tri: u32,
+        hit: &Hit,
+        cone: Option<Cone>,
+        to_render: Option<&Affine3A>,
+    ) -> SurfacePoint {
         let tri = mesh.triangles[tri as usize];
         let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = p0 * b0 + p1 * b1 + p2 * b2;
         let n_front = geometric_normal(p0, p1, p2).normalize();
-        let attrs = self.triangle_attributes(mesh, tri, b1, b2);
+        let mut attrs = self.triangle_attributes(mesh, tri, b1, b2);
         let mat = &self.materials[mesh.material as usize];
         let [i0, i1, i2] = tri.map(|i| i as usize);
+        if let Some(cone) = cone {
+            let corners = match to_render {
+                Some(m) => [p0, p1, p2].map(|p| m.transform_point3(p)),
+                None => [p0, p1, p2],
+            };
+            for (set, uvs) in mesh.uvs.iter().enumerate() {
+                if let Some(uvs) = uvs {
+                    let uv = [uvs[i0], uvs[i1], uvs[i2]];
+                    attrs.footprint[set] = footprint::triangle_footprint(
+                        corners,
+                        uv,
+                        cone.dir,
+                        cone.width,
+                        cone.isotropic,
+                    );
+                }
+            }
+        }
         let mut ns = mesh
             .normals
             .as_ref()

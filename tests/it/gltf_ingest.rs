@@ -302,6 +302,7 @@ fn materials_factors_textures_and_extensions() {
     let attrs = SurfaceAttributes {
         uv: [Vec2::ZERO; 2],
         color: Vec4::ONE,
+        footprint: [[Vec2::ZERO; 2]; 2],
     };
     let base = texture_lookup(&scene.textures, &t, &attrs, true);
     assert!(
@@ -338,6 +339,7 @@ fn texture_transform_moves_the_texture() {
     let attrs = SurfaceAttributes {
         uv: [Vec2::new(0.25, 0.5); 2],
         color: Vec4::ONE,
+        footprint: [[Vec2::ZERO; 2]; 2],
     };
     let lookup = |s: &Scene| {
         texture_lookup(

@@ -131,6 +131,7 @@ fn float_textures_are_linear_in_colour_slots() {
         width: 1,
         height: 1,
         texels: std::sync::Arc::new(Texels::RgbaF32(vec![[0.5, 2.0, 0.25, 1.0]])),
+        mips: Default::default(),
         wrap_u: lucerna::scene::Wrap::Repeat,
         wrap_v: lucerna::scene::Wrap::Repeat,
         nearest: false,

@@ -25,3 +25,4 @@ mod quadric_lights;
 mod scene_file;
 mod split;
 mod stress;
+mod texture_filter;

@@ -105,6 +105,7 @@ impl<'a> Importer<'a> {
             width: decoded.0,
             height: decoded.1,
             texels: decoded.2,
+            mips: Default::default(),
             wrap_u: wrap(sampler.wrap_s()),
             wrap_v: wrap(sampler.wrap_t()),
             nearest: sampler.mag_filter() == Some(gltf::texture::MagFilter::Nearest),

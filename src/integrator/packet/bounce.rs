@@ -13,6 +13,7 @@ use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf, BsdfStorage};
 use crate::sampling::sampler::{SamplerKind, SplitKind, sobol_4d_lanes, vertex_seeds_lanes};
 use crate::simd::{F8, LANES, M8, U8, V3};
+use crate::world::footprint::RayCone;
 use glam::Vec3;
 
 impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
@@ -38,6 +39,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         let mut storage = layered.each_mut().map(Some);
         let (mut scatter, mut lane_shaded) = (0u32, 0u32);
         let hits = world.intersect_lanes(&lanes.ray, *active);
+        // Ray cones are followed only where textures are filtered by them.
+        let cones = world.footprints.on();
         for lane in Lanes::new(*active) {
             let (sample, depth) = (lanes.sample[lane], lanes.depth.lane(lane));
             let slot = &mut buffers.slots[sample as usize];
@@ -53,6 +56,11 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 continue;
             };
             let camera_ray = depth == 0 && lanes.branch[lane] == 0;
+            if cones {
+                lanes
+                    .arrived
+                    .set_lane(lane, hit.t * lanes.ray.dir.lane(lane).length());
+            }
             if let Some((mesh, tri)) = world.surfaces.hit_triangle(&hit)
                 && let Some(bsdf) = &self.mesh_bsdfs[mesh as usize]
             {
@@ -75,7 +83,14 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 continue;
             }
             let ray = lanes.ray.ray(lane);
-            let it = world.interaction(&ray, &hit);
+            let width = if cones {
+                lanes.cone_width.lane(lane)
+                    + lanes.cone_spread.lane(lane) * lanes.arrived.lane(lane)
+            } else {
+                0.0
+            };
+            let rough = lanes.prev_delta & (1 << lane) == 0;
+            let it = world.interaction_in_cone(&ray, &hit, width, rough);
             if world.surfaces.scalar_only[it.material as usize] {
                 // Glass (volumes, refraction) and filters: the scalar code, lane by lane.
                 self.hand_off(lanes, lane, (ray, hit), slot, rays);
@@ -185,6 +200,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         buffers: &mut PacketBuffers,
     ) {
         let counts = self.split.at(0);
+        let footprints = self.world.footprints;
         let rounds = v.rounds(v.mask, counts.bsdf);
         // The parents' throughputs: the first round updates their lanes.
         let beta = lanes.beta;
@@ -224,6 +240,22 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             let positive = b.x.gt(zero) | b.y.gt(zero) | b.z.gt(zero);
             let alive = ok & ((!roulette | u[3].lt(survival)) & positive).bits();
             let (pdf, delta) = (s.pdf * n_bsdf, s.delta.bits());
+            // The continued rays' cones (`RayCone::scattered` in lanes).
+            let (cone_width, cone_spread) = if footprints.on() {
+                let lobe = (F8::splat(std::f32::consts::FRAC_1_PI) / s.pdf).sqrt()
+                    * F8::splat(footprints.lobe_scale);
+                let widened = F8::select(
+                    s.pdf.gt(F8::ZERO),
+                    lanes.cone_spread.max(lobe),
+                    lanes.cone_spread,
+                );
+                (
+                    lanes.cone_width + lanes.cone_spread * lanes.arrived,
+                    F8::select(s.delta, lanes.cone_spread, widened),
+                )
+            } else {
+                (lanes.cone_width, lanes.cone_spread)
+            };
             if k == 0 {
                 // The paths go on in their lanes.
                 let m = M8::from_bits(alive);
@@ -237,6 +269,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 lanes.prev_delta = (lanes.prev_delta & !alive) | (delta & alive);
                 lanes.depth.merge(m, depth);
                 lanes.prev_nee_count.merge(m, nee_count);
+                if footprints.on() {
+                    lanes.cone_width.merge(m, cone_width);
+                    lanes.cone_spread.merge(m, cone_spread);
+                }
                 continued = alive;
                 continue;
             }
@@ -255,6 +291,10 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                         prev_pdf: pdf.lane(lane),
                         prev_delta: delta & (1 << lane) != 0,
                         prev_nee_count: counts.nee,
+                        cone: RayCone {
+                            width: cone_width.lane(lane),
+                            spread: cone_spread.lane(lane),
+                        },
                     },
                     sample,
                 });

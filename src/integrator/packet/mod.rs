@@ -345,7 +345,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         }
         out.fill(starts.len(), |lane| Path {
             ray: rays[lane],
-            state: LaneState::camera(rays[lane].origin),
+            state: LaneState::camera(rays[lane].origin, self.world.footprints.camera),
             sample: sample[lane],
         });
     }

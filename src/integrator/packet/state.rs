@@ -10,6 +10,7 @@ use crate::film::record::{Contribution, FirstHit, Recorder};
 use crate::geometry::ray::{Ray, RayLanes};
 use crate::sampling::sampler::Sampler;
 use crate::simd::{F8, LANES, U8, V3};
+use crate::world::footprint::RayCone;
 use glam::Vec3;
 
 /// A pixel's share of a pass: where it lies and which of its samples to take.
@@ -46,13 +47,15 @@ pub(super) struct LaneState {
     pub(super) prev_pdf: f32,
     pub(super) prev_delta: bool,
     pub(super) prev_nee_count: u32,
+    pub(super) cone: RayCone,
 }
 
 impl LaneState {
-    /// The state of a camera path whose ray starts at `origin` (`PathState::camera`'s).
+    /// The state of a camera path whose ray starts at `origin` with cone `cone`
+    /// (`PathState::camera`'s).
     #[inline(always)]
-    pub(super) fn camera(origin: Vec3) -> Self {
-        let s = PathState::camera(origin);
+    pub(super) fn camera(origin: Vec3, cone: RayCone) -> Self {
+        let s = PathState::camera(origin, cone);
         Self {
             beta: s.beta,
             depth: s.depth,
@@ -62,6 +65,7 @@ impl LaneState {
             prev_pdf: s.prev_pdf,
             prev_delta: s.prev_delta,
             prev_nee_count: s.prev_nee_count,
+            cone: s.cone,
         }
     }
 }
@@ -82,6 +86,7 @@ pub(super) const NO_PATH: Path = Path {
         prev_pdf: 0.0,
         prev_delta: true,
         prev_nee_count: 1,
+        cone: RayCone::POINT,
     },
     sample: 0,
 };
@@ -103,6 +108,12 @@ pub(super) struct PathLanes {
     pub(super) depth: U8,
     pub(super) branch: [u32; LANES],
     pub(super) prev_nee_count: U8,
+    /// Each lane's ray cone (`world::footprint`): its width where the ray starts and its
+    /// spread.
+    pub(super) cone_width: F8,
+    pub(super) cone_spread: F8,
+    /// The distance to each lane's hit of this bounce (render space).
+    pub(super) arrived: F8,
     /// Sample slot of each lane's path.
     pub(super) sample: [u32; LANES],
     /// Each lane's sample's Sobol key ([`Sampler::sobol_key`]): its bit-reversed index and
@@ -135,6 +146,9 @@ impl PathLanes {
             depth: U8::splat(0),
             branch: [0; LANES],
             prev_nee_count: U8::splat(0),
+            cone_width: F8::ZERO,
+            cone_spread: F8::ZERO,
+            arrived: F8::ZERO,
             sample: [0; LANES],
             sobol_rev: U8::splat(0),
             sobol_seed: U8::splat(0),
@@ -169,6 +183,8 @@ impl PathLanes {
         self.depth.set_lane(lane, state.depth);
         self.branch[lane] = state.branch;
         self.prev_nee_count.set_lane(lane, state.prev_nee_count);
+        self.cone_width.set_lane(lane, state.cone.width);
+        self.cone_spread.set_lane(lane, state.cone.spread);
         self.sample[lane] = path.sample;
         self.sobol_rev.set_lane(lane, rev);
         self.sobol_seed.set_lane(lane, seed);
@@ -195,6 +211,10 @@ impl PathLanes {
             vertex: self.depth.lane(lane),
             media: Media::EMPTY,
             crossed: 0.0,
+            cone: RayCone {
+                width: self.cone_width.lane(lane),
+                spread: self.cone_spread.lane(lane),
+            },
         }
     }
 }

@@ -5,6 +5,7 @@ use lucerna::film::Film;
 use lucerna::film::aov::{Aov, AovSet};
 use lucerna::film::filter::PixelFilter;
 use lucerna::integrator::Settings;
+use lucerna::integrator::settings::TextureFilter;
 use lucerna::render::{self, RenderOptions, RenderStats};
 use lucerna::scene::{Camera, Environment, Instance, Material, Mesh, Projection, Scene};
 use lucerna::world::World;
@@ -188,8 +189,9 @@ pub fn render_aovs(
         .build()
         .unwrap();
     pool.install(|| {
-        let world =
+        let mut world =
             World::build(scene, None, Some(res), settings.light_select).expect("test scene builds");
+        world.set_footprints(settings.texture_filter == TextureFilter::Mip, Some(spp));
         let options = RenderOptions {
             spp: Some(spp),
             settings,
@@ -282,6 +284,7 @@ pub fn make_the_light_a_screen(scene: &mut Scene) {
         width: w,
         height: h,
         texels: std::sync::Arc::new(Texels::RgbaF32(texels)),
+        mips: Default::default(),
         wrap_u: Wrap::ClampToEdge,
         wrap_v: Wrap::ClampToEdge,
         nearest: false,
