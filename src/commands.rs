@@ -210,12 +210,13 @@ pub fn inspect(
         count(&|m| m.alpha_mode != crate::scene::AlphaMode::Opaque),
         count(&|m| m.double_sided),
     );
-    let texel_bytes: usize = scene.textures.iter().map(|t| t.memory_bytes()).sum();
+    let texel_bytes = scene.texel_bytes();
     let _ = writeln!(
         out,
-        "  textures: {} ({} bytes of texels)",
+        "  textures: {} ({} bytes of texels; `--texture-filter mip` adds about {} bytes of MIP pyramids)",
         scene.textures.len(),
-        texel_bytes
+        texel_bytes,
+        texel_bytes / 3
     );
     let emissive_triangles: usize = scene
         .instances
