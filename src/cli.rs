@@ -304,7 +304,7 @@ struct RenderArgs {
     guiding: Option<String>,
     /// Texture lookups: bilinear (at a point, full resolution) or mip (filtered over the
     /// footprint of each sample's ray cone through MIP maps: no aliasing at few samples,
-    /// 10-25 % more time a sample on textured assets). [default: bilinear]
+    /// 10-20 % more time a sample on textured assets). [default: bilinear]
     #[arg(long, help_heading = "Integrator")]
     texture_filter: Option<String>,
     /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1, or auto (learned

@@ -100,7 +100,7 @@ impl Default for Settings {
     /// Power heuristic (β = 2), throughput roulette (threshold 0.1: the most efficient of
     /// 0.01, 0.05, 0.1 and 0.2 at equal time on the Cornell box and the indirect room), no
     /// depth limit, light selection by power, area sampling, no guiding, bilinear texture
-    /// lookups (as Mitsuba 3, Cycles and pbrt-v4 by default: MIP filtering costs 10-25 % a
+    /// lookups (as Mitsuba 3, Cycles and pbrt-v4 by default: MIP filtering costs 10-20 % a
     /// sample on textured assets and pays only at few samples), no splitting, Owen-scrambled
     /// Sobol, seed 0.
     fn default() -> Self {
