@@ -153,6 +153,7 @@ pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Resul
                 wrap_u: Wrap::Repeat,
                 wrap_v: Wrap::ClampToEdge,
                 nearest: true,
+                mipmaps: true,
             };
             scene::Texels::RgbaF32(
                 (0..decoded.height)
@@ -171,6 +172,7 @@ pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Resul
         wrap_u: Wrap::Repeat,
         wrap_v: Wrap::ClampToEdge,
         nearest: false,
+        mipmaps: true,
     });
     scene.environment = Some(scene::Environment::LatLong {
         texture: (scene.textures.len() - 1) as u32,

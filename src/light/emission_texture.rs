@@ -370,6 +370,7 @@ mod tests {
             wrap_u: wrap,
             wrap_v: wrap,
             nearest: false,
+            mipmaps: true,
         }
     }
 

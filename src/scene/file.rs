@@ -129,6 +129,13 @@ struct TextureEntry {
     wrap_u: Wrap,
     wrap_v: Wrap,
     nearest: bool,
+    /// Absent in files written before MIP filtering: allowed.
+    #[serde(default = "allowed")]
+    mipmaps: bool,
+}
+
+fn allowed() -> bool {
+    true
 }
 
 /// Appends arrays of plain little-endian values to the buffer.
@@ -227,6 +234,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
                 wrap_u: t.wrap_u,
                 wrap_v: t.wrap_v,
                 nearest: t.nearest,
+                mipmaps: t.mipmaps,
             }
         })
         .collect();
@@ -593,6 +601,7 @@ fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {
         wrap_u: entry.wrap_u,
         wrap_v: entry.wrap_v,
         nearest: entry.nearest,
+        mipmaps: entry.mipmaps,
     }
 }
 

@@ -87,6 +87,9 @@ pub struct Texture {
     pub wrap_v: Wrap,
     /// Nearest-texel lookups instead of bilinear when magnified (glTF magFilter NEAREST).
     pub nearest: bool,
+    /// Whether footprint lookups may use MIP levels (false where the sampler asks for none:
+    /// glTF minFilter NEAREST or LINEAR): without, they are the point lookup.
+    pub mipmaps: bool,
 }
 
 #[inline]
@@ -222,7 +225,7 @@ impl Texture {
         } else {
             (lb, la, axes[1])
         };
-        if !(major > 1.0) || !major.is_finite() || !uv.is_finite() {
+        if !(major > 1.0) || !major.is_finite() || !uv.is_finite() || !self.mipmaps {
             return self.sample(uv, srgb);
         }
         let minor = minor.max(major / MAX_ANISOTROPY).max(1.0);
@@ -419,6 +422,7 @@ mod tests {
             wrap_u: Wrap::ClampToEdge,
             wrap_v: Wrap::ClampToEdge,
             nearest: false,
+            mipmaps: true,
         };
         assert!((t.sample(Vec2::new(0.25, 0.5), false).x - 0.0).abs() < 1e-6);
         assert!((t.sample(Vec2::new(0.5, 0.5), false).x - 0.5).abs() < 1e-6);
@@ -437,6 +441,7 @@ mod tests {
             wrap_u: Wrap::Repeat,
             wrap_v: Wrap::Repeat,
             nearest: false,
+            mipmaps: true,
         }
     }
 
@@ -484,6 +489,16 @@ mod tests {
                 t.sample(uv, true)
             );
         }
+        // A sampler without MIP levels looks up the point whatever the footprint.
+        let point = Texture {
+            mipmaps: false,
+            ..t.clone()
+        };
+        let uv = Vec2::new(0.3, 0.7);
+        assert_eq!(
+            point.sample_footprint(uv, [Vec2::X, Vec2::Y], true),
+            t.sample(uv, true)
+        );
     }
 
     #[test]

@@ -176,6 +176,7 @@ fn patch_texture(background: f32) -> Texture {
         wrap_u: Wrap::Repeat,
         wrap_v: Wrap::Repeat,
         nearest: false,
+        mipmaps: true,
     }
 }
 
@@ -593,6 +594,7 @@ fn environment_map_importance_sampling() {
         wrap_u: Wrap::Repeat,
         wrap_v: Wrap::ClampToEdge,
         nearest: true,
+        mipmaps: true,
     };
     let env = Environment::Map(Box::new(EnvironmentMap::new(
         texture,

@@ -666,3 +666,38 @@ fn unlit_surfaces_show_their_colour_to_the_camera_and_let_other_rays_pass() {
     }
     assert!(floor > 900, "{floor} floor pixels");
 }
+
+#[test]
+fn samplers_without_mipmaps_keep_full_resolution_lookups() {
+    // minFilter NEAREST (9728) or LINEAR (9729) asks for no MIP levels; unset or a
+    // *_MIPMAP_* filter allows them.
+    let dir = temp();
+    let mut b = Builder::new();
+    let png = png_rgba(1, 1, &[[200, 100, 50, 255]]);
+    let filters = [
+        json!({"minFilter": 9729}),
+        json!({"minFilter": 9728}),
+        json!({}),
+        json!({"minFilter": 9987}),
+    ];
+    let textures: Vec<usize> = filters
+        .iter()
+        .map(|f| b.png_texture(&png, f.clone()))
+        .collect();
+    let quad = b.quad_primitive(None);
+    let mut primitives = Vec::new();
+    for t in &textures {
+        let m = b.add(
+            "materials",
+            json!({"pbrMetallicRoughness": {"baseColorTexture": {"index": t}}}),
+        );
+        let mut p = quad.clone();
+        p["material"] = json!(m);
+        primitives.push(p);
+    }
+    let mesh = b.mesh(json!(primitives));
+    b.root(json!({"mesh": mesh}));
+    let scene = load(&b.write_embedded(dir.path(), "min_filters"));
+    let mipmaps: Vec<bool> = scene.textures.iter().map(|t| t.mipmaps).collect();
+    assert_eq!(mipmaps, [false, false, true, true]);
+}

@@ -135,6 +135,7 @@ fn float_textures_are_linear_in_colour_slots() {
         wrap_u: lucerna::scene::Wrap::Repeat,
         wrap_v: lucerna::scene::Wrap::Repeat,
         nearest: false,
+        mipmaps: true,
     };
     assert_eq!(
         t.sample(Vec2::splat(0.5), true).to_array(),

@@ -28,7 +28,10 @@ fn textured_scene(dir: &Path) -> PathBuf {
             [255, 255, 255, 0],
         ],
     );
-    let colour = b.png_texture(&png, json!({"magFilter": 9728, "wrapS": 33648}));
+    let colour = b.png_texture(
+        &png,
+        json!({"magFilter": 9728, "minFilter": 9729, "wrapS": 33648}),
+    );
     let normal = b.png_texture(&png_rgba(1, 1, &[[128, 128, 255, 255]]), json!({}));
     let m = b.add(
         "materials",
@@ -102,6 +105,13 @@ fn round_trip_renders_identically() {
         ));
         file::write(&original, &path).unwrap();
         let read = ingest::load(&path, &Default::default()).unwrap();
+        let samplers = |s: &Scene| {
+            s.textures
+                .iter()
+                .map(|t| (t.nearest, t.mipmaps, t.wrap_u, t.wrap_v))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(samplers(&read), samplers(&original));
         // Writing what was read gives the same files: nothing is lost or reinterpreted.
         let again = dir.join("again").join(path.file_name().unwrap());
         std::fs::create_dir_all(again.parent().unwrap()).unwrap();

@@ -47,6 +47,7 @@ fn checker_plane() -> Scene {
         wrap_u: Wrap::Repeat,
         wrap_v: Wrap::Repeat,
         nearest: false,
+        mipmaps: true,
     };
     let material = Material {
         name: "checker".into(),

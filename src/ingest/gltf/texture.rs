@@ -109,6 +109,11 @@ impl<'a> Importer<'a> {
             wrap_u: wrap(sampler.wrap_s()),
             wrap_v: wrap(sampler.wrap_t()),
             nearest: sampler.mag_filter() == Some(gltf::texture::MagFilter::Nearest),
+            // minFilter NEAREST or LINEAR: the author asks for no MIP levels.
+            mipmaps: !matches!(
+                sampler.min_filter(),
+                Some(gltf::texture::MinFilter::Nearest | gltf::texture::MinFilter::Linear)
+            ),
         });
         let index = (self.scene.textures.len() - 1) as u32;
         self.textures.insert(texture.index(), index);

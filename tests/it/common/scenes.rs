@@ -288,6 +288,7 @@ pub fn make_the_light_a_screen(scene: &mut Scene) {
         wrap_u: Wrap::ClampToEdge,
         wrap_v: Wrap::ClampToEdge,
         nearest: false,
+        mipmaps: true,
     });
     let mesh = &mut scene.meshes[light];
     let (lo, hi) = mesh.positions.iter().fold(
