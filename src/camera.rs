@@ -1,6 +1,7 @@
 //! The render camera: generates primary rays in render space from film positions, and
 //! provides the world-to-camera and world-to-NDC matrices compositors read from the EXR.
 
+use crate::geometry::cone::RayCone;
 use crate::geometry::ray::Ray;
 use crate::geometry::space::RenderSpace;
 use crate::sampling::warp::square_to_uniform_disk;
@@ -246,8 +247,7 @@ impl Camera {
     /// The cone of a primary ray through one pixel: a perspective camera's spreads by the
     /// angle a pixel spans at the image centre; an orthographic camera's is as wide as a
     /// pixel and does not spread.
-    pub fn pixel_cone(&self) -> crate::world::footprint::RayCone {
-        use crate::world::footprint::RayCone;
+    pub fn pixel_cone(&self) -> RayCone {
         match self.kind {
             Kind::Perspective { tan_half_y, .. } => RayCone {
                 width: 0.0,

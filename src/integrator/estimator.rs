@@ -14,10 +14,10 @@
 
 use super::media::Media;
 use super::settings::Settings;
+use crate::geometry::cone::RayCone;
 use crate::geometry::ray::Ray;
 use crate::light::{Light, LightSample};
 use crate::material::PerLobe;
-use crate::world::footprint::RayCone;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 

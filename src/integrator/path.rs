@@ -40,11 +40,11 @@ use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
 use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
+use crate::geometry::cone::RayCone;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::scene::Material;
-use crate::world::footprint::RayCone;
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 

@@ -7,13 +7,13 @@ use super::PacketTracer;
 use super::shading::{Dim, NO_BSDF, Shading, Vertices};
 use super::state::{LaneState, PacketBuffers, Path, PathLanes};
 use super::weights::roulette_survival;
+use crate::geometry::cone::RayCone;
 use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
 use crate::geometry::triangle::Lanes;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf, BsdfStorage};
 use crate::sampling::sampler::{SamplerKind, SplitKind, sobol_4d_lanes, vertex_seeds_lanes};
 use crate::simd::{F8, LANES, M8, U8, V3};
-use crate::world::footprint::RayCone;
 use glam::Vec3;
 
 impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {

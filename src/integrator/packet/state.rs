@@ -7,10 +7,10 @@ use super::super::media::Media;
 use super::super::split::{PixelParts, SampleParts, SamplePoints, SplitStats};
 use crate::film::PixelAccumulator;
 use crate::film::record::{Contribution, FirstHit, Recorder};
+use crate::geometry::cone::RayCone;
 use crate::geometry::ray::{Ray, RayLanes};
 use crate::sampling::sampler::Sampler;
 use crate::simd::{F8, LANES, U8, V3};
-use crate::world::footprint::RayCone;
 use glam::Vec3;
 
 /// A pixel's share of a pass: where it lies and which of its samples to take.
