@@ -25,7 +25,8 @@ impl RayCone {
 
     /// The cone of a ray leaving a vertex `distance` along this one by a BSDF sample of
     /// solid-angle density `pdf` (`delta` for a specular lobe), with lobe cones scaled by
-    /// `lobe_scale` ([`Footprints::lobe_scale`]).
+    /// `lobe_scale` (`world::footprint::Footprints::lobe_scale`). The spread becomes at least
+    /// the half-angle of the cone holding one sample's share of the lobe, `sqrt(1 / (π p))`.
     #[inline]
     pub fn scattered(&self, distance: f32, pdf: f32, delta: bool, lobe_scale: f32) -> RayCone {
         let spread = if delta || !(pdf > 0.0) {

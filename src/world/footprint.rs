@@ -9,10 +9,11 @@
 //! orthographic camera's, as wide as a pixel without spreading). A specular bounce keeps
 //! the spread (a flat mirror's image; curvature is not followed, so a curved mirror's
 //! reflection is filtered less than it could be, never more). A bounce off a lobe with
-//! extent widens the spread to the angle of the cone that holds one sample's share of the
-//! lobe: a sample of density `p` stands for a solid angle of `1 / p`, a cone of half-angle
-//! `sqrt(1 / (π p))`, so diffuse bounces look textures up coarsely and sharp glossy ones
-//! finely.
+//! extent widens the spread to the half-angle of the cone that holds one sample's share of
+//! the lobe: a sample of density `p` stands for a solid angle of `1 / p`, a cone of
+//! half-angle `sqrt(1 / (π p))`, so diffuse bounces look textures up coarsely and sharp
+//! glossy ones finely (the half-angle, not the full angle: the blur of lookups after a
+//! bounce is a bias, kept small). Those lookups take the footprint as a circle: one probe.
 //!
 //! Where the cone meets a triangle, its circular cross-section projects to an ellipse on
 //! the triangle's plane (stretched by `1 / |cos θ|` along the ray's direction in the plane),
