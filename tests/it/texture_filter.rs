@@ -116,7 +116,7 @@ fn mip_maps_remove_aliasing_at_few_samples_and_converge_to_full_resolution() {
     let reference = render_with(TextureFilter::Bilinear, 1024, 1);
     let error = |f: TextureFilter, spp: u32| rel_mse(&render_with(f, spp, 2), &reference);
     // At 4 samples bilinear lookups alias towards the horizon; filtered ones do not (the
-    // measured ratio is about 0.4).
+    // measured ratio is about a quarter).
     let (bilinear, mip) = (
         error(TextureFilter::Bilinear, 4),
         error(TextureFilter::Mip, 4),
