@@ -265,6 +265,19 @@ impl Material {
                     || self.anisotropy.is_some()))
     }
 
+    /// True for the texture slots (by [`Material::texture_slots`] name) that are read as
+    /// colour, sRGB-decoding integer texels (`material::base_color`, `emission`, the
+    /// specular and sheen colours); the others are data.
+    pub fn is_colour_slot(name: &str) -> bool {
+        matches!(
+            name,
+            "base_color_texture"
+                | "emissive_texture"
+                | "specular.color_texture"
+                | "sheen.color_texture"
+        )
+    }
+
     /// Every texture slot the material uses, with its field name.
     pub fn texture_slots(&self) -> impl Iterator<Item = (&'static str, &TextureRef)> {
         let specular = &self.specular;

@@ -231,18 +231,19 @@ impl Texture {
         let minor = minor.max(major / MAX_ANISOTROPY).max(1.0);
         let lod = minor.log2();
         let probes = ((major / minor).ceil() as usize).clamp(1, MAX_ANISOTROPY as usize);
+        let chain = self.chain(srgb);
         let mut sum = Vec4::ZERO;
         for i in 0..probes {
             let offset = (i as f32 + 0.5) / probes as f32 - 0.5;
-            sum += self.trilinear(uv + along * offset, lod, srgb);
+            sum += self.trilinear(chain, uv + along * offset, lod, srgb);
         }
         sum / probes as f32
     }
 
-    /// Trilinear lookup of `uv` at (fractional) MIP level `lod` ≥ 0.
+    /// Trilinear lookup of `uv` at (fractional) MIP level `lod` ≥ 0 of the image and its
+    /// levels `chain` (for reading with `srgb`).
     #[inline]
-    fn trilinear(&self, uv: Vec2, lod: f32, srgb: bool) -> Vec4 {
-        let chain = self.chain(srgb);
+    fn trilinear(&self, chain: &[Level], uv: Vec2, lod: f32, srgb: bool) -> Vec4 {
         let top = chain.len() as f32;
         let lod = lod.min(top);
         let fine = lod.floor();

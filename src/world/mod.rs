@@ -289,12 +289,6 @@ impl World {
     /// colour slots sRGB-decode integer texels, the others do not), in parallel.
     fn build_mips(&self) {
         use rayon::prelude::*;
-        const COLOUR_SLOTS: [&str; 4] = [
-            "base_color_texture",
-            "emissive_texture",
-            "specular.color_texture",
-            "sheen.color_texture",
-        ];
         let textures = &self.surfaces.textures;
         let mut wanted: Vec<(usize, bool)> = Vec::new();
         let mut seen = std::collections::HashSet::new();
@@ -303,7 +297,7 @@ impl World {
                 let Some(t) = textures.get(slot.texture as usize) else {
                     continue;
                 };
-                let srgb = COLOUR_SLOTS.contains(&name);
+                let srgb = crate::scene::Material::is_colour_slot(name);
                 if seen.insert((std::sync::Arc::as_ptr(&t.mips), srgb)) {
                     wanted.push((slot.texture as usize, srgb));
                 }
