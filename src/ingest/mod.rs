@@ -154,6 +154,7 @@ pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Resul
                 wrap_v: Wrap::ClampToEdge,
                 nearest: true,
                 mipmaps: true,
+                udim: None,
             };
             scene::Texels::RgbaF32(
                 (0..decoded.height)
@@ -173,6 +174,7 @@ pub fn set_environment_map(scene: &mut Scene, path: &Path, scale: Vec3) -> Resul
         wrap_v: Wrap::ClampToEdge,
         nearest: false,
         mipmaps: true,
+        udim: None,
     });
     scene.environment = Some(scene::Environment::LatLong {
         texture: (scene.textures.len() - 1) as u32,

@@ -371,6 +371,7 @@ mod tests {
             wrap_v: wrap,
             nearest: false,
             mipmaps: true,
+            udim: None,
         }
     }
 

@@ -6,7 +6,9 @@
 //! ([`strip_unused_attributes`]).
 
 use super::material::{Reduced, SMOOTH_ALPHA};
+use super::udim;
 use super::{AlphaMode, BsdfModel, LightKind, Material, Scene};
+use std::collections::BTreeSet;
 
 /// The BSDF lobes a scene's materials can produce.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -246,4 +248,54 @@ pub fn strip_unused_attributes(scene: &mut Scene) -> usize {
         }
     }
     dropped
+}
+
+/// One warning per UDIM texture whose meshes reach tiles it has no image for, naming the
+/// texture and those tiles (a triangle reaches the tile under its centroid's coordinates,
+/// after the slot's texture transform; there the fallback is read).
+pub fn missing_tile_warnings(scene: &Scene) -> Vec<String> {
+    let mut missing: Vec<BTreeSet<u32>> = vec![BTreeSet::new(); scene.textures.len()];
+    for mesh in &scene.meshes {
+        let Some(material) = scene.materials.get(mesh.material as usize) else {
+            continue;
+        };
+        for (_, slot) in material.texture_slots() {
+            let Some(udim) = scene
+                .textures
+                .get(slot.texture as usize)
+                .and_then(|t| t.udim.as_deref())
+            else {
+                continue;
+            };
+            let Some(uvs) = &mesh.uvs[(slot.tex_coord as usize).min(1)] else {
+                continue;
+            };
+            for tri in &mesh.triangles {
+                let [Some(a), Some(b), Some(c)] = tri.map(|v| uvs.get(v as usize).copied()) else {
+                    continue;
+                };
+                let centroid = (a + b + c) / 3.0;
+                let uv = slot.transform.map_or(centroid, |t| t.apply(centroid));
+                if let Some(number) = udim::number_at(uv)
+                    && !udim.has(number)
+                {
+                    missing[slot.texture as usize].insert(number);
+                }
+            }
+        }
+    }
+    missing
+        .iter()
+        .zip(&scene.textures)
+        .filter(|(tiles, _)| !tiles.is_empty())
+        .map(|(tiles, texture)| {
+            let list: Vec<String> = tiles.iter().map(u32::to_string).collect();
+            format!(
+                "UDIM texture {}: no image for tile{} {} that meshes reach: the fallback is read there",
+                texture.name,
+                if tiles.len() == 1 { "" } else { "s" },
+                list.join(", ")
+            )
+        })
+        .collect()
 }

@@ -132,6 +132,11 @@ struct TextureEntry {
     /// Absent in files written before MIP filtering: allowed.
     #[serde(default = "allowed")]
     mipmaps: bool,
+    /// A UDIM set: its tiles as (tile number, index of the texture holding the tile's
+    /// image); this entry's own image is read where the set has no tile. Empty for an
+    /// ordinary texture.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    tiles: Vec<(u32, u32)>,
 }
 
 fn allowed() -> bool {
@@ -235,6 +240,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
                 wrap_v: t.wrap_v,
                 nearest: t.nearest,
                 mipmaps: t.mipmaps,
+                tiles: t.udim.as_ref().map_or(Vec::new(), |u| u.tiles.clone()),
             }
         })
         .collect();
@@ -430,6 +436,15 @@ pub fn parse(
         shared.insert(key, texels.clone());
         textures.push(texture(t, texels));
     }
+    // UDIM sets, once every texture they name is read.
+    for (i, t) in manifest.textures.iter().enumerate() {
+        if t.tiles.is_empty() {
+            continue;
+        }
+        let udim = super::udim_set(t.tiles.clone(), &textures)
+            .map_err(|reason| bad(&format!("textures[{i}].tiles"), reason))?;
+        textures[i].udim = Some(Arc::new(udim));
+    }
     let scene = Scene {
         source: manifest.source,
         meshes,
@@ -461,6 +476,8 @@ pub fn parse(
         scene.subdivision_surfaces.push(surface);
     }
     validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
+    let udim_warnings = super::features::missing_tile_warnings(&scene);
+    scene.warnings.extend(udim_warnings);
     Ok(scene)
 }
 
@@ -602,6 +619,7 @@ fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {
         wrap_v: entry.wrap_v,
         nearest: entry.nearest,
         mipmaps: entry.mipmaps,
+        udim: None,
     }
 }
 
@@ -955,6 +973,11 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
         }) => {
             if *texture as usize >= textures {
                 fail("environment.texture".into(), "texture index out of range")
+            } else if scene.textures[*texture as usize].udim.is_some() {
+                fail(
+                    "environment.texture".into(),
+                    "a UDIM texture set cannot light the environment",
+                )
             } else if !(scale.is_finite() && scale.min_element() >= 0.0 && rotation.is_finite()) {
                 fail("environment".into(), "scale or rotation is not finite")
             } else {

@@ -6,6 +6,7 @@ pub mod features;
 pub mod file;
 pub mod material;
 pub mod texture;
+pub mod udim;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 pub use material::{
@@ -14,7 +15,7 @@ pub use material::{
 };
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;
-pub use texture::{MipChains, Texels, Texture, Wrap, share_mip_chains};
+pub use texture::{MipChains, Texels, Texture, Wrap, share_mip_chains, udim_set};
 
 /// A scene ready for [`crate::world::World::build`].
 #[derive(Clone, Debug, Default)]

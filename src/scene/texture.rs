@@ -14,6 +14,7 @@
 //! the stored values). A level keeps the base image's texel format, so a pyramid costs a
 //! third of the image.
 
+use super::udim::Udim;
 use crate::color::{SRGB8_TO_LINEAR, linear_to_srgb, srgb_to_linear};
 use glam::{Vec2, Vec4};
 use serde::{Deserialize, Serialize};
@@ -90,6 +91,9 @@ pub struct Texture {
     /// Whether footprint lookups may use MIP levels (false where the sampler asks for none:
     /// glTF minFilter NEAREST or LINEAR): without, they are the point lookup.
     pub mipmaps: bool,
+    /// For a UDIM texture set, its tiles; the texture's own image is then what coordinates
+    /// without a tile read (the asset's fallback colour).
+    pub udim: Option<Arc<Udim<Texture>>>,
 }
 
 #[inline]
@@ -200,6 +204,11 @@ impl Texture {
     /// Looks up `uv` (glTF convention: (0, 0) is the image's top-left corner), decoding sRGB
     /// 8-bit texels to linear when `srgb` is set. Bilinear unless the sampler says nearest.
     pub fn sample(&self, uv: Vec2, srgb: bool) -> Vec4 {
+        if let Some(udim) = &self.udim
+            && let Some((tile, at)) = udim.tile(uv)
+        {
+            return tile.sample(at, srgb);
+        }
         if !uv.is_finite() {
             return self.texel(0, 0, srgb);
         }
@@ -217,6 +226,11 @@ impl Texture {
     /// texture coordinates) are `axes`: anisotropic trilinear filtering (see the module
     /// notes); [`Texture::sample`] where the footprint is at most a texel.
     pub fn sample_footprint(&self, uv: Vec2, axes: [Vec2; 2], srgb: bool) -> Vec4 {
+        if let Some(udim) = &self.udim
+            && let Some((tile, at)) = udim.tile(uv)
+        {
+            return tile.sample_footprint(at, axes, srgb);
+        }
         let size = Vec2::new(self.width as f32, self.height as f32);
         let (a, b) = (axes[0] * size, axes[1] * size);
         let (la, lb) = (a.length(), b.length());
@@ -306,9 +320,13 @@ impl Texture {
     /// stalling its threads on the first lookups).
     pub fn build_mips(&self, srgb: bool) {
         self.chain(srgb);
+        for tile in self.udim.iter().flat_map(|u| u.images()) {
+            tile.chain(srgb);
+        }
     }
 
-    /// Mean linear value over the image (for light power estimates).
+    /// Mean linear value over the image (for light power estimates; a UDIM set's own image
+    /// is its fallback).
     pub fn mean(&self, srgb: bool) -> Vec4 {
         let n = (self.width as usize * self.height as usize).max(1);
         let mut sum = glam::DVec4::ZERO;
@@ -332,16 +350,37 @@ impl Texture {
     }
 }
 
+/// The UDIM set of `tiles` (tile number, index into `textures`): each tile's image must be
+/// a texture of its own, not another set. Errors name the problem.
+pub fn udim_set(tiles: Vec<(u32, u32)>, textures: &[Texture]) -> Result<Udim<Texture>, String> {
+    Udim::new(tiles, |index| match textures.get(index as usize) {
+        None => Err(format!("texture index {index} out of range")),
+        Some(t) if t.udim.is_some() => Err(format!("texture {index} is itself a UDIM set")),
+        Some(t) => Ok(t.clone()),
+    })
+}
+
 /// Makes the textures that share texels share one set of MIP pyramids, so that sampler
-/// variants of an image build its pyramid once.
+/// variants of an image, and a UDIM tile used elsewhere too, build its pyramid once.
 pub fn share_mip_chains(textures: &mut [Texture]) {
     let mut by_image: std::collections::HashMap<*const Texels, Arc<MipChains>> =
         std::collections::HashMap::new();
-    for t in textures {
+    let mut share = |t: &Texture| {
         let shared = by_image
             .entry(Arc::as_ptr(&t.texels))
             .or_insert_with(|| t.mips.clone());
-        t.mips = shared.clone();
+        Texture {
+            mips: shared.clone(),
+            ..t.clone()
+        }
+    };
+    for t in textures.iter_mut() {
+        t.mips = share(t).mips;
+    }
+    for t in textures.iter_mut() {
+        if let Some(udim) = &t.udim {
+            t.udim = Some(Arc::new(udim.map_images(&mut share)));
+        }
     }
 }
 
@@ -424,6 +463,7 @@ mod tests {
             wrap_v: Wrap::ClampToEdge,
             nearest: false,
             mipmaps: true,
+            udim: None,
         };
         assert!((t.sample(Vec2::new(0.25, 0.5), false).x - 0.0).abs() < 1e-6);
         assert!((t.sample(Vec2::new(0.5, 0.5), false).x - 0.5).abs() < 1e-6);
@@ -443,6 +483,7 @@ mod tests {
             wrap_v: Wrap::Repeat,
             nearest: false,
             mipmaps: true,
+            udim: None,
         }
     }
 

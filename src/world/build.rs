@@ -162,7 +162,7 @@ impl<'t> TexturedEmission<'t> {
     }
 
     /// The pyramid of material `m`'s emissive texture and the texture coordinates `uvs`
-    /// after its texture transform, or `None` for untextured emission.
+    /// after its texture transform, or `None` for untextured emission and UDIM sets.
     fn footprint(
         &mut self,
         m: &Material,
@@ -170,6 +170,12 @@ impl<'t> TexturedEmission<'t> {
     ) -> Option<(&EmissionPyramid, Option<[Vec2; 3]>)> {
         let slot = m.emissive_texture?;
         let textures = self.textures;
+        if textures[slot.texture as usize].udim.is_some() {
+            // A UDIM set's tiles lie outside the unit square a pyramid covers: its
+            // triangles are lights of the factor's power, sampled uniformly (unbiased, as
+            // every power estimate is; only the choice of light samples is less informed).
+            return None;
+        }
         let pyramid = self
             .pyramids
             .entry((slot.texture, m.emissive.to_array().map(f32::to_bits)))

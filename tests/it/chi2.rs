@@ -177,6 +177,7 @@ fn patch_texture(background: f32) -> Texture {
         wrap_v: Wrap::Repeat,
         nearest: false,
         mipmaps: true,
+        udim: None,
     }
 }
 
@@ -595,6 +596,7 @@ fn environment_map_importance_sampling() {
         wrap_v: Wrap::ClampToEdge,
         nearest: true,
         mipmaps: true,
+        udim: None,
     };
     let env = Environment::Map(Box::new(EnvironmentMap::new(
         texture,

@@ -136,6 +136,7 @@ fn float_textures_are_linear_in_colour_slots() {
         wrap_v: lucerna::scene::Wrap::Repeat,
         nearest: false,
         mipmaps: true,
+        udim: None,
     };
     assert_eq!(
         t.sample(Vec2::splat(0.5), true).to_array(),

@@ -153,6 +153,52 @@ fn round_trip_renders_identically() {
     assert_ne!(read.textures[0].nearest, read.textures[2].nearest);
 }
 
+/// A UDIM set (the base colour split into tiles 1001 and 1002 along u, the quad's u spread
+/// over both) survives the round trip: its tiles, their images and what renders.
+#[test]
+fn udim_sets_round_trip() {
+    let dir = temp_dir("udim-round-trip");
+    let mut scene = ingest::load(&textured_scene(&dir), &Default::default()).unwrap();
+    let base = scene.materials[0].base_color_texture.unwrap().texture as usize;
+    let tile = |value: f32| lucerna::scene::Texture {
+        name: format!("tile {value}"),
+        width: 1,
+        height: 1,
+        texels: std::sync::Arc::new(lucerna::scene::Texels::RgbaF32(vec![[
+            value, 0.5, 0.25, 1.0,
+        ]])),
+        ..scene.textures[base].clone()
+    };
+    let first = scene.textures.len() as u32;
+    scene.textures.extend([tile(0.9), tile(0.1)]);
+    let udim =
+        lucerna::scene::udim_set(vec![(1001, first), (1002, first + 1)], &scene.textures).unwrap();
+    scene.textures[base].udim = Some(std::sync::Arc::new(udim));
+    for mesh in &mut scene.meshes {
+        for uv in mesh.uvs[0].iter_mut().flatten() {
+            uv.x *= 2.0;
+        }
+    }
+    let path = dir.join("udim.lucerna");
+    file::write(&scene, &path).unwrap();
+    let read = ingest::load(&path, &Default::default()).unwrap();
+    let tiles = &read.textures[base]
+        .udim
+        .as_ref()
+        .expect("still a UDIM set")
+        .tiles;
+    assert_eq!(tiles, &[(1001, first), (1002, first + 1)]);
+    let at = |s: &Scene, u: f32| s.textures[base].sample(glam::Vec2::new(u, 0.5), false);
+    assert_eq!(at(&read, 0.5).x, 0.9);
+    assert_eq!(at(&read, 1.5).x, 0.1);
+    assert!(
+        read.warnings.iter().all(|w| !w.contains("UDIM")),
+        "{:?}",
+        read.warnings
+    );
+    assert_same_image(scene, read, "UDIM set");
+}
+
 /// Writes the Cornell box, lets `corrupt` change the manifest (and the buffer), and returns
 /// the error of reading it.
 fn error_after(name: &str, corrupt: impl FnOnce(&mut Value, &mut Vec<u8>)) -> lucerna::Error {

@@ -48,6 +48,7 @@ fn checker_plane() -> Scene {
         wrap_v: Wrap::Repeat,
         nearest: false,
         mipmaps: true,
+        udim: None,
     };
     let material = Material {
         name: "checker".into(),

@@ -1,8 +1,15 @@
 """Texture images for the plugin, read with OpenImageIO (PNG, JPEG, OpenEXR, Radiance HDR,
 TIFF, ...). Paths are resolved by USD's asset resolver, so images inside a .usdz package
-are read too."""
+are read too.
+
+UDIM texture sets (a path with `<UDIM>`, `<UVTILE>` or `_MAPID_`) are read as a
+[`TileSet`]: each tile whose file the resolver finds, among tiles 1001-1100 (the range
+OpenUSD's UsdShadeUdimUtils searches). `<UDIM>` and RenderMan's `_MAPID_` stand for the
+tile number 1001 + u + 10 v; `<UVTILE>` for `u<u+1>_v<v+1>` (Mudbox's one-based form, as
+MaterialX defines it)."""
 
 import os
+import re
 import tempfile
 
 import numpy as np
@@ -87,12 +94,17 @@ def _read_file(path):
 
 def read(asset_path):
     """Reads the image an `Sdf.AssetPath` names. Raises OSError with the reason."""
-    from . import heartbeat
-
-    heartbeat()
     resolved = asset_path.resolvedPath
     if not resolved:
         raise OSError(f"cannot resolve {asset_path.path!r}")
+    return read_resolved(resolved)
+
+
+def read_resolved(resolved):
+    """Reads the image at a path the asset resolver returned. Raises OSError."""
+    from . import heartbeat
+
+    heartbeat()
     if "[" in resolved and resolved.endswith("]"):
         # Inside a package (.usdz): copy the bytes out for OpenImageIO.
         asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
@@ -107,6 +119,72 @@ def read(asset_path):
     else:
         pixels, eight_bit, raw8 = _read_file(resolved)
     return Image(resolved, pixels, eight_bit, raw8)
+
+
+#: The tokens that make a path a UDIM texture set.
+UDIM_TOKENS = ("<UDIM>", "<UVTILE>", "_MAPID_")
+#: Tiles searched: OpenUSD's range (ten rows of ten).
+UDIM_SEARCH = range(1001, 1101)
+
+
+def udim_token(path):
+    """The UDIM token in `path`, or None."""
+    return next((t for t in UDIM_TOKENS if t in path), None)
+
+
+def udim_tile_path(path, number):
+    """`path` with its UDIM token replaced by tile `number`'s name."""
+    token = udim_token(path)
+    if token == "<UVTILE>":
+        u, v = (number - 1001) % 10, (number - 1001) // 10
+        return path.replace(token, f"u{u + 1}_v{v + 1}")
+    return path.replace(token, str(number))
+
+
+class TileSet:
+    """A UDIM texture set: `tiles`, {tile number: Image}, and `fallback`, the Image read
+    where the set has no tile (given as an Image, or as a linear RGBA value: a 1x1 image)."""
+
+    def __init__(self, path, tiles, fallback, unreadable=None):
+        self.path = path
+        self.tiles = tiles
+        #: Tiles whose files were found but could not be read: {number: reason}.
+        self.unreadable = unreadable or {}
+        if not isinstance(fallback, Image):
+            fallback = Image(f"{path} (fallback)",
+                             np.asarray(fallback, np.float32).reshape(1, 1, 4), False, None)
+        self.fallback = fallback
+
+    @property
+    def eight_bit(self):
+        return all(t.eight_bit for t in self.tiles.values())
+
+    def image(self, number):
+        """Tile `number`'s image, or the fallback where the set has none."""
+        return self.tiles.get(number, self.fallback)
+
+
+def read_tiles(path, layer, fallback):
+    """The UDIM set `path` names, anchored at `layer` (the layer that authored it), with
+    `fallback` (linear RGBA). A tile whose file cannot be read is left out (it reads the
+    fallback) and named in the set's `unreadable`. Raises OSError where no tile is read."""
+    resolver = Ar.GetResolver()
+    tiles, unreadable = {}, {}
+    for number in UDIM_SEARCH:
+        candidate = udim_tile_path(path, number)
+        anchored = layer.ComputeAbsolutePath(candidate) if layer else candidate
+        resolved = str(resolver.Resolve(anchored))
+        if not resolved:
+            continue
+        try:
+            tiles[number] = read_resolved(resolved)
+        except OSError as e:
+            unreadable[number] = f"{os.path.basename(resolved)}: {e}"
+    if not tiles:
+        found = "; ".join(f"tile {n} ({r})" for n, r in unreadable.items())
+        raise OSError(f"no tile of {path!r} read among {UDIM_SEARCH.start}-{UDIM_SEARCH.stop - 1}"
+                      + (f": {found}" if found else ""))
+    return TileSet(path, tiles, fallback, unreadable)
 
 
 def srgb_to_linear(x):

@@ -39,9 +39,31 @@ def _shared(pack):
         key = (pack.__name__, tuple(signature(a) for a in args[:-1]))
         cache = self.__dict__.setdefault("_packed", {})
         if key not in cache:
-            cache[key] = (pack(self, *args), args)  # the sources stay alive with the key
+            cache[key] = (_by_tile(self, pack, args), args)  # the sources stay alive with the key
         return cache[key][0]
     return wrapper
+
+
+def _by_tile(self, pack, args):
+    """`pack` of the sources `args` (the last is the name). Where some are UDIM sets, the
+    slot's texture is a UDIM set too: packed once per tile that any of them has (the
+    others read as they are) and once for the fallback, whose texture becomes the set."""
+    udim = [isinstance(a, TextureSource) and a.tiles is not None for a in args[:-1]]
+    if not any(udim):
+        return pack(self, *args)
+
+    def at(number):
+        return [a.at_tile(number) if u else a for a, u in zip(args[:-1], udim)]
+
+    def index(packed):
+        return packed[0] if isinstance(packed, tuple) else packed
+
+    name = args[-1]
+    numbers = sorted(set().union(*(a.tiles for a, u in zip(args[:-1], udim) if u)))
+    tiles = [(n, index(pack(self, *at(n), f"{name}.{n}"))) for n in numbers]
+    packed = pack(self, *at(None), name)
+    self.writer.set_tiles(index(packed), tiles)
+    return packed
 
 
 #: Render contexts in the order they are tried.

@@ -25,6 +25,8 @@ raw, acescg / lin_ap1, as MaterialX names them); without one, colour-typed image
 `auto` (as Storm and Karma read 8-bit colour images) and float and vector images are raw.
 ACEScg images are converted to lucerna's linear Rec.709 working space."""
 
+import copy
+
 import numpy as np
 from pxr import Sdf, UsdShade
 
@@ -149,9 +151,29 @@ class TextureSource:
                              self.st_name, self.transform, self.element)
 
     def mean(self):
-        """The mean of each output channel (a texture where only a constant can be used)."""
+        """The mean of each output channel (a texture where only a constant can be used);
+        of a UDIM set, the mean of its tiles' means (each covers a unit square)."""
+        if self.tiles is not None:
+            means = [self.at_tile(n).mean() for n in self.tiles]
+            return tuple(float(v) for v in np.mean(means, axis=0))
         values = self.values(len(self.channels))
         return tuple(float(v) for v in values.reshape(-1, values.shape[2]).mean(0))
+
+    @property
+    def tiles(self):
+        """The tile numbers of a UDIM set, or None for one image."""
+        return sorted(self.image.tiles) if isinstance(self.image, images.TileSet) else None
+
+    def at_tile(self, number):
+        """This texture of a UDIM set restricted to tile `number`'s image (None: the
+        fallback, read as the linear value it is, through the same scale and bias), clamped
+        at its edges so that no lookup blends two tiles."""
+        tile = copy.copy(self)
+        tile.image = self.image.image(number) if number is not None else self.image.fallback
+        if tile.image is self.image.fallback:
+            tile.color_space = "raw"
+        tile.wrap = ("clamp_to_edge", "clamp_to_edge")
+        return tile
 
 
 def as_array(value):
@@ -254,11 +276,12 @@ class Network:
         if output not in _CHANNELS:
             self.warn(str(node.GetPath()), f"unknown UsdUVTexture output {output!r}: fallback used")
             return "value", default
-        fallback = fit(self.value(node, "fallback", (0.0, 0.0, 0.0, 1.0)), 4)
-        fallback = as_value(fallback[_CHANNELS[output]])
+        fallback4 = fit(self.value(node, "fallback", (0.0, 0.0, 0.0, 1.0)), 4)
+        fallback = as_value(fallback4[_CHANNELS[output]])
         color_space = str(self.value(node, "sourceColorSpace", "auto"))
         wraps = [str(self.value(node, axis, "useMetadata")) for axis in ("wrapS", "wrapT")]
-        texture = self._image(node, "file", _CHANNELS[output], color_space, wraps, "st", element)
+        texture = self._image(node, "file", _CHANNELS[output], color_space, wraps, "st", element,
+                              fallback4)
         if texture is None:
             return "value", fallback
         return "texture", texture.affine(
@@ -278,8 +301,12 @@ class Network:
             self.warn(str(node.GetPath()), f"unknown colour space {name!r}: the image is read as raw")
             color_space = "raw"
         wraps = [str(self.value(node, axis, "periodic")) for axis in ("uaddressmode", "vaddressmode")]
-        texture = self._image(node, "file", channels, color_space, wraps, "texcoord", element)
         fallback = self.value(node, "default", None)
+        fallback4 = np.array([0.0, 0.0, 0.0, 1.0])
+        if fallback is not None:
+            fallback4[channels] = fit(fallback, len(channels))
+        texture = self._image(node, "file", channels, color_space, wraps, "texcoord", element,
+                              fallback4)
         if texture is None:
             return "value", default if fallback is None else fallback
         return "texture", texture
@@ -297,8 +324,10 @@ class Network:
     def _node_PxrTexture(self, node, output, element, default, node_id):
         channels = _CHANNELS.get(output, [0, 1, 2])
         linearize = int(self.value(node, "linearize", 0))
+        missing = (*fit(self.value(node, "missingColor", (1.0, 0.0, 1.0)), 3),
+                   float(as_array(self.value(node, "missingAlpha", 1.0))[0]))
         texture = self._image(node, "filename", channels, "sRGB" if linearize else "raw",
-                              ["periodic", "periodic"], "manifold", element)
+                              ["periodic", "periodic"], "manifold", element, missing)
         if texture is None:
             return "value", default
         return "texture", texture
@@ -354,7 +383,7 @@ class Network:
     def _node_combine(self, node, output, element, default, node_id):
         count = mtlx.output_size(node_id, output)
         parts = [self._in(node, f"in{i + 1}", element, 0.0) for i in range(count)]
-        return self._combine(parts, lambda *xs: np.concatenate([x[..., :1] for x in xs], -1), count, element)
+        return self.combine(parts, lambda *xs: np.concatenate([x[..., :1] for x in xs], -1), count, element)
 
     def _node_multiply(self, node, output, element, default, node_id):
         return self._binary(node, np.multiply, element, default, node_id, output)
@@ -386,17 +415,18 @@ class Network:
             folded = b[1].affine(k, 0.0) if op is np.multiply else b[1].affine(1.0, k)
             if folded is not None:
                 return "texture", folded
-        return self._combine([a, b], op, count, element)
+        return self.combine([a, b], op, count, element)
 
     def _node_mix(self, node, output, element, default, node_id):
         count = mtlx.output_size(node_id, output)
         fg = self._in(node, "fg", element, 0.0)
         bg = self._in(node, "bg", element, 0.0)
         mix = self._in(node, "mix", element, 0.0)
-        return self._combine([fg, bg, mix], lambda f, b, m: b + (f - b) * m[..., :1], count, element)
+        return self.combine([fg, bg, mix], lambda f, b, m: b + (f - b) * m[..., :1], count, element)
 
-    def _combine(self, parts, op, count, element):
-        """`op` over the parts: on values, or baked over the largest texture's texels."""
+    def combine(self, parts, op, count, element):
+        """`op` over the parts: on values, or baked over the largest texture's texels (over
+        each tile of UDIM sets, into a set of baked tiles)."""
         for kind, _ in parts:
             if kind == "primvar":
                 self.warn(element, "a primvar combined with other inputs is not supported: "
@@ -406,6 +436,20 @@ class Network:
         if not textures:
             arrays = [fit(v, count) if as_array(v).size != 1 else as_array(v) for _, v in parts]
             return "value", as_value(fit(op(*arrays), count))
+        sets = [t for t in textures if t.tiles is not None]
+        if sets:
+            # UDIM sets: tile by tile (and the fallback), into a set of the baked tiles.
+            def at(number):
+                return [(k, v.at_tile(number) if k == "texture" and v.tiles is not None else v)
+                        for k, v in parts]
+            numbers = sorted(set().union(*(t.tiles for t in sets)))
+            baked = {n: self.combine(at(n), op, count, element)[1] for n in numbers}
+            fallback = self.combine(at(None), op, count, element)[1]
+            tiles = images.TileSet(sets[0].image.path, {n: b.image for n, b in baked.items()},
+                                   fallback.image)
+            first = baked[numbers[0]]
+            return "texture", TextureSource(tiles, first.channels, first.scale, first.bias, "raw",
+                                            sets[0].wrap, first.st_name, first.transform, element)
         shape = max((t.image.shape for t in textures), key=lambda s: s[0] * s[1])
         if len({(t.st_name, str(t.transform)) for t in textures}) > 1:
             self.warn(element, "textures read through different coordinates are combined: "
@@ -448,7 +492,10 @@ class Network:
         return "primvar", str(self.value(node, "primvarName", "") or "st")
 
     # ---- images and coordinates -------------------------------------------------------
-    def _image(self, node, file_input, channels, color_space, wraps, st_input, element):
+    def _image(self, node, file_input, channels, color_space, wraps, st_input, element,
+               fallback=(0.0, 0.0, 0.0, 1.0)):
+        """The texture a node's image input names, or None after a warning. `fallback`
+        (linear RGBA) is what a UDIM set's coordinates without a tile read."""
         path = str(node.GetPath())
         asset = self.value(node, file_input, None)
         if isinstance(asset, str) and asset:
@@ -456,10 +503,10 @@ class Network:
         if not isinstance(asset, Sdf.AssetPath) or not asset.path:
             self.warn(path, "no texture file: fallback used")
             return None
-        if "<UDIM>" in asset.path or "<udim>" in asset.path.lower():
-            self.warn(path, f"UDIM texture {asset.path!r} is not supported: fallback used")
-            return None
-        image = self.image(asset, path)
+        if images.udim_token(asset.path):
+            image = self.tile_set(node, file_input, asset, fallback, path)
+        else:
+            image = self.image(asset, path)
         if image is None:
             return None
         wrap = []
@@ -480,6 +527,25 @@ class Network:
             except OSError as e:
                 self.warn(element, f"texture {asset.path!r} unreadable ({e}): fallback used")
                 self._images[key] = None
+        return self._images[key]
+
+    def tile_set(self, node, file_input, asset, fallback, element):
+        """The UDIM set (images.TileSet) an asset path names (cached), anchored at the layer
+        that authored it, or None after a warning."""
+        attrs = node.GetInput(file_input).GetValueProducingAttributes()
+        specs = attrs[0].GetPropertyStack(self.time) if attrs else []
+        layer = specs[0].layer if specs else node.GetPrim().GetStage().GetRootLayer()
+        fallback = tuple(float(x) for x in fallback)
+        key = (layer.identifier, asset.path, fallback)
+        if key not in self._images:
+            try:
+                self._images[key] = images.read_tiles(asset.path, layer, fallback)
+            except OSError as e:
+                self.warn(element, f"UDIM texture {asset.path!r} unreadable ({e}): fallback used")
+                self._images[key] = None
+            for number, reason in getattr(self._images[key], "unreadable", {}).items():
+                self.warn(element, f"UDIM texture {asset.path!r}: tile {number} unreadable "
+                          f"({reason}): the fallback is read there")
         return self._images[key]
 
     def _st(self, node, name):

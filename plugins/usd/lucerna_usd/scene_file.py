@@ -181,6 +181,14 @@ class SceneWriter:
         self._texels[key] = (len(self.textures) - 1, original)
         return len(self.textures) - 1
 
+    def set_tiles(self, index, tiles):
+        """Makes texture `index` a UDIM set of `tiles`, [(tile number, texture index)]: its
+        own image is then read where the set has no tile."""
+        entry = self.textures[index]
+        if "tiles" in entry:
+            raise ValueError(f"texture {index} is a UDIM set already")
+        entry["tiles"] = [[int(n), int(i)] for n, i in tiles]
+
     def write(self, path):
         """Writes the manifest `path` and its buffer `path + '.bin'`."""
         buffer_name = os.path.basename(path) + ".bin"

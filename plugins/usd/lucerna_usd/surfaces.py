@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from . import mtlx
-from .networks import NormalMap, as_array, fit
+from .networks import NormalMap, as_array, as_value, fit
 
 PREVIEW_DEFAULTS = {
     "diffuseColor": (0.18, 0.18, 0.18),
@@ -120,9 +120,8 @@ class Reader:
             folded = value.affine(k, 0.0)
             if folded is not None:
                 return "texture", folded
-            values = value.values(n) * np.asarray(k, np.float32)
-            from .networks import TextureSource
-            return "texture", TextureSource.baked(values, value, value.element)
+            return self.net.combine([source, ("value", as_value(fit(k, n)))], np.multiply, n,
+                                    value.element)
         return source  # a primvar: the factor is lost (warned by the caller where it matters)
 
     def normal(self, source, material, name="normal"):

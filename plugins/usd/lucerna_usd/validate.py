@@ -2,14 +2,17 @@
 usdchecker's ComplianceChecker): every registered validator runs through one
 `ValidationContext`, and each finding is reported with the prim or property paths it is
 about. "Shader id not found in sdrRegistry" is not reported for the MaterialX and
-RenderMan nodes lucerna reads: usd-core registers no definitions for them."""
+RenderMan nodes lucerna reads: usd-core registers no definitions for them. Nor is
+"invalid or unresolvable inputs:file" of a UDIM set (`<UDIM>` in the path): the normal-map
+validator resolves the path as one file, which a set never is; the plugin reads its tiles
+and warns about those it cannot."""
 
 import re
 from dataclasses import dataclass
 
 from pxr import Usd, UsdValidation
 
-from . import mtlx
+from . import images, mtlx
 
 _UNREGISTERED_SHADER = re.compile(r"shaderId '([^']+)' specified on shader prim .* not found in sdrRegistry")
 
@@ -59,6 +62,9 @@ def validate(stage: Usd.Stage) -> list:
             # usd-core registers no MaterialX or RenderMan shader definitions; lucerna
             # reads these nodes itself (MaterialX's library defines them).
             continue
+        if "unresolvable inputs:file" in error.GetMessage() and any(
+                f"{t}" in error.GetMessage() for t in images.UDIM_TOKENS):
+            continue  # a UDIM set: resolved tile by tile when it is read (images.py)
         if "'anon:" in error.GetMessage() and ".mtlx" in error.GetMessage():
             continue  # a .mtlx document lucerna converted to an in-memory layer (mtlx.py)
         findings.append(Finding(

@@ -114,6 +114,7 @@ impl<'a> Importer<'a> {
                 sampler.min_filter(),
                 Some(gltf::texture::MinFilter::Nearest | gltf::texture::MinFilter::Linear)
             ),
+            udim: None,
         });
         let index = (self.scene.textures.len() - 1) as u32;
         self.textures.insert(texture.index(), index);

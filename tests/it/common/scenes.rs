@@ -289,6 +289,7 @@ pub fn make_the_light_a_screen(scene: &mut Scene) {
         wrap_v: Wrap::ClampToEdge,
         nearest: false,
         mipmaps: true,
+        udim: None,
     });
     let mesh = &mut scene.meshes[light];
     let (lo, hi) = mesh.positions.iter().fold(
