@@ -63,7 +63,11 @@ def _one(pixels):
     return 255 if pixels.dtype == np.uint8 else 1.0
 
 
-def _read_file(path):
+class OverBudget(OSError):
+    """An image that would take more memory to decode than the limit allows."""
+
+
+def _read_file(path, limit):
     buf = oiio.ImageBuf(path)
     if buf.has_error:
         raise OSError(buf.geterror().strip() or "cannot read the image")
@@ -72,10 +76,11 @@ def _read_file(path):
         raise OSError(buf.geterror().strip() or "cannot read the image")
     # Float pixels, RGBA floats, and the 8-bit copy: what decoding holds at its peak.
     need = spec.width * spec.height * (spec.nchannels * 4 + 16 + 4 + spec.nchannels)
-    if MAX_BYTES is not None and need > MAX_BYTES:
-        raise OSError(f"an image of {spec.width}x{spec.height} pixels would need "
-                      f"{need / 2**20:.0f} MiB to decode, more than the limit of "
-                      f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
+    if limit is not None and need > limit:
+        raise OverBudget(f"an image of {spec.width}x{spec.height} pixels would need "
+                         f"{need / 2**20:.0f} MiB to decode, more than the "
+                         f"{max(limit, 0) / 2**20:.0f} MiB left of the limit of "
+                         f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
     eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
     if eight_bit:
         raw = buf.get_pixels(oiio.UINT8)
@@ -100,11 +105,13 @@ def read(asset_path):
     return read_resolved(resolved)
 
 
-def read_resolved(resolved):
-    """Reads the image at a path the asset resolver returned. Raises OSError."""
+def read_resolved(resolved, limit=None):
+    """Reads the image at a path the asset resolver returned, refusing one that would take
+    more than `limit` bytes to decode (default: the whole MAX_BYTES). Raises OSError."""
     from . import heartbeat
 
     heartbeat()
+    limit = MAX_BYTES if limit is None else limit
     if "[" in resolved and resolved.endswith("]"):
         # Inside a package (.usdz): copy the bytes out for OpenImageIO.
         asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
@@ -115,9 +122,9 @@ def read_resolved(resolved):
         with tempfile.NamedTemporaryFile(suffix=suffix) as f:
             f.write(data)
             f.flush()
-            pixels, eight_bit, raw8 = _read_file(f.name)
+            pixels, eight_bit, raw8 = _read_file(f.name, limit)
     else:
-        pixels, eight_bit, raw8 = _read_file(resolved)
+        pixels, eight_bit, raw8 = _read_file(resolved, limit)
     return Image(resolved, pixels, eight_bit, raw8)
 
 
@@ -167,9 +174,12 @@ class TileSet:
 def read_tiles(path, layer, fallback):
     """The UDIM set `path` names, anchored at `layer` (the layer that authored it), with
     `fallback` (linear RGBA). A tile whose file cannot be read is left out (it reads the
-    fallback) and named in the set's `unreadable`. Raises OSError where no tile is read."""
+    fallback) and named in the set's `unreadable`. The tiles together stay within
+    MAX_BYTES (--max-memory): a tile that would pass it refuses the whole set, as an image
+    beyond it is refused. Raises OSError where no tile is read."""
     resolver = Ar.GetResolver()
     tiles, unreadable = {}, {}
+    held = 0
     for number in UDIM_SEARCH:
         candidate = udim_tile_path(path, number)
         anchored = layer.ComputeAbsolutePath(candidate) if layer else candidate
@@ -177,9 +187,15 @@ def read_tiles(path, layer, fallback):
         if not resolved:
             continue
         try:
-            tiles[number] = read_resolved(resolved)
+            tile = read_resolved(resolved, None if MAX_BYTES is None else MAX_BYTES - held)
+        except OverBudget as e:
+            raise OverBudget(f"tile {number} after {len(tiles)} tiles of {held / 2**20:.0f} MiB: "
+                             f"{e}") from None
         except OSError as e:
             unreadable[number] = f"{os.path.basename(resolved)}: {e}"
+            continue
+        tiles[number] = tile
+        held += (tile.raw8 if tile.raw8 is not None else tile.pixels).nbytes
     if not tiles:
         found = "; ".join(f"tile {n} ({r})" for n, r in unreadable.items())
         raise OSError(f"no tile of {path!r} read among {UDIM_SEARCH.start}-{UDIM_SEARCH.stop - 1}"

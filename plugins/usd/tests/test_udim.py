@@ -312,3 +312,18 @@ def test_materialx_graphs_over_a_udim_set_are_baked_tile_by_tile(stage_file, con
     assert texels(s, {"texture": tiles[1012]})[0, 0, :3] == pytest.approx([1, 0, 0])
     fallback = texels(s, m["base_color_texture"])
     assert fallback.shape[:2] == (1, 1) and fallback[0, 0, :3] == pytest.approx([0.5, 0, 0.5])
+
+
+def test_a_set_beyond_the_memory_limit_is_refused_whole(converted, tmp_path, monkeypatch):
+    """Ten tiles of 64x640 RGBA bytes hold 160 KiB each, and decoding one needs 1.37 MiB at
+    its peak: a limit of 2 MiB takes five, then refuses the set, naming the tile, what was
+    held and --max-memory; the fallback is used."""
+    from lucerna_usd import images
+
+    files = write_textures(tmp_path / "tex", udim_name)
+    monkeypatch.setattr(images, "MAX_BYTES", 2 << 20)
+    scene = converted(avocado_stage(tmp_path / "big.usda", files, "<UDIM>"))
+    refused = scene.warnings_about("--max-memory")
+    assert any("tile 1006 after 5 tiles of 1 MiB" in w and "fallback used" in w for w in refused), \
+        scene["warnings"]
+    assert scene["materials"][0]["base_color_texture"] is None
