@@ -211,9 +211,21 @@ pub fn inspect(
         count(&|m| m.double_sided),
     );
     let texel_bytes = scene.texel_bytes();
+    let sets: Vec<usize> = scene
+        .textures
+        .iter()
+        .filter_map(|t| t.udim.as_ref().map(|u| u.tiles.len()))
+        .collect();
+    let udim = match sets.len() {
+        0 => String::new(),
+        n => format!(
+            ", {n} of them UDIM sets of {} tiles in all",
+            sets.iter().sum::<usize>()
+        ),
+    };
     let _ = writeln!(
         out,
-        "  textures: {} ({} bytes of texels; `--texture-filter mip` adds about {} bytes of MIP pyramids)",
+        "  textures: {}{udim} ({} bytes of texels; `--texture-filter mip` adds about {} bytes of MIP pyramids)",
         scene.textures.len(),
         texel_bytes,
         texel_bytes / 3

@@ -441,8 +441,21 @@ pub fn parse(
         if t.tiles.is_empty() {
             continue;
         }
-        let udim = super::udim_set(t.tiles.clone(), &textures)
-            .map_err(|reason| bad(&format!("textures[{i}].tiles"), reason))?;
+        let element = format!("textures[{i}].tiles");
+        let nested = |&(_, index): &(u32, u32)| {
+            manifest
+                .textures
+                .get(index as usize)
+                .is_some_and(|e| !e.tiles.is_empty())
+        };
+        if let Some((number, index)) = t.tiles.iter().find(|tile| nested(tile)) {
+            return Err(bad(
+                &element,
+                format!("tile {number}: texture {index} is itself a UDIM set"),
+            ));
+        }
+        let udim =
+            super::udim_set(t.tiles.clone(), &textures).map_err(|reason| bad(&element, reason))?;
         textures[i].udim = Some(Arc::new(udim));
     }
     let scene = Scene {

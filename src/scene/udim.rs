@@ -42,17 +42,18 @@ impl<T> Udim<T> {
         tiles: Vec<(u32, u32)>,
         mut image: impl FnMut(u32) -> Result<T, String>,
     ) -> Result<Self, String> {
+        // Numbers are checked before the grid is sized by them.
+        if let Some(&(number, _)) = tiles.iter().find(|(n, _)| !(FIRST..=LAST).contains(n)) {
+            return Err(format!("tile number {number} is outside {FIRST}..={LAST}"));
+        }
         let rows = tiles
             .iter()
-            .map(|&(n, _)| n.saturating_sub(FIRST) / COLUMNS + 1)
+            .map(|&(n, _)| (n - FIRST) / COLUMNS + 1)
             .max()
             .unwrap_or(0);
         let mut grid = vec![0u32; (COLUMNS * rows) as usize];
         let mut images = Vec::with_capacity(tiles.len());
         for (k, &(number, index)) in tiles.iter().enumerate() {
-            if !(FIRST..=LAST).contains(&number) {
-                return Err(format!("tile number {number} is outside {FIRST}..={LAST}"));
-            }
             let image = image(index).map_err(|e| format!("tile {number}: {e}"))?;
             let cell = &mut grid[(number - FIRST) as usize];
             if *cell != 0 {
@@ -152,6 +153,7 @@ mod tests {
         let err = |tiles| Udim::new(tiles, named).unwrap_err();
         assert!(err(vec![(1000, 0)]).contains("outside"));
         assert!(err(vec![(10000, 0)]).contains("outside"));
+        assert!(err(vec![(1001, 0), (u32::MAX, 1)]).contains("outside"));
         assert!(err(vec![(1001, 0), (1001, 0)]).contains("twice"));
         assert_eq!(
             err(vec![(1001, 5)]),

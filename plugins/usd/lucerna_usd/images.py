@@ -9,7 +9,6 @@ tile number 1001 + u + 10 v; `<UVTILE>` for `u<u+1>_v<v+1>` (Mudbox's one-based 
 MaterialX defines it)."""
 
 import os
-import re
 import tempfile
 
 import numpy as np

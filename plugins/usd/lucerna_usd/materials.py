@@ -58,11 +58,11 @@ def _by_tile(self, pack, args):
     def index(packed):
         return packed[0] if isinstance(packed, tuple) else packed
 
-    name = args[-1]
-    numbers = sorted(set().union(*(a.tiles for a, u in zip(args[:-1], udim) if u)))
-    tiles = [(n, index(pack(self, *at(n), f"{name}.{n}"))) for n in numbers]
-    packed = pack(self, *at(None), name)
-    self.writer.set_tiles(index(packed), tiles)
+    sets = [a.image for a, u in zip(args[:-1], udim) if u]
+    numbers = sorted(set().union(*(s.tiles for s in sets)))
+    tiles = [(n, index(pack(self, *at(n), args[-1]))) for n in numbers]
+    packed = pack(self, *at(None), args[-1])
+    self.writer.set_tiles(index(packed), tiles, sets[0].path)
     return packed
 
 

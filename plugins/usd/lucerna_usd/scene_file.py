@@ -181,13 +181,17 @@ class SceneWriter:
         self._texels[key] = (len(self.textures) - 1, original)
         return len(self.textures) - 1
 
-    def set_tiles(self, index, tiles):
-        """Makes texture `index` a UDIM set of `tiles`, [(tile number, texture index)]: its
-        own image is then read where the set has no tile."""
+    def set_tiles(self, index, tiles, asset):
+        """Makes texture `index` a UDIM set of `tiles`, [(tile number, texture index)], read
+        from `asset` (the path with its UDIM token, which the set's name then shows): its
+        own image is read where the set has no tile. The tiles are named after the set."""
         entry = self.textures[index]
         if "tiles" in entry:
             raise ValueError(f"texture {index} is a UDIM set already")
         entry["tiles"] = [[int(n), int(i)] for n, i in tiles]
+        for n, i in tiles:
+            self.textures[i]["name"] = f"{entry['name']} tile {n}"
+        entry["name"] = f"{entry['name']} ({asset})"
 
     def write(self, path):
         """Writes the manifest `path` and its buffer `path + '.bin'`."""

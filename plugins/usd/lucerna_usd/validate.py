@@ -63,7 +63,7 @@ def validate(stage: Usd.Stage) -> list:
             # reads these nodes itself (MaterialX's library defines them).
             continue
         if "unresolvable inputs:file" in error.GetMessage() and any(
-                f"{t}" in error.GetMessage() for t in images.UDIM_TOKENS):
+                t in error.GetMessage() for t in images.UDIM_TOKENS):
             continue  # a UDIM set: resolved tile by tile when it is read (images.py)
         if "'anon:" in error.GetMessage() and ".mtlx" in error.GetMessage():
             continue  # a .mtlx document lucerna converted to an in-memory layer (mtlx.py)

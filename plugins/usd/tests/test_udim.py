@@ -221,8 +221,10 @@ def test_missing_tiles_read_the_fallback_and_are_named_once(tmp_path):
     px, log = render(stage, tmp_path / "h.exr", 1, spp=4)
     warnings = [line for line in log.splitlines() if "UDIM texture" in line]
     assert warnings and all("tiles 1004, 1007 that meshes reach" in w for w in warnings), log
-    # One warning per texture of the material (base colour, metallic-roughness, normal).
+    # One warning per texture of the material (base colour, metallic-roughness, normal),
+    # naming the material's slot and the asset.
     assert len(warnings) == 3, warnings
+    assert any("/World/M:base_color (tex/baseColor.<UDIM>.png)" in w for w in warnings), warnings
     assert np.isfinite(px).all()
 
 
@@ -243,9 +245,11 @@ def test_unreadable_or_absent_tile_sets_warn_and_use_the_fallback(stage_file, co
 
 
 @pytest.mark.parametrize("tiles, reason", [
-    ([[1000, 0]], "outside 1001..=9999"),
-    ([[1001, 0], [1001, 0]], "given twice"),
+    ([[1000, 1]], "outside 1001..=9999"),
+    ([[1001, 1], [1001, 1]], "given twice"),
     ([[1001, 7]], "out of range"),
+    ([[1001, 1], [4294967295, 2]], "outside 1001..=9999"),
+    ([[1001, 0]], "texture 0 is itself a UDIM set"),
 ])
 def test_bad_tile_lists_in_a_scene_file_are_refused(tmp_path, converted, stage_file, tiles, reason):
     files = write_textures(tmp_path / "tex", None)
@@ -327,3 +331,10 @@ def test_a_set_beyond_the_memory_limit_is_refused_whole(converted, tmp_path, mon
     assert any("tile 1006 after 5 tiles of 1 MiB" in w and "fallback used" in w for w in refused), \
         scene["warnings"]
     assert scene["materials"][0]["base_color_texture"] is None
+
+
+def test_inspect_counts_the_sets_and_their_tiles(tmp_path):
+    stage = avocado_stage(tmp_path / "s.usda", write_textures(tmp_path / "tex", udim_name), "<UDIM>")
+    run = subprocess.run([lucerna_bin(), "inspect", str(stage)], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "textures: 33, 3 of them UDIM sets of 30 tiles in all" in run.stdout, run.stdout
