@@ -16,7 +16,7 @@ const MAX_MEMORY: u64 = 1 << 30;
 /// finding) if a pixel is not finite. Scenes the memory estimate refuses are skipped, as the
 /// command line refuses them.
 pub fn render_a_few_pixels(scene: Scene) {
-    if lucerna::world::estimate_memory(&scene).total() > MAX_MEMORY {
+    if lucerna::world::build::estimate_memory(&scene).total() > MAX_MEMORY {
         return;
     }
     let Ok(world) = World::build(scene, None, Some((4, 4)), LightSelect::Power) else {
