@@ -361,6 +361,11 @@ struct RenderArgs {
     /// physical memory or of the cgroup's limit]
     #[arg(long, help_heading = "Running")]
     max_memory: Option<String>,
+    /// Most memory the textures may take, decoded and with their MIP levels, e.g. 4G, or
+    /// `off`; textures that need more are read from tiled copies on disk through a cache of
+    /// this size, more slowly. [default: half of --max-memory]
+    #[arg(long, help_heading = "Running")]
+    texture_memory: Option<String>,
     /// Continue the render in the output file (a checkpoint, or a finished render to take
     /// more samples); without the file, start afresh.
     #[arg(long, help_heading = "Running")]
@@ -481,6 +486,7 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
         Command::Render(_) => {
             let job = job_from(sub, sub_definition)?;
             crate::memory::set_process_limit(job.max_memory.or_else(crate::memory::default_limit));
+            crate::memory::set_texture_memory(job.texture_memory);
             Ok(crate::job::run(&job)?.exit_code())
         }
         Command::Inspect {

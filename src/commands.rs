@@ -223,13 +223,30 @@ pub fn inspect(
             sets.iter().sum::<usize>()
         ),
     };
-    let _ = writeln!(
-        out,
-        "  textures: {}{udim} ({} bytes of texels; `--texture-filter mip` adds about {} bytes of MIP pyramids)",
-        scene.textures.len(),
-        texel_bytes,
-        texel_bytes / 3
-    );
+    match scene.texture_cache() {
+        None => {
+            let _ = writeln!(
+                out,
+                "  textures: {}{udim} ({} bytes of texels; `--texture-filter mip` adds about {} bytes of MIP pyramids)",
+                scene.textures.len(),
+                texel_bytes,
+                texel_bytes / 3
+            );
+        }
+        Some(cache) => {
+            let stats = cache.stats();
+            let _ = writeln!(
+                out,
+                "  textures: {}{udim} (too large for the texture memory: {} images in tiled files of {} bytes with their MIP levels, read through a tile cache of {} bytes, {} of them resident now; {} bytes of texels in memory)",
+                scene.textures.len(),
+                stats.images,
+                stats.bytes_on_disk,
+                cache.capacity(),
+                stats.resident,
+                texel_bytes
+            );
+        }
+    }
     let emissive_triangles: usize = scene
         .instances
         .iter()

@@ -182,6 +182,26 @@ pub fn process_limit() -> Option<u64> {
     }
 }
 
+/// The texture memory chosen by `--texture-memory` (0: half of the process limit).
+static TEXTURE_MEMORY: AtomicU64 = AtomicU64::new(0);
+
+/// Sets the texture memory [`texture_memory`] answers (`None`: half of the process limit).
+pub fn set_texture_memory(bytes: Option<u64>) {
+    TEXTURE_MEMORY.store(bytes.unwrap_or(0), Ordering::Relaxed);
+}
+
+/// The most that a scene's textures may hold in memory, decoded and with their MIP
+/// pyramids, before they are read through a tile cache of this size instead
+/// (`scene::texture_cache`): `--texture-memory`, by default half of the process limit;
+/// `None` without either.
+pub fn texture_memory() -> Option<u64> {
+    match TEXTURE_MEMORY.load(Ordering::Relaxed) {
+        0 => process_limit().map(|limit| limit / 2),
+        u64::MAX => None,
+        bytes => Some(bytes),
+    }
+}
+
 /// Refuses to allocate `bytes` for `what` when that alone exceeds the process limit.
 pub fn check_allocation(bytes: u64, what: &str) -> std::result::Result<(), String> {
     match process_limit() {

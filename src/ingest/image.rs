@@ -64,6 +64,57 @@ pub fn decode(bytes: &[u8]) -> Result<DecodedImage, String> {
     }
 }
 
+/// The bytes the texels of the image `bytes` will hold once decoded, from its header alone
+/// (without decoding it): what [`decode`] will return, so that a scene's textures can be
+/// measured before any is decoded. `None` where the header cannot be read (decoding will
+/// say why).
+pub fn decoded_bytes(bytes: &[u8]) -> Option<u64> {
+    let (width, height, texel_bytes) = if bytes.starts_with(b"\x89PNG\r\n\x1a\n") {
+        let reader = png::Decoder::new(Cursor::new(bytes)).read_info().ok()?;
+        let info = reader.info();
+        let sixteen = info.bit_depth == png::BitDepth::Sixteen;
+        (info.width, info.height, if sixteen { 8 } else { 4 })
+    } else if bytes.starts_with(&[0xff, 0xd8]) {
+        let mut decoder = zune_jpeg::JpegDecoder::new(Cursor::new(bytes));
+        decoder.decode_headers().ok()?;
+        let (w, h) = decoder.dimensions()?;
+        (w as u32, h as u32, 4)
+    } else if bytes.len() >= 12 && bytes.starts_with(b"RIFF") && &bytes[8..12] == b"WEBP" {
+        let decoder = image_webp::WebPDecoder::new(Cursor::new(bytes)).ok()?;
+        let (w, h) = decoder.dimensions();
+        (w, h, 4)
+    } else if bytes.starts_with(&EXR_MAGIC) {
+        let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(bytes), false).ok()?;
+        let size = meta.headers.first()?.layer_size;
+        (size.width() as u32, size.height() as u32, 16)
+    } else if bytes.starts_with(b"#?RADIANCE") || bytes.starts_with(b"#?RGBE") {
+        let format = image::ImageFormat::Hdr;
+        let (w, h) = image::ImageReader::with_format(Cursor::new(bytes), format)
+            .into_dimensions()
+            .ok()?;
+        (w, h, 16)
+    } else if bytes.starts_with(b"II*\0") || bytes.starts_with(b"MM\0*") {
+        use image::ImageDecoder;
+        let decoder = image::ImageReader::with_format(Cursor::new(bytes), image::ImageFormat::Tiff)
+            .into_decoder()
+            .ok()?;
+        let (w, h) = decoder.dimensions();
+        let colour = decoder.color_type();
+        let texel_bytes = match colour.bytes_per_pixel() / colour.channel_count() {
+            4 => 16,
+            2 => 8,
+            _ => 4,
+        };
+        (w, h, texel_bytes)
+    } else if bytes.starts_with(KTX2_MAGIC) {
+        // Basis Universal LDR payloads become 8-bit texels (HDR ones are rare in delivery).
+        (le_u32(bytes, 20)?, le_u32(bytes, 24)?, 4)
+    } else {
+        return None;
+    };
+    Some(width as u64 * height as u64 * texel_bytes)
+}
+
 const KTX2_MAGIC: &[u8] = b"\xabKTX 20\xbb\r\n\x1a\n";
 
 /// The little-endian u32 at byte `at`, if the bytes reach that far.

@@ -43,6 +43,8 @@ pub struct RenderJob {
     /// Seconds between checkpoints written while rendering.
     pub checkpoint_interval: Option<f64>,
     pub max_memory: Option<u64>,
+    /// `--texture-memory` (`None`: half of the memory limit).
+    pub texture_memory: Option<u64>,
     /// `auto`, `bar`, `lines`, `alfred` or `none`.
     pub progress: String,
     pub progress_interval: f64,
@@ -81,6 +83,7 @@ impl Default for RenderJob {
             resume: false,
             checkpoint_interval: None,
             max_memory: None,
+            texture_memory: None,
             progress: "auto".into(),
             progress_interval: 5.0,
             quiet: false,
@@ -94,7 +97,7 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 39] = [
+pub const JOB_SETTINGS: [&str; 40] = [
     "output",
     "frames",
     "frame",
@@ -129,6 +132,7 @@ pub const JOB_SETTINGS: [&str; 39] = [
     "resume",
     "checkpoint-interval",
     "max-memory",
+    "texture-memory",
     "progress",
     "progress-interval",
     "quiet",
@@ -277,6 +281,7 @@ impl RenderJob {
             "resume" => self.resume = parse_bool(value)?,
             "checkpoint-interval" => self.checkpoint_interval = Some(seconds(value, 0.0, 1e7)?),
             "max-memory" => self.max_memory = Some(memory::parse_limit(value)?),
+            "texture-memory" => self.texture_memory = Some(memory::parse_limit(value)?),
             "progress" => {
                 if !["auto", "bar", "lines", "alfred", "none"].contains(&value) {
                     return Err(format!("auto, bar, lines, alfred or none, got {value:?}"));

@@ -11,6 +11,7 @@ use crate::film::Film;
 use crate::film::aov::Aov;
 use crate::output::{denoise, exr, preview};
 use crate::render::{self, RenderStats};
+use crate::scene::texture_cache::CacheStats;
 use crate::sequence::output_path;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -83,6 +84,7 @@ pub(super) fn write_view(
             &stats,
             prepared.build_seconds,
             pool,
+            texture_cache_stats(&prepared.world),
         )?;
     }
     let outputs: Vec<PathBuf> = if job.write_files {
@@ -136,6 +138,17 @@ pub(super) fn write_view(
             prepared.world.bvh_seconds,
             stats.summary()
         );
+        if let Some(c) = texture_cache_stats(&prepared.world) {
+            use crate::memory::Bytes;
+            log::info!(
+                "texture cache: {} images in tiled files of {}; {} tiles read ({}), {} resident at the end",
+                c.images,
+                Bytes(c.bytes_on_disk),
+                c.tiles_read,
+                Bytes(c.bytes_read),
+                Bytes(c.resident)
+            );
+        }
     }
     outcome.rendered.push(Rendered {
         frame,
@@ -146,6 +159,18 @@ pub(super) fn write_view(
         denoised: denoised.filter(|_| job.keep_images),
     });
     Ok(())
+}
+
+/// What the tile cache of the world's textures did, if they are read through one.
+fn texture_cache_stats(world: &crate::world::World) -> Option<CacheStats> {
+    world
+        .surfaces
+        .textures
+        .iter()
+        .find_map(|t| match &*t.texels {
+            crate::scene::Texels::Tiled(image) => Some(image.cache().stats()),
+            _ => None,
+        })
 }
 
 /// `--stats-json`: the render's figures, counts as integers.
@@ -160,6 +185,7 @@ fn write_stats_json(
     stats: &RenderStats,
     build_seconds: f64,
     pool: &rayon::ThreadPool,
+    texture_cache: Option<CacheStats>,
 ) -> Result<()> {
     let path = output_path(pattern, frame, &job.stem(), "")
         .map_err(|e| Error::bad_input("", "--stats-json", e))?;
@@ -181,6 +207,13 @@ fn write_stats_json(
         "threads": pool.current_num_threads(),
         "interrupted": stats.interrupted,
         "denoised": job.denoise && !stats.interrupted,
+        "texture_cache": texture_cache.map(|c| serde_json::json!({
+            "images": c.images,
+            "bytes_on_disk": c.bytes_on_disk,
+            "tiles_read": c.tiles_read,
+            "bytes_read": c.bytes_read,
+            "resident_bytes": c.resident,
+        })),
     });
     crate::files::write_atomically(&path, |w| {
         use std::io::Write;

@@ -1,7 +1,7 @@
 //! The scene file: the internal [`Scene`] on disk, so that other programs (the USD plugin,
 //! the benchmark's Mitsuba exporter) can write or read exactly what the renderer sees.
 //!
-//! One concept in one file (950 lines): the format, read and written here side by side so
+//! One concept in one file (1050 lines): the format, read and written here side by side so
 //! that every field's validation sits next to its writing.
 //!
 //! Two files: a JSON manifest `NAME.lucerna` and one little-endian binary buffer beside it
@@ -14,7 +14,9 @@
 //!
 //! A scene file is untrusted input: [`read`] checks the format and version, every view
 //! against the buffer, every count, index and range, and that every number is finite,
-//! before anything uses the scene.
+//! before anything uses the scene. The buffer is read view by view, never whole: most of it
+//! is texels, which go one image at a time to the texture cache's tiled files when they need
+//! more than the texture memory (`texture_cache`).
 
 use super::{BoundaryInterpolation, SubdivisionScheme, SubdivisionSurface};
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
@@ -214,22 +216,9 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         .textures
         .iter()
         .map(|t| {
-            let (encoding, texels) =
-                *written
-                    .entry(Arc::as_ptr(&t.texels))
-                    .or_insert_with(|| match &*t.texels {
-                        Texels::Rgba8(p) => (
-                            Encoding::Rgba8,
-                            buffer.push(p.iter().map(|p| [u32::from_le_bytes(*p)])),
-                        ),
-                        Texels::Rgba16(p) => (
-                            Encoding::Rgba16,
-                            buffer.push(p.iter().map(|[r, g, b, a]| {
-                                [*r as u32 | (*g as u32) << 16, *b as u32 | (*a as u32) << 16]
-                            })),
-                        ),
-                        Texels::RgbaF32(p) => (Encoding::Rgba32f, buffer.floats(p)),
-                    });
+            let (encoding, texels) = *written
+                .entry(Arc::as_ptr(&t.texels))
+                .or_insert_with(|| push_texels(&mut buffer, &t.texels));
             TextureEntry {
                 name: t.name.clone(),
                 width: t.width,
@@ -298,8 +287,60 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
 pub fn read(path: &Path) -> Result<Scene> {
     let text = crate::files::read_input(path).map_err(|e| Error::bad_input(path, "file", e))?;
     parse(path, &text, |buffer| {
-        crate::files::read_input(buffer).map_err(std::io::Error::other)
+        crate::files::check_input(buffer).map_err(std::io::Error::other)?;
+        Ok(BufferSource::File(std::fs::File::open(buffer)?))
     })
+}
+
+/// Where a scene file's buffer is read from: bytes in memory, or the file, read view by
+/// view (so that loading never holds the whole buffer, which is mostly texels, at once).
+pub enum BufferSource {
+    Bytes(Vec<u8>),
+    File(std::fs::File),
+}
+
+impl From<Vec<u8>> for BufferSource {
+    fn from(bytes: Vec<u8>) -> Self {
+        BufferSource::Bytes(bytes)
+    }
+}
+
+impl BufferSource {
+    fn len(&self) -> std::io::Result<u64> {
+        match self {
+            BufferSource::Bytes(b) => Ok(b.len() as u64),
+            BufferSource::File(f) => Ok(f.metadata()?.len()),
+        }
+    }
+
+    /// Fills `out` from byte `offset` (which the caller has checked lies inside).
+    fn read_at(&self, offset: u64, out: &mut [u8]) -> std::io::Result<()> {
+        match self {
+            BufferSource::Bytes(b) => {
+                out.copy_from_slice(&b[offset as usize..offset as usize + out.len()]);
+                Ok(())
+            }
+            BufferSource::File(f) => std::os::unix::fs::FileExt::read_exact_at(f, out, offset),
+        }
+    }
+}
+
+/// Appends `texels` to `buffer` (a tiled image's read back from its tiles).
+fn push_texels(buffer: &mut BufferWriter, texels: &Texels) -> (Encoding, View) {
+    match texels {
+        Texels::Rgba8(p) => (
+            Encoding::Rgba8,
+            buffer.push(p.iter().map(|p| [u32::from_le_bytes(*p)])),
+        ),
+        Texels::Rgba16(p) => (
+            Encoding::Rgba16,
+            buffer.push(p.iter().map(|[r, g, b, a]| {
+                [*r as u32 | (*g as u32) << 16, *b as u32 | (*a as u32) << 16]
+            })),
+        ),
+        Texels::RgbaF32(p) => (Encoding::Rgba32f, buffer.floats(p)),
+        Texels::Tiled(image) => push_texels(buffer, &image.read_all().into()),
+    }
 }
 
 /// Decodes the manifest bytes `text` of the scene file at `path`, reading its buffer with
@@ -308,7 +349,7 @@ pub fn read(path: &Path) -> Result<Scene> {
 pub fn parse(
     path: &Path,
     text: &[u8],
-    read_buffer: impl FnOnce(&Path) -> std::io::Result<Vec<u8>>,
+    read_buffer: impl FnOnce(&Path) -> std::io::Result<BufferSource>,
 ) -> Result<Scene> {
     let bad = |element: &str, reason: String| Error::bad_input(path, element, reason);
     let manifest: Manifest =
@@ -335,20 +376,19 @@ pub fn parse(
             "must be a file name beside the manifest".into(),
         ));
     }
-    let bytes = read_buffer(&buffer_path)
+    let source = read_buffer(&buffer_path)
         .map_err(|e| bad("buffer", format!("{}: {e}", buffer_path.display())))?;
-    if bytes.len() as u64 != manifest.buffer_bytes {
+    let len =
+        (source.len()).map_err(|e| bad("buffer", format!("{}: {e}", buffer_path.display())))?;
+    if len != manifest.buffer_bytes {
         return Err(bad(
             "buffer",
-            format!(
-                "{} bytes, the manifest says {}",
-                bytes.len(),
-                manifest.buffer_bytes
-            ),
+            format!("{len} bytes, the manifest says {}", manifest.buffer_bytes),
         ));
     }
     let buffer = BufferReader {
-        bytes: &bytes,
+        source: &source,
+        len,
         path,
     };
 
@@ -396,8 +436,28 @@ pub fn parse(
         });
     }
     let mut textures = Vec::with_capacity(manifest.textures.len());
-    // Textures naming the same texels share them, as they did when written.
+    // Textures naming the same texels share them, as they did when written. When the
+    // texels need more than the texture memory, they are moved to tiled files one by one.
     let mut shared: HashMap<(u64, u64, Encoding), Arc<Texels>> = HashMap::new();
+    let distinct: std::collections::HashSet<_> = (manifest.textures.iter())
+        .map(|t| (t.texels.offset, t.texels.count, t.encoding))
+        .collect();
+    let texel_bytes = distinct.iter().fold(0u64, |sum, (_, count, encoding)| {
+        let size = match encoding {
+            Encoding::Rgba8 => 4,
+            Encoding::Rgba16 => 8,
+            Encoding::Rgba32f => 16,
+        };
+        sum.saturating_add(count.saturating_mul(size))
+    });
+    let cache = super::texture_cache::cache_for(texel_bytes);
+    // Named after the scene the file holds (a USD stage's path, not the plugin's file).
+    let name = match manifest.source.as_str() {
+        "" => path.display().to_string(),
+        source => source.to_string(),
+    };
+    let cache_notice =
+        (cache.as_ref()).map(|c| super::texture_cache::notice(&name, texel_bytes, c));
     for (i, t) in manifest.textures.iter().enumerate() {
         let element = format!("textures[{i}].texels");
         if t.width == 0 || t.height == 0 || t.texels.count != t.width as u64 * t.height as u64 {
@@ -431,6 +491,24 @@ pub fn parse(
                 )
             }
             Encoding::Rgba32f => Texels::RgbaF32(buffer.floats(t.texels, &element)?),
+        };
+        // The environment map stays in memory: its sampling tables read every texel, and
+        // it is checked for values that are not radiance.
+        let environment = matches!(
+            manifest.environment,
+            Some(Environment::LatLong { texture, .. }) if texture as usize == i
+        );
+        let texels = match &cache {
+            Some(cache) if !environment => texels
+                .to_tiled(&t.name, t.width, t.height, cache)
+                .map_err(|e| {
+                    Error::other(
+                        path,
+                        &element,
+                        format!("writing its tiled copy failed: {e}"),
+                    )
+                })?,
+            _ => texels,
         };
         let texels = Arc::new(texels);
         shared.insert(key, texels.clone());
@@ -491,6 +569,7 @@ pub fn parse(
     validate(&scene).map_err(|(element, reason)| bad(&element, reason))?;
     let udim_warnings = super::features::missing_tile_warnings(&scene);
     scene.warnings.extend(udim_warnings);
+    scene.warnings.extend(cache_notice);
     Ok(scene)
 }
 
@@ -638,7 +717,8 @@ fn texture(entry: &TextureEntry, texels: Arc<Texels>) -> Texture {
 
 /// Reads typed views out of the buffer with bounds checks.
 struct BufferReader<'a> {
-    bytes: &'a [u8],
+    source: &'a BufferSource,
+    len: u64,
     path: &'a Path,
 }
 
@@ -650,28 +730,37 @@ impl BufferReader<'_> {
             .count
             .checked_mul(size)
             .and_then(|len| view.offset.checked_add(len))
-            .filter(|&end| end <= self.bytes.len() as u64)
+            .filter(|&end| end <= self.len)
             .ok_or_else(|| {
                 Error::bad_input(
                     self.path,
                     element,
                     format!(
                         "view of {} elements at byte {} runs past the buffer ({} bytes)",
-                        view.count,
-                        view.offset,
-                        self.bytes.len()
+                        view.count, view.offset, self.len
                     ),
                 )
             })?;
-        let data = &self.bytes[view.offset as usize..end as usize];
-        Ok(data
-            .chunks_exact(size as usize)
-            .map(|chunk| {
+        crate::memory::check_allocation(end - view.offset, element)
+            .map_err(|reason| Error::bad_input(self.path, element, reason))?;
+        // Read a block at a time: the words are the only full copy.
+        const BLOCK_ELEMENTS: u64 = 1 << 16;
+        let mut out = Vec::with_capacity(view.count as usize);
+        let mut block = vec![0u8; (BLOCK_ELEMENTS.min(view.count) * size) as usize];
+        let mut offset = view.offset;
+        while offset < end {
+            let n = ((end - offset) as usize).min(block.len());
+            self.source
+                .read_at(offset, &mut block[..n])
+                .map_err(|e| Error::bad_input(self.path, element, format!("cannot read: {e}")))?;
+            out.extend(block[..n].chunks_exact(size as usize).map(|chunk| {
                 std::array::from_fn(|k| {
                     u32::from_le_bytes(chunk[4 * k..4 * k + 4].try_into().unwrap())
                 })
-            })
-            .collect())
+            }));
+            offset += n as u64;
+        }
+        Ok(out)
     }
 
     /// The view's elements as `N` finite floats each, converted to `T`.

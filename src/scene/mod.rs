@@ -6,6 +6,7 @@ pub mod features;
 pub mod file;
 pub mod material;
 pub mod texture;
+pub mod texture_cache;
 pub mod udim;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
@@ -368,7 +369,7 @@ impl Scene {
             .sum()
     }
 
-    /// Bytes of its texels (shared texels once).
+    /// Bytes of its texels held in memory (shared texels once; tiled ones are the cache's).
     pub fn texel_bytes(&self) -> u64 {
         let mut seen = std::collections::HashSet::new();
         self.textures
@@ -378,11 +379,24 @@ impl Scene {
             .sum()
     }
 
-    /// Bytes of its bulk data: meshes, texels (shared texels once), instances and shapes.
+    /// The tile cache its textures are read through, when they are too large to be held in
+    /// memory (`texture_cache`).
+    pub fn texture_cache(&self) -> Option<&Arc<texture_cache::TextureCache>> {
+        self.textures.iter().find_map(|t| match &*t.texels {
+            Texels::Tiled(image) => Some(image.cache()),
+            _ => None,
+        })
+    }
+
+    /// Bytes of its bulk data: meshes, texels (shared texels once; for tiled ones, the tile
+    /// cache's capacity and the tiles each thread keeps), instances and shapes.
     pub fn data_bytes(&self) -> u64 {
         use std::mem::size_of;
         self.meshes.iter().map(Mesh::data_bytes).sum::<u64>()
             + self.texel_bytes()
+            + self.texture_cache().map_or(0, |c| {
+                c.capacity() + c.bytes_per_thread() * rayon::current_num_threads() as u64
+            })
             + (self.instances.len() * size_of::<Instance>()
                 + self.spheres.len() * size_of::<Sphere>()
                 + self.disks.len() * size_of::<Disk>()

@@ -14,8 +14,11 @@
 //! the stored values). A level keeps the base image's texel format, so a pyramid costs a
 //! third of the image.
 
+use super::texture_cache::{
+    LevelImage, LevelLayout, LevelTexels, TexelArray, TextureCache, TiledImage,
+};
 use super::udim::Udim;
-use crate::color::{SRGB8_TO_LINEAR, linear_to_srgb, srgb_to_linear};
+use crate::color::{linear_to_srgb, rgba8_to_linear, rgba16_to_linear};
 use glam::{Vec2, Vec4};
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, OnceLock};
@@ -23,12 +26,70 @@ use std::sync::{Arc, OnceLock};
 /// Texel storage. Integer images keep their stored values (8 or 16 bits a channel) and are
 /// sRGB-decoded per lookup where the material slot says so, because one image may serve
 /// both colour and data slots. Float images (OpenEXR, Radiance HDR, float TIFF) hold linear
-/// values and are read as they are in every slot, as OpenImageIO-based renderers do.
+/// values and are read as they are in every slot, as OpenImageIO-based renderers do. A
+/// tiled image lies on disk with its MIP levels and is read through a cache of tiles
+/// (`texture_cache`), for scenes whose textures do not fit in memory.
 #[derive(Clone, Debug)]
 pub enum Texels {
     Rgba8(Vec<[u8; 4]>),
     Rgba16(Vec<[u16; 4]>),
     RgbaF32(Vec<[f32; 4]>),
+    Tiled(Arc<TiledImage>),
+}
+
+impl Texels {
+    /// The `width` × `height` image of these texels (`name` in messages) moved to a tiled
+    /// file, for reading through `cache` (its MIP levels are written on first use).
+    pub fn to_tiled(
+        &self,
+        name: &str,
+        width: u32,
+        height: u32,
+        cache: &Arc<TextureCache>,
+    ) -> std::io::Result<Texels> {
+        let texels = match self {
+            Texels::Rgba8(t) => LevelTexels::Rgba8(t),
+            Texels::Rgba16(t) => LevelTexels::Rgba16(t),
+            Texels::RgbaF32(t) => LevelTexels::RgbaF32(t),
+            Texels::Tiled(_) => return Ok(self.clone()),
+        };
+        let base = LevelImage {
+            width,
+            height,
+            texels,
+        };
+        Ok(Texels::Tiled(Arc::new(cache.store(name, &base)?)))
+    }
+}
+
+/// The levels of a tiled image for reading with `srgb` (0 first), its MIP levels built as
+/// those of images in memory are ([`build_chain`]) and written on first use.
+fn tiled_levels(image: &TiledImage, srgb: bool) -> &[LevelLayout] {
+    image.levels(srgb, |base| {
+        let (width, height) = (image.base().width, image.base().height);
+        let levels = build_chain(&Texels::from(base), width, height, srgb);
+        (levels.into_iter())
+            .map(|l| {
+                let texels = match l.texels {
+                    Texels::Rgba8(t) => TexelArray::Rgba8(t),
+                    Texels::Rgba16(t) => TexelArray::Rgba16(t),
+                    Texels::RgbaF32(t) => TexelArray::RgbaF32(t),
+                    Texels::Tiled(_) => unreachable!("levels are built in memory"),
+                };
+                (l.width, l.height, texels)
+            })
+            .collect()
+    })
+}
+
+impl From<TexelArray> for Texels {
+    fn from(array: TexelArray) -> Self {
+        match array {
+            TexelArray::Rgba8(t) => Texels::Rgba8(t),
+            TexelArray::Rgba16(t) => Texels::Rgba16(t),
+            TexelArray::RgbaF32(t) => Texels::RgbaF32(t),
+        }
+    }
 }
 
 /// How coordinates outside [0, 1) map into the image.
@@ -113,49 +174,29 @@ fn wrap(i: i64, n: u32, mode: Wrap) -> usize {
     }) as usize
 }
 
-fn texels_bytes(texels: &Texels) -> usize {
+/// Bytes `texels` hold in memory (a tiled image's tiles are the cache's).
+pub fn texels_bytes(texels: &Texels) -> usize {
     match texels {
         Texels::Rgba8(t) => t.len() * 4,
         Texels::Rgba16(t) => t.len() * 8,
         Texels::RgbaF32(t) => t.len() * 16,
+        Texels::Tiled(_) => 0,
     }
 }
 
-/// An 8-bit texel, linear (colour channels sRGB-decoded where `srgb` is set).
-#[inline(always)]
-fn decode8([r, g, b, a]: [u8; 4], srgb: bool) -> Vec4 {
-    if srgb {
-        let lut = &*SRGB8_TO_LINEAR;
-        Vec4::new(
-            lut[r as usize],
-            lut[g as usize],
-            lut[b as usize],
-            a as f32 / 255.0,
-        )
-    } else {
-        Vec4::new(r as f32, g as f32, b as f32, a as f32) / 255.0
-    }
-}
-
-/// A 16-bit texel, linear (colour channels sRGB-decoded where `srgb` is set).
-#[inline(always)]
-fn decode16(t: [u16; 4], srgb: bool) -> Vec4 {
-    let [r, g, b, a] = t.map(|v| v as f32 / 65535.0);
-    if srgb {
-        Vec4::new(srgb_to_linear(r), srgb_to_linear(g), srgb_to_linear(b), a)
-    } else {
-        Vec4::new(r, g, b, a)
-    }
-}
-
-/// Texel `i` of `texels`, linear (sRGB-decoded where `srgb` is set and the texels are
-/// integers).
+/// Texel `i` (row-major) of `texels`, linear (sRGB-decoded where `srgb` is set and the
+/// texels are integers).
 #[inline]
 fn fetch(texels: &Texels, i: usize, srgb: bool) -> Vec4 {
     match texels {
-        Texels::Rgba8(t) => decode8(t[i], srgb),
-        Texels::Rgba16(t) => decode16(t[i], srgb),
+        Texels::Rgba8(t) => rgba8_to_linear(t[i], srgb),
+        Texels::Rgba16(t) => rgba16_to_linear(t[i], srgb),
         Texels::RgbaF32(t) => Vec4::from_array(t[i]),
+        Texels::Tiled(image) => {
+            let level = image.base();
+            let width = level.width as usize;
+            image.texel(level, i % width, i / width, srgb)
+        }
     }
 }
 
@@ -165,31 +206,47 @@ impl Texture {
         fetch(&self.texels, y * self.width as usize + x, srgb)
     }
 
-    /// Bilinear lookup of `uv` in an image of `width` × `height` `texels`.
-    #[inline]
-    fn bilinear(&self, texels: &Texels, (width, height): (u32, u32), uv: Vec2, srgb: bool) -> Vec4 {
+    /// The texels a bilinear lookup of `uv` in a `width` × `height` image blends (columns
+    /// and rows, wrapped) and its weights across and down.
+    #[inline(always)]
+    fn corners(&self, (width, height): (u32, u32), uv: Vec2) -> ([usize; 2], [usize; 2], f32, f32) {
         let x = uv.x as f64 * width as f64 - 0.5;
         let y = uv.y as f64 * height as f64 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
         let (x0, y0) = (x0 as i64, y0 as i64);
-        let xa = wrap(x0, width, self.wrap_u);
-        let xb = wrap(x0 + 1, width, self.wrap_u);
-        let ya = wrap(y0, height, self.wrap_v) * width as usize;
-        let yb = wrap(y0 + 1, height, self.wrap_v) * width as usize;
+        let xs = [
+            wrap(x0, width, self.wrap_u),
+            wrap(x0 + 1, width, self.wrap_u),
+        ];
+        let ys = [
+            wrap(y0, height, self.wrap_v),
+            wrap(y0 + 1, height, self.wrap_v),
+        ];
+        (xs, ys, fx, fy)
+    }
+
+    /// Bilinear lookup of `uv` in an image of `width` × `height` `texels`.
+    #[inline]
+    fn bilinear(&self, texels: &Texels, (width, height): (u32, u32), uv: Vec2, srgb: bool) -> Vec4 {
+        if let Texels::Tiled(image) = texels {
+            return self.bilinear_tiled(image, image.base(), uv, srgb);
+        }
+        let ([xa, xb], [ya, yb], fx, fy) = self.corners((width, height), uv);
+        let (ya, yb) = (ya * width as usize, yb * width as usize);
         // One match for the four texels, so that each format's loads are inlined together.
         let (c00, c10, c01, c11) = match texels {
             Texels::Rgba8(t) => (
-                decode8(t[ya + xa], srgb),
-                decode8(t[ya + xb], srgb),
-                decode8(t[yb + xa], srgb),
-                decode8(t[yb + xb], srgb),
+                rgba8_to_linear(t[ya + xa], srgb),
+                rgba8_to_linear(t[ya + xb], srgb),
+                rgba8_to_linear(t[yb + xa], srgb),
+                rgba8_to_linear(t[yb + xb], srgb),
             ),
             Texels::Rgba16(t) => (
-                decode16(t[ya + xa], srgb),
-                decode16(t[ya + xb], srgb),
-                decode16(t[yb + xa], srgb),
-                decode16(t[yb + xb], srgb),
+                rgba16_to_linear(t[ya + xa], srgb),
+                rgba16_to_linear(t[ya + xb], srgb),
+                rgba16_to_linear(t[yb + xa], srgb),
+                rgba16_to_linear(t[yb + xb], srgb),
             ),
             Texels::RgbaF32(t) => (
                 Vec4::from_array(t[ya + xa]),
@@ -197,7 +254,25 @@ impl Texture {
                 Vec4::from_array(t[yb + xa]),
                 Vec4::from_array(t[yb + xb]),
             ),
+            Texels::Tiled(_) => unreachable!("tiled images are looked up above"),
         };
+        c00.lerp(c10, fx).lerp(c01.lerp(c11, fx), fy)
+    }
+
+    /// Bilinear lookup of `uv` in `level` of the tiled `image`: the same blend of the same
+    /// texels as [`Texture::bilinear`] in memory.
+    fn bilinear_tiled(
+        &self,
+        image: &TiledImage,
+        level: &LevelLayout,
+        uv: Vec2,
+        srgb: bool,
+    ) -> Vec4 {
+        let ([xa, xb], [ya, yb], fx, fy) = self.corners((level.width, level.height), uv);
+        let c00 = image.texel(level, xa, ya, srgb);
+        let c10 = image.texel(level, xb, ya, srgb);
+        let c01 = image.texel(level, xa, yb, srgb);
+        let c11 = image.texel(level, xb, yb, srgb);
         c00.lerp(c10, fx).lerp(c01.lerp(c11, fx), fy)
     }
 
@@ -245,84 +320,56 @@ impl Texture {
         let minor = minor.max(major / MAX_ANISOTROPY).max(1.0);
         let lod = minor.log2();
         let probes = ((major / minor).ceil() as usize).clamp(1, MAX_ANISOTROPY as usize);
-        let chain = self.chain(srgb);
+        let probe = |i: usize| uv + along * ((i as f32 + 0.5) / probes as f32 - 0.5);
         let mut sum = Vec4::ZERO;
-        for i in 0..probes {
-            let offset = (i as f32 + 0.5) / probes as f32 - 0.5;
-            sum += self.trilinear(chain, uv + along * offset, lod, srgb);
+        if let Texels::Tiled(image) = &*self.texels {
+            let levels = tiled_levels(image, srgb);
+            for i in 0..probes {
+                let uv = probe(i);
+                sum += trilinear(levels.len() - 1, lod, |l| {
+                    self.bilinear_tiled(image, &levels[l], uv, srgb)
+                });
+            }
+        } else {
+            let chain = self.chain(srgb);
+            for i in 0..probes {
+                let uv = probe(i);
+                sum += trilinear(chain.len(), lod, |l| match l {
+                    0 => self.bilinear(&self.texels, (self.width, self.height), uv, srgb),
+                    l => {
+                        let l = &chain[l - 1];
+                        self.bilinear(&l.texels, (l.width, l.height), uv, srgb)
+                    }
+                });
+            }
         }
         sum / probes as f32
-    }
-
-    /// Trilinear lookup of `uv` at (fractional) MIP level `lod` ≥ 0 of the image and its
-    /// levels `chain` (for reading with `srgb`).
-    #[inline]
-    fn trilinear(&self, chain: &[Level], uv: Vec2, lod: f32, srgb: bool) -> Vec4 {
-        let top = chain.len() as f32;
-        let lod = lod.min(top);
-        let fine = lod.floor();
-        let t = lod - fine;
-        let at = |level: usize| match level {
-            0 => self.bilinear(&self.texels, (self.width, self.height), uv, srgb),
-            l => {
-                let l = &chain[l - 1];
-                self.bilinear(&l.texels, (l.width, l.height), uv, srgb)
-            }
-        };
-        let fine_value = at(fine as usize);
-        if t == 0.0 {
-            return fine_value;
-        }
-        fine_value.lerp(at(fine as usize + 1), t)
     }
 
     /// The MIP pyramid for reading the texels with `srgb`, built on first use.
     fn chain(&self, srgb: bool) -> &[Level] {
         let srgb = srgb && !matches!(*self.texels, Texels::RgbaF32(_));
-        self.mips.chains[srgb as usize].get_or_init(|| self.build_chain(srgb))
-    }
-
-    /// Levels 1 and up, each half the size of the one before (rounded down, at least one
-    /// texel), box-filtered from the one before in linear values, as GPUs generate MIP
-    /// maps: no level needs a copy of another at higher precision, and an 8-bit level's
-    /// rounding (half a step) is what the next one starts from.
-    fn build_chain(&self, srgb: bool) -> Vec<Level> {
-        let (mut w, mut h) = (self.width as usize, self.height as usize);
-        let mut levels: Vec<Level> = Vec::new();
-        while w > 1 || h > 1 {
-            let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-            let source = levels.last().map_or(&*self.texels, |l| &l.texels);
-            let src = |i| fetch(source, i, srgb);
-            let (from, to) = ((w, h), (nw, nh));
-            let texels = match *self.texels {
-                Texels::Rgba8(_) => Texels::Rgba8(box_downsample(src, from, to, |v| {
-                    encode(v, 255.0, srgb).map(|x| x as u8)
-                })),
-                Texels::Rgba16(_) => Texels::Rgba16(box_downsample(src, from, to, |v| {
-                    encode(v, 65535.0, srgb).map(|x| x as u16)
-                })),
-                Texels::RgbaF32(_) => {
-                    Texels::RgbaF32(box_downsample(src, from, to, |v| v.to_array()))
-                }
-            };
-            (w, h) = (nw, nh);
-            levels.push(Level {
-                width: w as u32,
-                height: h as u32,
-                texels,
-            });
-        }
-        levels
+        self.mips.chains[srgb as usize]
+            .get_or_init(|| build_chain(&self.texels, self.width, self.height, srgb))
     }
 
     /// Builds the MIP pyramid for reading the texels with `srgb` now, if it is not built
     /// (a render builds those its materials read before it starts, in parallel, instead of
     /// stalling its threads on the first lookups).
     pub fn build_mips(&self, srgb: bool) {
-        self.chain(srgb);
-        for tile in self.udim.iter().flat_map(|u| u.images()) {
-            tile.chain(srgb);
+        match &*self.texels {
+            Texels::Tiled(image) => drop(tiled_levels(image, srgb)),
+            _ => drop(self.chain(srgb)),
         }
+        for tile in self.udim.iter().flat_map(|u| u.images()) {
+            tile.build_mips(srgb);
+        }
+    }
+
+    /// Whether the image, or a tile of its UDIM set, lies in a tiled file (`texture_cache`).
+    pub fn is_tiled(&self) -> bool {
+        matches!(*self.texels, Texels::Tiled(_))
+            || (self.udim.iter().flat_map(|u| u.images())).any(Texture::is_tiled)
     }
 
     /// Mean linear value over the image (for light power estimates; a UDIM set's own image
@@ -330,6 +377,18 @@ impl Texture {
     pub fn mean(&self, srgb: bool) -> Vec4 {
         let n = (self.width as usize * self.height as usize).max(1);
         let mut sum = glam::DVec4::ZERO;
+        if let Texels::Tiled(image) = &*self.texels {
+            // Tile by tile rather than row by row: each tile is read once.
+            let level = image.base();
+            for (x0, y0, x1, y1) in level.tiles() {
+                for y in y0..y1 {
+                    for x in x0..x1 {
+                        sum += image.texel(level, x, y, srgb).as_dvec4();
+                    }
+                }
+            }
+            return (sum / n as f64).as_vec4();
+        }
         for y in 0..self.height as usize {
             for x in 0..self.width as usize {
                 sum += self.texel(x, y, srgb).as_dvec4();
@@ -348,6 +407,57 @@ impl Texture {
     pub fn texel_linear(&self, x: u32, y: u32, srgb: bool) -> Vec4 {
         self.texel(x as usize, y as usize, srgb)
     }
+}
+
+/// Trilinear blend at (fractional) MIP level `lod` ≥ 0 of a pyramid whose `top` level is
+/// the coarsest, `at(level)` the bilinear lookup at an integer level.
+#[inline]
+fn trilinear(top: usize, lod: f32, at: impl Fn(usize) -> Vec4) -> Vec4 {
+    let lod = lod.min(top as f32);
+    let fine = lod.floor();
+    let t = lod - fine;
+    let fine_value = at(fine as usize);
+    if t == 0.0 {
+        return fine_value;
+    }
+    fine_value.lerp(at(fine as usize + 1), t)
+}
+
+/// MIP levels 1 and up of the `width` × `height` image `texels` read with `srgb`, each half
+/// the size of the one before (rounded down, at least one texel), box-filtered from the one
+/// before in linear values, as GPUs generate MIP maps: no level needs a copy of another at
+/// higher precision, and an 8-bit level's rounding (half a step) is what the next one starts
+/// from. A tiled image has its levels on disk: none here.
+fn build_chain(texels: &Texels, width: u32, height: u32, srgb: bool) -> Vec<Level> {
+    let (mut w, mut h) = (width as usize, height as usize);
+    let mut levels: Vec<Level> = Vec::new();
+    if matches!(texels, Texels::Tiled(_)) {
+        return levels;
+    }
+    while w > 1 || h > 1 {
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        let source = levels.last().map_or(texels, |l| &l.texels);
+        let src = |i| fetch(source, i, srgb);
+        let (from, to) = ((w, h), (nw, nh));
+        let level = match texels {
+            Texels::Rgba8(_) => Texels::Rgba8(box_downsample(src, from, to, |v| {
+                encode(v, 255.0, srgb).map(|x| x as u8)
+            })),
+            Texels::Rgba16(_) => Texels::Rgba16(box_downsample(src, from, to, |v| {
+                encode(v, 65535.0, srgb).map(|x| x as u16)
+            })),
+            Texels::RgbaF32(_) | Texels::Tiled(_) => {
+                Texels::RgbaF32(box_downsample(src, from, to, |v| v.to_array()))
+            }
+        };
+        (w, h) = (nw, nh);
+        levels.push(Level {
+            width: w as u32,
+            height: h as u32,
+            texels: level,
+        });
+    }
+    levels
 }
 
 /// The UDIM set of `tiles` (tile number, index into `textures`): each tile's image must be
@@ -558,5 +668,88 @@ mod tests {
         let long = [Vec2::new(1.0 / 64.0, 0.0), Vec2::new(0.0, 8.0 / 64.0)];
         let along = t.sample_footprint(uv, long, false).x;
         assert!((along - 1.0).abs() < 1e-6, "stripe kept: {along}");
+    }
+
+    /// A `w` × `h` image of 8-bit, 16-bit or float texels (`kind` 0, 1, 2) that differ
+    /// everywhere.
+    fn varied(kind: u32, w: u32, h: u32) -> Texels {
+        let value = |i: u32, c: u32| ((i * 37 + c * 101) % 251) as f32 / 250.0;
+        let n = w * h;
+        match kind {
+            0 => Texels::Rgba8(
+                (0..n)
+                    .map(|i| std::array::from_fn(|c| (value(i, c as u32) * 255.0) as u8))
+                    .collect(),
+            ),
+            1 => Texels::Rgba16(
+                (0..n)
+                    .map(|i| std::array::from_fn(|c| (value(i, c as u32) * 65535.0) as u16))
+                    .collect(),
+            ),
+            _ => Texels::RgbaF32(
+                (0..n)
+                    .map(|i| std::array::from_fn(|c| value(i, c as u32) * 4.0))
+                    .collect(),
+            ),
+        }
+    }
+
+    #[test]
+    fn lookups_through_the_tile_cache_equal_lookups_in_memory_bit_for_bit() {
+        // A cache of a few tiles, so that tiles are evicted and read again while looking up.
+        let cache = TextureCache::new(6 * 64 * 64 * 16);
+        let mut rng = crate::sampling::pcg::Pcg32::new(7, 1);
+        let mut next = || rng.next_f32();
+        for kind in 0..3 {
+            for (w, h, wrap) in [
+                (150, 70, Wrap::Repeat),
+                (64, 64, Wrap::MirroredRepeat),
+                (300, 1, Wrap::ClampToEdge),
+            ] {
+                let memory = Texture {
+                    wrap_u: wrap,
+                    texels: Arc::new(varied(kind, w, h)),
+                    ..grey(w, h, |_, _| 0)
+                };
+                let tiled = memory.texels.to_tiled("t", w, h, &cache).unwrap();
+                let on_disk = Texture {
+                    texels: Arc::new(tiled),
+                    mips: Default::default(),
+                    ..memory.clone()
+                };
+                for srgb in [false, true] {
+                    assert_eq!(on_disk.mean(srgb), memory.mean(srgb));
+                    for _ in 0..2000 {
+                        let uv = Vec2::new(next() * 3.0 - 1.0, next() * 3.0 - 1.0);
+                        let scale = 2f32.powf(next() * 12.0 - 10.0);
+                        let axes = [
+                            Vec2::new(next() - 0.5, next() - 0.5) * scale,
+                            Vec2::new(next() - 0.5, next() - 0.5) * scale * next(),
+                        ];
+                        assert_eq!(on_disk.sample(uv, srgb), memory.sample(uv, srgb));
+                        assert_eq!(
+                            on_disk.sample_footprint(uv, axes, srgb),
+                            memory.sample_footprint(uv, axes, srgb),
+                            "kind {kind} {w}x{h} uv {uv} axes {axes:?} srgb {srgb}"
+                        );
+                    }
+                }
+                let Texels::Tiled(image) = &*on_disk.texels else {
+                    unreachable!()
+                };
+                let back = Texels::from(image.read_all());
+                let texels = |t: &Texels| -> Vec<Vec4> {
+                    (0..(w * h) as usize).map(|i| fetch(t, i, false)).collect()
+                };
+                assert_eq!(texels(&back), texels(&memory.texels));
+            }
+        }
+        let stats = cache.stats();
+        assert_eq!(stats.images, 9);
+        assert!(stats.resident <= cache.capacity(), "{stats:?}");
+        assert!(
+            stats.tiles_read > 100,
+            "a small cache reads tiles again: {stats:?}"
+        );
     }
 }

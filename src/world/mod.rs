@@ -286,7 +286,8 @@ impl World {
     }
 
     /// Builds the MIP pyramids the materials read (each image once per way it is read:
-    /// colour slots sRGB-decode integer texels, the others do not), in parallel.
+    /// colour slots sRGB-decode integer texels, the others do not), in parallel for images
+    /// in memory.
     fn build_mips(&self) {
         use rayon::prelude::*;
         let textures = &self.surfaces.textures;
@@ -303,9 +304,17 @@ impl World {
                 }
             }
         }
-        wanted
+        // Images in tiled files are read back whole to build their levels: one at a time,
+        // so that no more than one is in memory.
+        let (tiled, in_memory): (Vec<_>, Vec<_>) = wanted
+            .into_iter()
+            .partition(|&(t, _)| textures[t].is_tiled());
+        in_memory
             .par_iter()
             .for_each(|&(t, srgb)| textures[t].build_mips(srgb));
+        for (t, srgb) in tiled {
+            textures[t].build_mips(srgb);
+        }
     }
 
     /// The shading point of `hit` along `ray`, its textures looked up at the point.

@@ -20,7 +20,7 @@ fn load(target: &str, bytes: &[u8]) -> lucerna::Result<lucerna::scene::Scene> {
             let split = bytes.iter().position(|&b| b == 0).unwrap_or(bytes.len());
             let buffer = bytes.get(split + 1..).unwrap_or_default();
             lucerna::scene::file::parse(Path::new("fuzz.lucerna"), &bytes[..split], |_| {
-                Ok(buffer.to_vec())
+                Ok(buffer.to_vec().into())
             })
         }
         _ => panic!("unknown fuzz target {target}"),

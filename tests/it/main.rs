@@ -25,4 +25,5 @@ mod quadric_lights;
 mod scene_file;
 mod split;
 mod stress;
+mod texture_cache;
 mod texture_filter;

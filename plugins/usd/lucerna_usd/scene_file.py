@@ -4,9 +4,12 @@ go to the buffer as views {offset in bytes, count in elements}; everything else 
 with the renderer's field names. Both files are written through a temporary file and a
 rename, the buffer first, so a reader never sees a manifest without its buffer."""
 
+import io
 import json
 import math
 import os
+import shutil
+import tempfile
 
 import numpy as np
 
@@ -59,7 +62,10 @@ class SceneWriter:
 
     def __init__(self, source):
         self.source = source
-        self._chunks = []
+        # The buffer is spooled to an unnamed temporary file as it grows, so that the
+        # conversion does not hold a copy of every mesh and texel in memory besides the
+        # arrays it converts; `write` copies it out.
+        self._spool = tempfile.TemporaryFile()
         self._size = 0
         self.meshes = []
         self.subdivision_surfaces = []
@@ -85,9 +91,9 @@ class SceneWriter:
     def _view(self, array, dtype, width):
         data = np.ascontiguousarray(np.asarray(array, dtype=dtype).reshape(-1, width))
         view = {"offset": self._size, "count": int(data.shape[0])}
-        raw = data.astype(data.dtype.newbyteorder("<"), copy=False).tobytes()
-        self._chunks.append(raw)
-        self._size += len(raw)
+        raw = data.astype(data.dtype.newbyteorder("<"), copy=False)
+        self._spool.write(memoryview(raw).cast("B"))
+        self._size += raw.nbytes
         return view
 
     def add_mesh(self, name, material, positions, triangles, normals=None, uvs=None, colors=None):
@@ -219,8 +225,9 @@ class SceneWriter:
         }
         _check_numbers(manifest)
         text = json.dumps(manifest, indent=1, allow_nan=False)
-        _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._chunks)
-        _write_atomically(path, [text.encode()])
+        self._spool.seek(0)
+        _write_atomically(os.path.join(os.path.dirname(path), buffer_name), self._spool)
+        _write_atomically(path, io.BytesIO(text.encode()))
 
 
 # The largest magnitude a 32-bit float holds: the renderer reads every number as one.
@@ -263,12 +270,12 @@ def _check_numbers(manifest):
                                           "holds (finite, within 32-bit float range)")
 
 
-def _write_atomically(path, chunks):
+def _write_atomically(path, source):
+    """Copies the file object `source` to `path` through a temporary file and a rename."""
     tmp = path + ".tmp"
     try:
         with open(tmp, "wb") as f:
-            for chunk in chunks:
-                f.write(chunk)
+            shutil.copyfileobj(source, f, 1 << 24)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

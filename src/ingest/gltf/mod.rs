@@ -106,7 +106,9 @@ pub fn import_with(
         variant: None,
         animation: None,
         unsupported_material_extensions: Default::default(),
+        texture_cache: None,
     };
+    importer.plan_texture_memory();
     importer.select_variant(choices.material_variant)?;
     importer.select_animation(choices.animation)?;
     importer.run(time)?;
@@ -142,6 +144,9 @@ pub(crate) struct Importer<'a> {
     animation: Option<usize>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
+    /// The tile cache images are read through when the textures do not fit in the texture
+    /// memory (`None`: they are kept in memory).
+    texture_cache: Option<Arc<crate::scene::texture_cache::TextureCache>>,
 }
 
 /// The animated parts of a node's transform at one time (the rest come from the node).

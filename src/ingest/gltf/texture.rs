@@ -4,8 +4,8 @@
 use super::super::image as img;
 use super::super::uri;
 use super::Importer;
-use crate::error::Result;
-use crate::scene::{self, TextureRef, UvTransform, Wrap};
+use crate::error::{Error, Result};
+use crate::scene::{self, TextureRef, UvTransform, Wrap, texture_cache};
 use glam::Vec2;
 use std::sync::Arc;
 
@@ -69,27 +69,21 @@ impl<'a> Importer<'a> {
         let decoded = match self.images.get(&image.index()) {
             Some(d) => d.clone(),
             None => {
-                let bytes: Vec<u8> = match image.source() {
-                    gltf::image::Source::View { view, .. } => {
-                        let data = self
-                            .buffers
-                            .get(view.buffer().index())
-                            .map(Vec::as_slice)
-                            .unwrap_or(&[]);
-                        let end = view.offset().checked_add(view.length());
-                        match end.and_then(|end| data.get(view.offset()..end)) {
-                            Some(slice) => slice.to_vec(),
-                            None => {
-                                return Err(self
-                                    .err(&element, "bufferView runs past the end of its buffer"));
-                            }
-                        }
-                    }
-                    gltf::image::Source::Uri { uri: u, .. } => uri::read(u, self.base)
-                        .map_err(|r| self.err(format!("{element}.uri"), r))?,
-                };
+                let bytes = self.image_bytes(&image)?;
                 let d = img::decode(&bytes).map_err(|r| self.err(&element, r))?;
-                let decoded = (d.width, d.height, Arc::new(d.texels));
+                let texels = match &self.texture_cache {
+                    Some(cache) => (d.texels)
+                        .to_tiled(&element, d.width, d.height, cache)
+                        .map_err(|e| {
+                            Error::other(
+                                &self.source,
+                                &element,
+                                format!("writing its tiled copy failed: {e}"),
+                            )
+                        })?,
+                    None => d.texels,
+                };
+                let decoded = (d.width, d.height, Arc::new(texels));
                 self.images.insert(image.index(), decoded.clone());
                 decoded
             }
@@ -119,6 +113,57 @@ impl<'a> Importer<'a> {
         let index = (self.scene.textures.len() - 1) as u32;
         self.textures.insert(texture.index(), index);
         Ok(index)
+    }
+
+    /// The encoded bytes of `image`, from its buffer view or its URI.
+    fn image_bytes(&self, image: &gltf::Image) -> Result<Vec<u8>> {
+        let element = format!("images[{}]", image.index());
+        match image.source() {
+            gltf::image::Source::View { view, .. } => {
+                let data = self
+                    .buffers
+                    .get(view.buffer().index())
+                    .map(Vec::as_slice)
+                    .unwrap_or(&[]);
+                let end = view.offset().checked_add(view.length());
+                match end.and_then(|end| data.get(view.offset()..end)) {
+                    Some(slice) => Ok(slice.to_vec()),
+                    None => Err(self.err(&element, "bufferView runs past the end of its buffer")),
+                }
+            }
+            gltf::image::Source::Uri { uri: u, .. } => {
+                uri::read(u, self.base).map_err(|r| self.err(format!("{element}.uri"), r))
+            }
+        }
+    }
+
+    /// Chooses how the file's textures are held before any is decoded: in memory, or (when
+    /// the images its textures show need more than the texture memory, decoded and with
+    /// their MIP levels, as their headers say) on disk through a tile cache, which the scene's
+    /// warnings then report.
+    pub(super) fn plan_texture_memory(&mut self) {
+        let mut images = std::collections::BTreeSet::new();
+        for texture in self.doc.textures() {
+            if let Ok(image) = self.texture_image(&texture) {
+                images.insert(image.index());
+            }
+        }
+        let mut bytes = 0u64;
+        for image in self.doc.images().filter(|i| images.contains(&i.index())) {
+            if let Some(n) = self
+                .image_bytes(&image)
+                .ok()
+                .and_then(|b| img::decoded_bytes(&b))
+            {
+                bytes = bytes.saturating_add(n);
+            }
+        }
+        self.texture_cache = texture_cache::cache_for(bytes);
+        if let Some(cache) = &self.texture_cache {
+            self.scene
+                .warnings
+                .push(texture_cache::notice(&self.source, bytes, cache));
+        }
     }
 
     /// The image a texture shows: its EXT_texture_webp or KHR_texture_basisu (KTX2) image

@@ -11,7 +11,7 @@ fuzz_target!(|data: &[u8]| {
     let split = data.iter().position(|&b| b == 0).unwrap_or(data.len());
     let (manifest, buffer) = (&data[..split], data.get(split + 1..).unwrap_or_default());
     let loaded = lucerna::scene::file::parse(Path::new("fuzz.lucerna"), manifest, |_| {
-        Ok(buffer.to_vec())
+        Ok(buffer.to_vec().into())
     });
     if let Ok(scene) = loaded {
         common::render_a_few_pixels(scene);

@@ -1,0 +1,122 @@
+//! Textures beyond the texture memory: read from tiled copies through the tile cache, they
+//! render the image of the same render with every texture in memory, pixel for pixel, from
+//! glTF and from scene files, and the render says so.
+
+use crate::common::cli::{lucerna_ok, lucerna_stderr, temp_dir};
+use lucerna::output::exr;
+use std::path::Path;
+
+const AVOCADO: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/tests/assets/gltf/Avocado/Avocado.gltf"
+);
+
+/// The beauty of a 16-spp render of `scene` to `out` with `extra` options, and its stderr.
+fn render(scene: &Path, out: &Path, extra: &[&str]) -> (Vec<f32>, String) {
+    let mut args = vec![
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--spp",
+        "16",
+        "--resolution",
+        "96x96",
+        "--env",
+        "1,1,1",
+    ];
+    args.extend_from_slice(extra);
+    let (ok, stderr) = lucerna_stderr(&args);
+    assert!(ok, "{stderr}");
+    let (planes, _) = exr::read(out).unwrap();
+    let beauty = ["R", "G", "B"]
+        .iter()
+        .flat_map(|c| planes.channel(c).unwrap().to_vec())
+        .collect();
+    (beauty, stderr)
+}
+
+#[test]
+fn textures_through_the_cache_render_the_image_of_textures_in_memory() {
+    let dir = temp_dir("texture-cache");
+    let scene_file = dir.join("avocado.lucerna");
+    lucerna_ok(&["convert", AVOCADO, "-o", scene_file.to_str().unwrap()]);
+    for scene in [Path::new(AVOCADO), &scene_file] {
+        for filter in ["bilinear", "mip"] {
+            let filter_args = ["--texture-filter", filter];
+            let (memory, said) = render(scene, &dir.join("memory.exr"), &filter_args);
+            assert!(!said.contains("tiled copies"), "{said}");
+            // Three 128 x 128 images (256 KiB with their MIP levels) in a texture memory of
+            // 64 KiB: read through a cache of 64 KiB, evicting and reading tiles again.
+            let stats = dir.join("stats.json");
+            let mut args = vec![
+                "--texture-memory",
+                "64K",
+                "--stats-json",
+                stats.to_str().unwrap(),
+            ];
+            args.extend_from_slice(&filter_args);
+            let (cached, said) = render(scene, &dir.join("cache.exr"), &args);
+            assert!(
+                said.contains("the textures need 256.0 KiB in memory with their MIP levels, more than the texture memory of 64.0 KiB")
+                    && said.contains("texture cache: 3 images in tiled files"),
+                "{said}"
+            );
+            assert!(
+                memory == cached,
+                "{} {filter}: the images differ",
+                scene.display()
+            );
+            let stats: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+            let cache = &stats["texture_cache"];
+            assert_eq!(cache["images"], 3);
+            assert!(cache["tiles_read"].as_u64().unwrap() > 0, "{cache}");
+            assert!(
+                cache["resident_bytes"].as_u64().unwrap() <= 64 << 10,
+                "{cache}"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_texture_memory_is_chosen_by_its_option() {
+    let dir = temp_dir("texture-memory-option");
+    let out = dir.join("x.exr");
+    // Half of 64 MiB holds the Avocado's 256 KiB of textures; 100 KiB does not.
+    let (_, said) = render(Path::new(AVOCADO), &out, &["--max-memory", "64M"]);
+    assert!(!said.contains("tiled copies"), "{said}");
+    let (_, said) = render(
+        Path::new(AVOCADO),
+        &out,
+        &["--max-memory", "64M", "--texture-memory", "100K"],
+    );
+    assert!(said.contains("texture memory of 100.0 KiB"), "{said}");
+    let (_, said) = render(
+        Path::new(AVOCADO),
+        &out,
+        &["--max-memory", "off", "--texture-memory", "off"],
+    );
+    assert!(!said.contains("tiled copies"), "{said}");
+}
+
+#[test]
+fn a_folder_that_takes_no_copies_is_a_clear_error() {
+    let dir = temp_dir("texture-cache-no-folder");
+    let out = dir.join("x.exr");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", AVOCADO, "-o", out.to_str().unwrap(), "--spp", "1"])
+        .args(["--texture-memory", "64K"])
+        .env("TMPDIR", dir.join("missing"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("images[0]: writing its tiled copy failed: in ")
+            && stderr.contains("missing"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+}
