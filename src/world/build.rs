@@ -335,10 +335,11 @@ fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
 
 /// Bytes obvhs holds per primitive at the peak of a BVH build beyond the primitives
 /// themselves: the bounds it is given, its PLOC nodes, sort keys and reinsertion state, and
-/// the wide nodes. Measured: the peak of `lucerna render` on single meshes of 0.32, 2 and
-/// 3.9 million triangles, less the scene and its render-space copy, is 304 to 319 bytes a
-/// triangle, which this constant makes 326 (tools/experiments/stress checks the estimate).
-const BVH_BUILD_BYTES_PER_PRIMITIVE: u64 = 240;
+/// the wide nodes. Measured: the peak of `lucerna render` on single meshes of 0.32 to 3.9
+/// million triangles, less the scene and its render-space copy, is 304 to 319 bytes a
+/// triangle, on meshes of 10 and 30 million 282 (tools/bench/scale.py), which this constant
+/// makes 296 (tools/experiments/stress checks the estimate).
+const BVH_BUILD_BYTES_PER_PRIMITIVE: u64 = 210;
 
 /// Bytes a light holds beyond its `Light`: its light-tree node and selection entries.
 const LIGHT_SELECTION_BYTES: u64 = 96;
@@ -411,6 +412,7 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
         .min(EMISSION_TREE_FLOATS as u64)
         * 4;
     MemoryEstimate {
+        program: crate::memory::PROGRAM_BYTES,
         scene: scene.data_bytes(),
         geometry,
         bvh,
