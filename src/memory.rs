@@ -24,10 +24,11 @@ pub struct MemoryEstimate {
     pub program: u64,
     /// The loaded scene: vertex data, triangles, texels.
     pub scene: u64,
-    /// Render-space copies of the flattened meshes, what each primitive refers to, and the
-    /// placements of shared meshes (those meshes themselves move out of the scene).
+    /// Render-space copies of meshes flattened more than once (a mesh placed once moves),
+    /// what each primitive refers to, and the placements of shared meshes (those meshes
+    /// themselves move out of the scene).
     pub geometry: u64,
-    /// The BVHs at their build peak: primitives, bounds, obvhs's build nodes and the result.
+    /// The BVHs at their build peak: flags, bounds, obvhs's build nodes and the result.
     pub bvh: u64,
     /// Area lights and their selection structures.
     pub lights: u64,

@@ -103,47 +103,32 @@ pub fn refine_subdivision_surfaces(
     Ok(())
 }
 
-fn transform_mesh(mesh: &Mesh, to_render: &DMat4) -> Mesh {
+/// `mesh` moved by `to_render` (object space to render space), in place: positions, normals
+/// and tangents transformed, the winding kept front-facing under a mirroring transform.
+fn transform_mesh(mut mesh: Mesh, to_render: &DMat4) -> Mesh {
     let linear = DMat3::from_mat4(*to_render);
     let mirrored = linear.determinant() < 0.0;
     let normal_matrix = linear.inverse().transpose();
-    let positions = mesh
-        .positions
-        .iter()
-        .map(|p| to_render.transform_point3(p.as_dvec3()).as_vec3())
-        .collect();
-    let normals = mesh.normals.as_ref().map(|ns| {
-        ns.iter()
-            .map(|n| (normal_matrix * n.as_dvec3()).normalize_or_zero().as_vec3())
-            .collect()
-    });
-    let tangents = mesh.tangents.as_ref().map(|ts| {
-        ts.iter()
-            .map(|t| {
-                let dir = (linear * t.truncate().as_dvec3())
-                    .normalize_or_zero()
-                    .as_vec3();
-                // A mirroring transform flips the bitangent's handedness.
-                dir.extend(if mirrored { -t.w } else { t.w })
-            })
-            .collect()
-    });
-    // A mirroring transform reverses the winding; swap two corners to keep fronts in front.
-    let triangles = if mirrored {
-        mesh.triangles.iter().map(|t| [t[0], t[2], t[1]]).collect()
-    } else {
-        mesh.triangles.clone()
-    };
-    Mesh {
-        name: mesh.name.clone(),
-        positions,
-        normals,
-        tangents,
-        uvs: mesh.uvs.clone(),
-        colors: mesh.colors.clone(),
-        triangles,
-        material: mesh.material,
+    for p in &mut mesh.positions {
+        *p = to_render.transform_point3(p.as_dvec3()).as_vec3();
     }
+    for n in mesh.normals.iter_mut().flatten() {
+        *n = (normal_matrix * n.as_dvec3()).normalize_or_zero().as_vec3();
+    }
+    for t in mesh.tangents.iter_mut().flatten() {
+        let dir = (linear * t.truncate().as_dvec3())
+            .normalize_or_zero()
+            .as_vec3();
+        // A mirroring transform flips the bitangent's handedness.
+        *t = dir.extend(if mirrored { -t.w } else { t.w });
+    }
+    // A mirroring transform reverses the winding; swap two corners to keep fronts in front.
+    if mirrored {
+        for t in &mut mesh.triangles {
+            t.swap(1, 2);
+        }
+    }
+    mesh
 }
 
 /// The mean emission of emitters with emissive textures, for their selection by power:
@@ -264,24 +249,20 @@ fn intersection_flags(m: &Material) -> u8 {
     f
 }
 
-/// Every primitive for the BVH with its intersection flags and scene reference.
+/// Every primitive for the BVH: its intersection flags and scene reference (the primitive
+/// itself is [`primitive`] of the reference, made when needed).
 fn primitives(
     meshes: &[Mesh],
     spheres: &[RenderSphere],
     quadrics: &[RenderQuadric],
     materials: &[Material],
-) -> (Vec<Primitive>, Vec<u8>, Vec<PrimRef>) {
+) -> (Vec<u8>, Vec<PrimRef>) {
     let count =
         meshes.iter().map(|m| m.triangles.len()).sum::<usize>() + spheres.len() + quadrics.len();
-    let (mut prims, mut flags, mut refs) = (
-        Vec::with_capacity(count),
-        Vec::with_capacity(count),
-        Vec::with_capacity(count),
-    );
+    let (mut flags, mut refs) = (Vec::with_capacity(count), Vec::with_capacity(count));
     for (mi, mesh) in meshes.iter().enumerate() {
         let f = intersection_flags(&materials[mesh.material as usize]);
-        for (ti, t) in mesh.triangles.iter().enumerate() {
-            prims.push(Primitive::Triangle(t.map(|i| mesh.positions[i as usize])));
+        for ti in 0..mesh.triangles.len() {
             flags.push(f);
             refs.push(PrimRef::Triangle {
                 mesh: mi as u32,
@@ -290,19 +271,38 @@ fn primitives(
         }
     }
     for (si, s) in spheres.iter().enumerate() {
-        prims.push(Primitive::Sphere {
-            centre: s.centre,
-            radius: s.radius,
-        });
         flags.push(intersection_flags(&materials[s.material as usize]));
         refs.push(PrimRef::Sphere(si as u32));
     }
     for (qi, q) in quadrics.iter().enumerate() {
-        prims.push(Primitive::Quadric(q.quadric));
         flags.push(intersection_flags(&materials[q.material as usize]));
         refs.push(PrimRef::Quadric(qi as u32));
     }
-    (prims, flags, refs)
+    (flags, refs)
+}
+
+/// The render-space primitive `r` refers to.
+#[inline]
+fn primitive(
+    r: PrimRef,
+    meshes: &[Mesh],
+    spheres: &[RenderSphere],
+    quadrics: &[RenderQuadric],
+) -> Primitive {
+    match r {
+        PrimRef::Triangle { mesh, tri } => {
+            let mesh = &meshes[mesh as usize];
+            Primitive::Triangle(mesh.triangles[tri as usize].map(|i| mesh.positions[i as usize]))
+        }
+        PrimRef::Sphere(s) => {
+            let s = &spheres[s as usize];
+            Primitive::Sphere {
+                centre: s.centre,
+                radius: s.radius,
+            }
+        }
+        PrimRef::Quadric(q) => Primitive::Quadric(quadrics[q as usize].quadric),
+    }
 }
 
 /// Marks a mesh that is flattened into render space in [`shared_mesh_indices`].
@@ -333,28 +333,44 @@ fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
         .collect()
 }
 
-/// Bytes obvhs holds per primitive at the peak of a BVH build beyond the primitives
-/// themselves: the bounds it is given, its PLOC nodes, sort keys and reinsertion state, and
-/// the wide nodes. Measured: the peak of `lucerna render` on single meshes of 0.32 to 3.9
-/// million triangles, less the scene and its render-space copy, is 304 to 319 bytes a
-/// triangle, on meshes of 10 and 30 million 282 (tools/bench/scale.py), which this constant
-/// makes 296 (tools/experiments/stress checks the estimate).
+/// Bytes obvhs holds per primitive at the peak of a BVH build beyond the primitives'
+/// flags and leaves: the bounds it is given, its PLOC nodes, sort keys and reinsertion
+/// state, and the wide nodes. Measured: the peak of `lucerna render` on single meshes of 1,
+/// 10 and 30 million triangles, less the program, the scene and its render-space copy, is
+/// 262, 240 and 241 bytes a triangle (tools/bench/scale.py), which this constant makes 256
+/// (tools/experiments/stress checks the estimate).
 const BVH_BUILD_BYTES_PER_PRIMITIVE: u64 = 210;
 
 /// Bytes a light holds beyond its `Light`: its light-tree node and selection entries.
 const LIGHT_SELECTION_BYTES: u64 = 96;
+
+/// How many times each mesh of `scene` is flattened into render space (placed and not
+/// shared: [`shared_mesh_indices`]).
+fn flattened_uses(scene: &Scene, shared_index: &[u32]) -> Vec<u32> {
+    let mut uses = vec![0u32; scene.meshes.len()];
+    for inst in &scene.instances {
+        if shared_index[inst.mesh as usize] == NOT_SHARED {
+            uses[inst.mesh as usize] += 1;
+        }
+    }
+    uses
+}
 
 /// Estimated bytes of rendering `scene` before any of them is allocated: the scene itself and
 /// what [`World::build`] adds (the film is the caller's: it depends on the request).
 pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
     use std::mem::size_of;
     let shared = shared_mesh_indices(scene);
+    let flat_uses = flattened_uses(scene, &shared);
     let (mut geometry, mut flat_prims, mut shared_prims, mut placements, mut emitters) =
         (0, 0, 0, 0, 0);
     for inst in &scene.instances {
         let mesh = &scene.meshes[inst.mesh as usize];
         if shared[inst.mesh as usize] == NOT_SHARED {
-            geometry += mesh.data_bytes();
+            // A mesh placed once moves into render space; others are copied.
+            if flat_uses[inst.mesh as usize] > 1 {
+                geometry += mesh.data_bytes();
+            }
             flat_prims += mesh.triangles.len() as u64;
             if scene.materials[mesh.material as usize].is_emissive() {
                 emitters += mesh.triangles.len() as u64;
@@ -383,10 +399,12 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
         + scene.lights.len() as u64;
     // Per flattened primitive: what it refers to and its light.
     geometry += flat_prims * (size_of::<PrimRef>() + size_of::<u32>()) as u64;
-    // The primitives and their flags as given to the build, its own state, and the result's
-    // leaves (triangle blocks of one to four and shapes: about a copy of the primitives, their
-    // flags and an index each; 80 bytes a triangle with the nodes on the sphere field).
-    let per_primitive = 2 * (size_of::<Primitive>() as u64 + 1)
+    // The primitives' flags as given to the build (the primitives themselves are made from
+    // the geometry when needed), its own state, and the result's leaves (triangle blocks of
+    // one to four and shapes: about a copy of the primitives, their flags and an index each;
+    // 80 bytes a triangle with the nodes on the sphere field).
+    let per_primitive = 1
+        + (size_of::<Primitive>() as u64 + 1)
         + size_of::<u32>() as u64
         + BVH_BUILD_BYTES_PER_PRIMITIVE;
     let bvh = (flat_prims + shared_prims + placements) * per_primitive;
@@ -479,14 +497,14 @@ impl PlacedGeometry {
             .meshes
             .iter()
             .map(|mesh| {
-                let prims: Vec<Primitive> = mesh
-                    .triangles
-                    .iter()
-                    .map(|t| Primitive::Triangle(t.map(|i| mesh.positions[i as usize])))
-                    .collect();
-                let flags =
-                    vec![intersection_flags(&materials[mesh.material as usize]); prims.len()];
-                Bvh::build(&prims, &flags)
+                let flags = vec![
+                    intersection_flags(&materials[mesh.material as usize]);
+                    mesh.triangles.len()
+                ];
+                Bvh::build_from(&flags, |t| {
+                    let t = mesh.triangles[t as usize];
+                    Primitive::Triangle(t.map(|i| mesh.positions[i as usize]))
+                })
             })
             .collect();
         let placements: Vec<Placement> = self
@@ -517,7 +535,6 @@ impl PlacedGeometry {
 
 /// The area lights: one per primitive whose material emits, and the primitive-to-light map.
 fn area_lights(
-    prims: &[Primitive],
     refs: &[PrimRef],
     surfaces_materials: &[Material],
     meshes: &[Mesh],
@@ -537,7 +554,7 @@ fn area_lights(
         return (Vec::new(), Vec::new());
     }
     let mut lights = Vec::new();
-    let mut prim_light = vec![NO_LIGHT; prims.len()];
+    let mut prim_light = vec![NO_LIGHT; refs.len()];
     let mut textured = TexturedEmission::new(textures);
     // The texture coordinates of an emitting triangle with an emissive texture.
     let texture_uvs = |r: &PrimRef, m: &Material| match (*r, m.emissive_texture) {
@@ -562,7 +579,7 @@ fn area_lights(
         })
         .collect();
     let max_depth = tree_depth_limit(&wanted);
-    for (i, (prim, r)) in prims.iter().zip(refs).enumerate() {
+    for (i, r) in refs.iter().enumerate() {
         let m = &surfaces_materials[material_of(r) as usize];
         if !m.is_emissive() {
             continue;
@@ -570,7 +587,7 @@ fn area_lights(
         prim_light[i] = lights.len() as u32;
         let uvs = texture_uvs(r, m);
         let mean_radiance = textured.mean(m, uvs);
-        lights.push(match *prim {
+        lights.push(match primitive(*r, meshes, spheres, quadrics) {
             Primitive::Triangle(p) => {
                 let n = geometric_normal(p[0], p[1], p[2]);
                 Light::Triangle(TriangleLight {
@@ -710,15 +727,21 @@ impl World {
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
         let shared_index = shared_mesh_indices(&scene);
+        // A mesh placed once moves into render space in place; one placed several times
+        // and not shared (an emitter's: each placement is a light of its own) is copied for
+        // each placement.
+        let flat_uses = flattened_uses(&scene, &shared_index);
         let meshes: Vec<Mesh> = scene
             .instances
             .iter()
             .filter(|inst| shared_index[inst.mesh as usize] == NOT_SHARED)
             .map(|inst| {
-                transform_mesh(
-                    &scene.meshes[inst.mesh as usize],
-                    &(to_render * inst.transform),
-                )
+                let mesh = &mut scene.meshes[inst.mesh as usize];
+                let mesh = match flat_uses[inst.mesh as usize] {
+                    1 => std::mem::take(mesh),
+                    _ => mesh.clone(),
+                };
+                transform_mesh(mesh, &(to_render * inst.transform))
             })
             .collect();
         let placed = PlacedGeometry::new(&mut scene, &shared_index, &to_render);
@@ -748,9 +771,8 @@ impl World {
             )
             .fold(0.0f32, f32::max);
 
-        let (prims, flags, refs) = primitives(&meshes, &spheres, &quadrics, &scene.materials);
+        let (flags, refs) = primitives(&meshes, &spheres, &quadrics, &scene.materials);
         let (mut lights, prim_light) = area_lights(
-            &prims,
             &refs,
             &scene.materials,
             &meshes,
@@ -782,8 +804,9 @@ impl World {
         lights.extend(punctual_lights(&scene, &space));
         light_names.extend(scene.lights.iter().map(|l| l.name.clone()));
         let bvh_start = std::time::Instant::now();
-        let bvh = Bvh::build(&prims, &flags);
-        drop(prims);
+        let bvh = Bvh::build_from(&flags, |i| {
+            primitive(refs[i as usize], &meshes, &spheres, &quadrics)
+        });
         let (placed_bvh, placements) = placed.build(&scene.materials);
         let bvh_seconds = bvh_start.elapsed().as_secs_f64();
 
