@@ -112,7 +112,8 @@ pub fn decoded_bytes(bytes: &[u8]) -> Option<u64> {
     } else {
         return None;
     };
-    Some(width as u64 * height as u64 * texel_bytes)
+    // Headers may declare any size (decoding refuses what is too large): never overflow.
+    Some((width as u64 * height as u64).saturating_mul(texel_bytes))
 }
 
 const KTX2_MAGIC: &[u8] = b"\xabKTX 20\xbb\r\n\x1a\n";

@@ -1,20 +1,23 @@
-//! Textures beyond memory: images moved out of memory into tiled, MIP-mapped files and read
-//! back through a cache of tiles that holds at most the texture memory.
+//! Textures beyond memory: images moved out of memory into tiled files and read back through
+//! a cache of tiles that holds at most the texture memory.
 //!
 //! When a scene's textures, decoded and with their MIP pyramids, need more than the texture
-//! memory (`--texture-memory`, by default half of `--max-memory`: [`crate::memory::texture_memory`]), every image is written as it is
-//! decoded to a file of tiles of at most 64 × 64 texels, holding its full resolution and its
-//! MIP levels for both ways of reading it (the layout `maketx` gives the `.tx` files that
-//! OpenImageIO's texture system reads), and dropped from memory. A lookup fetches the tiles
-//! it touches from one cache shared by every texture and thread ([`TextureCache`]): tiles
-//! read from disk on a miss, evicted (S3-FIFO, by bytes) when the cache is full. The cache
-//! is `quick_cache`'s: sharded locks, a hit marks the entry with one atomic store, and a
-//! tile wanted by several threads at once is read once while the others wait for it, so
-//! threads reading different tiles never wait on each other.
+//! memory (`--texture-memory`, by default half of `--max-memory`:
+//! [`crate::memory::texture_memory`]), every image is written as it is decoded to a file of
+//! tiles of at most 64 × 64 texels (the layout `maketx` gives the `.tx` files that
+//! OpenImageIO's texture system reads) and dropped from memory. The MIP levels for a way of
+//! reading it (as data, or integer texels as sRGB colour) are appended to the file when a
+//! render first needs them ([`TiledImage::levels`]: the caller builds them from level 0 read
+//! back, with the same filter as the pyramids of images in memory). A lookup fetches the
+//! tiles it touches from one cache shared by every texture and thread ([`TextureCache`]):
+//! tiles read from disk on a miss, evicted (S3-FIFO, by bytes) when the cache is full. The
+//! cache is `quick_cache`'s: sharded locks, a hit marks the entry with one atomic store, and a
+//! tile wanted by several threads at once is read once while the others wait for it; and
+//! each thread keeps the tiles it read last, so that most lookups touch no shared state.
 //!
-//! The levels are built by the same filter as the pyramids of images kept in memory and the
-//! tiles hold the same texels, so a lookup through the cache gives the value of the same
-//! lookup in memory, bit for bit: only the speed differs.
+//! The tiles hold the texels of the image in memory and its levels are built alike, so a
+//! lookup through the cache gives the value of the same lookup in memory, bit for bit: only
+//! the speed differs.
 //!
 //! The files are unnamed temporary files (`O_TMPFILE`) in `TMPDIR`, or in /var/tmp when
 //! `TMPDIR` is held in memory (tmpfs): the kernel frees them when the process ends, however

@@ -258,3 +258,38 @@ fn corrupt_ktx2_files_are_errors() {
         assert!(err.contains("65536x65536"), "{name}: {err}");
     }
 }
+
+/// What the texture memory is decided by: an image's decoded size from its header alone,
+/// equal to what decoding gives, and never an overflow whatever the header declares.
+#[test]
+fn decoded_sizes_are_read_from_headers_alone() {
+    use lucerna::ingest::image::{decode, decoded_bytes};
+    let bytes_of = |texels: &Texels| match texels {
+        Texels::Rgba8(t) => t.len() as u64 * 4,
+        Texels::Rgba16(t) => t.len() as u64 * 8,
+        Texels::RgbaF32(t) => t.len() as u64 * 16,
+        Texels::Tiled(_) => unreachable!("decoding gives texels in memory"),
+    };
+    let mut png16 = Vec::new();
+    let mut encoder = png::Encoder::new(&mut png16, 3, 2);
+    encoder.set_color(png::ColorType::Rgb);
+    encoder.set_depth(png::BitDepth::Sixteen);
+    (encoder.write_header().unwrap())
+        .write_image_data(&[7; 3 * 2 * 6])
+        .unwrap();
+    let files = [
+        png16,
+        std::fs::read(ktx2_asset("etc1s_basecolor.ktx2")).unwrap(),
+        std::fs::read(ktx2_asset("etc1s_basecolor_64.png")).unwrap(),
+    ];
+    for bytes in &files {
+        let image = decode(bytes).unwrap();
+        assert_eq!(decoded_bytes(bytes), Some(bytes_of(&image.texels)));
+    }
+    assert_eq!(decoded_bytes(&files[0]), Some(3 * 2 * 8));
+    // A KTX2 header declaring 2^32 - 1 texels a side: the most a u64 holds, not a wrap.
+    let mut huge = files[1].clone();
+    huge[20..28].copy_from_slice(&[0xff; 8]);
+    assert_eq!(decoded_bytes(&huge), Some(u64::MAX));
+    assert_eq!(decoded_bytes(b"not an image"), None);
+}
