@@ -50,6 +50,14 @@ enum Command {
         /// auto, packet, scalar or general, as `render --plan`. [default: auto]
         #[arg(long)]
         plan: Option<String>,
+        /// The memory limit the render would have, as `render --max-memory` (it decides the
+        /// texture memory). [default: 80 % of the physical memory or of the cgroup's limit]
+        #[arg(long)]
+        max_memory: Option<String>,
+        /// As `render --texture-memory`: textures that need more are shown read through a
+        /// tile cache of this size. [default: half of --max-memory]
+        #[arg(long)]
+        texture_memory: Option<String>,
     },
     /// Run a job file's renders unattended: a child process and a log per frame, complete
     /// outputs skipped, checkpoints resumed, a JSON summary; exits 1 if any frame failed.
@@ -436,7 +444,12 @@ fn load_from(matches: &ArgMatches, command: &clap::Command) -> Result<crate::ing
     let mut job = RenderJob::default();
     let load_args: Vec<clap::Arg> = command
         .get_arguments()
-        .filter(|a| !matches!(a.get_id().as_str(), "scene" | "output" | "aov" | "plan"))
+        .filter(|a| {
+            !matches!(
+                a.get_id().as_str(),
+                "scene" | "output" | "aov" | "plan" | "max_memory" | "texture_memory"
+            )
+        })
         .cloned()
         .collect();
     let only_load = clap::Command::new("load").args(load_args);
@@ -490,9 +503,22 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
             Ok(crate::job::run(&job)?.exit_code())
         }
         Command::Inspect {
-            scene, aov, plan, ..
+            scene,
+            aov,
+            plan,
+            max_memory,
+            texture_memory,
+            ..
         } => {
-            crate::memory::set_process_limit(crate::memory::default_limit());
+            let limit = |value: Option<String>, option: &str| {
+                value
+                    .map(|v| crate::memory::parse_limit(&v))
+                    .transpose()
+                    .map_err(|reason| Error::bad_input("", option, reason))
+            };
+            let max_memory = limit(max_memory, "--max-memory")?;
+            crate::memory::set_process_limit(max_memory.or_else(crate::memory::default_limit));
+            crate::memory::set_texture_memory(limit(texture_memory, "--texture-memory")?);
             let load = load_from(sub, sub_definition)?;
             print!(
                 "{}",

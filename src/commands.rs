@@ -237,12 +237,11 @@ pub fn inspect(
             let stats = cache.stats();
             let _ = writeln!(
                 out,
-                "  textures: {}{udim} (too large for the texture memory: {} images in tiled files of {} bytes with their MIP levels, read through a tile cache of {} bytes, {} of them resident now; {} bytes of texels in memory)",
+                "  textures: {}{udim} (too large for the texture memory: {} images in tiled files of {} bytes, read through a tile cache of {} bytes; {} bytes of texels in memory)",
                 scene.textures.len(),
                 stats.images,
                 stats.bytes_on_disk,
                 cache.capacity(),
-                stats.resident,
                 texel_bytes
             );
         }

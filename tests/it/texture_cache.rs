@@ -120,3 +120,28 @@ fn a_folder_that_takes_no_copies_is_a_clear_error() {
     );
     assert!(!out.exists());
 }
+
+#[test]
+fn inspect_shows_what_a_render_with_the_same_limits_would_do() {
+    let inspect = |extra: &[&str]| {
+        let mut args = vec!["inspect", AVOCADO];
+        args.extend_from_slice(extra);
+        let run = crate::common::cli::lucerna(&args);
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        String::from_utf8_lossy(&run.stdout).into_owned()
+    };
+    let cached = inspect(&["--texture-memory", "64K"]);
+    assert!(
+        cached.contains("textures: 3 (too large for the texture memory: 3 images in tiled files of 196608 bytes, read through a tile cache of 65536 bytes; 0 bytes of texels in memory)"),
+        "{cached}"
+    );
+    let resident = inspect(&["--max-memory", "1G"]);
+    assert!(
+        resident.contains("textures: 3 (196608 bytes of texels;"),
+        "{resident}"
+    );
+}
