@@ -439,25 +439,36 @@ pub fn parse(
     // Textures naming the same texels share them, as they did when written. When the
     // texels need more than the texture memory, they are moved to tiled files one by one.
     let mut shared: HashMap<(u64, u64, Encoding), Arc<Texels>> = HashMap::new();
-    let distinct: std::collections::HashSet<_> = (manifest.textures.iter())
-        .map(|t| (t.texels.offset, t.texels.count, t.encoding))
-        .collect();
-    let texel_bytes = distinct.iter().fold(0u64, |sum, (_, count, encoding)| {
-        let size = match encoding {
-            Encoding::Rgba8 => 4,
-            Encoding::Rgba16 => 8,
-            Encoding::Rgba32f => 16,
-        };
-        sum.saturating_add(count.saturating_mul(size))
-    });
-    let cache = super::texture_cache::cache_for(texel_bytes);
+    // The distinct images, numbered in order of first use, their sizes, and which stays in
+    // memory whatever its size: the environment map, whose sampling tables read every
+    // texel and which is checked for values that are not radiance.
+    let environment = match manifest.environment {
+        Some(Environment::LatLong { texture, .. }) => Some(texture as usize),
+        _ => None,
+    };
+    let mut images: HashMap<(u64, u64, Encoding), usize> = HashMap::new();
+    let (mut sizes, mut pinned) = (Vec::new(), Vec::new());
+    for (i, t) in manifest.textures.iter().enumerate() {
+        let key = (t.texels.offset, t.texels.count, t.encoding);
+        let image = *images.entry(key).or_insert_with(|| {
+            let texel = match t.encoding {
+                Encoding::Rgba8 => 4,
+                Encoding::Rgba16 => 8,
+                Encoding::Rgba32f => 16,
+            };
+            sizes.push(t.texels.count.saturating_mul(texel));
+            pinned.push(false);
+            sizes.len() - 1
+        });
+        pinned[image] |= environment == Some(i);
+    }
+    let plan = super::texture_cache::TexturePlan::new(&sizes, &pinned);
     // Named after the scene the file holds (a USD stage's path, not the plugin's file).
     let name = match manifest.source.as_str() {
         "" => path.display().to_string(),
         source => source.to_string(),
     };
-    let cache_notice =
-        (cache.as_ref()).map(|c| super::texture_cache::notice(&name, texel_bytes, c));
+    let cache_notice = plan.notice(&name);
     for (i, t) in manifest.textures.iter().enumerate() {
         let element = format!("textures[{i}].texels");
         if t.width == 0 || t.height == 0 || t.texels.count != t.width as u64 * t.height as u64 {
@@ -492,14 +503,8 @@ pub fn parse(
             }
             Encoding::Rgba32f => Texels::RgbaF32(buffer.floats(t.texels, &element)?),
         };
-        // The environment map stays in memory: its sampling tables read every texel, and
-        // it is checked for values that are not radiance.
-        let environment = matches!(
-            manifest.environment,
-            Some(Environment::LatLong { texture, .. }) if texture as usize == i
-        );
-        let texels = match &cache {
-            Some(cache) if !environment => texels
+        let texels = match plan.cache_of(images[&key]) {
+            Some(cache) => texels
                 .to_tiled(&t.name, t.width, t.height, cache)
                 .map_err(|e| {
                     Error::other(

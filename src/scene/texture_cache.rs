@@ -44,24 +44,86 @@ pub fn resident_bytes(texel_bytes: u64) -> u64 {
     texel_bytes.saturating_add(texel_bytes / 3)
 }
 
-/// The cache to read a scene's textures through when, decoded, they need `texel_bytes` and
-/// that is more than the texture memory; `None` keeps them in memory.
-pub fn cache_for(texel_bytes: u64) -> Option<Arc<TextureCache>> {
-    let memory = crate::memory::texture_memory()?;
-    (resident_bytes(texel_bytes) > memory).then(|| TextureCache::new(memory))
+/// Which of a scene's images are read through the tile cache, decided before any is decoded.
+#[derive(Debug, Default)]
+pub struct TexturePlan {
+    /// The cache, when some images go to it.
+    cache: Option<Arc<TextureCache>>,
+    /// Per image (as numbered by the caller), whether it goes to the cache.
+    tiled: Vec<bool>,
+    /// Bytes all the images need in memory with their MIP levels, and the texture memory.
+    needed: u64,
+    memory: u64,
 }
 
-/// The warning that `source`'s textures, `texel_bytes` decoded, are read through `cache`.
-pub fn notice(source: &str, texel_bytes: u64, cache: &TextureCache) -> String {
-    use crate::memory::Bytes;
-    format!(
-        "{source}: the textures need {} in memory with their MIP levels, more than the texture \
-         memory of {} (--texture-memory): they are read from tiled copies on disk through a \
-         cache of {}, more slowly",
-        Bytes(resident_bytes(texel_bytes)),
-        Bytes(cache.capacity()),
-        Bytes(cache.capacity())
-    )
+impl TexturePlan {
+    /// Plans images of `sizes` decoded bytes under the texture memory
+    /// ([`crate::memory::texture_memory`]); `pinned` images stay in memory whatever their
+    /// size (an environment map, whose sampling tables read every texel).
+    pub fn new(sizes: &[u64], pinned: &[bool]) -> Self {
+        match crate::memory::texture_memory() {
+            Some(memory) => Self::within(memory, sizes, pinned),
+            None => Self::default(),
+        }
+    }
+
+    /// [`TexturePlan::new`] under a texture memory of `memory` bytes. All images stay in
+    /// memory when, with their MIP levels, they fit in it. Otherwise the largest go to tiled
+    /// files, one by one, until those left need at most half of it; the cache takes the
+    /// rest, so small images (and the many lookups they serve) keep the speed of memory.
+    pub fn within(memory: u64, sizes: &[u64], pinned: &[bool]) -> Self {
+        let needed = resident_bytes(sizes.iter().fold(0u64, |a, &b| a.saturating_add(b)));
+        let mut plan = Self {
+            cache: None,
+            tiled: vec![false; sizes.len()],
+            needed,
+            memory,
+        };
+        if needed <= memory {
+            return plan;
+        }
+        let mut largest: Vec<usize> = (0..sizes.len())
+            .filter(|&i| !pinned.get(i).copied().unwrap_or(false))
+            .collect();
+        largest.sort_by_key(|&i| std::cmp::Reverse(sizes[i]));
+        let mut kept: u64 = sizes.iter().fold(0u64, |a, &b| a.saturating_add(b));
+        for i in largest {
+            if resident_bytes(kept) <= memory / 2 {
+                break;
+            }
+            plan.tiled[i] = true;
+            kept -= sizes[i];
+        }
+        let left = memory.saturating_sub(resident_bytes(kept));
+        plan.cache = Some(TextureCache::new(left.max(memory / 2)));
+        plan
+    }
+
+    /// The cache image `index` is read through, if it goes to one.
+    pub fn cache_of(&self, index: usize) -> Option<&Arc<TextureCache>> {
+        self.cache
+            .as_ref()
+            .filter(|_| self.tiled.get(index).copied().unwrap_or(false))
+    }
+
+    /// The warning that `source`'s textures are read through a cache, if they are.
+    pub fn notice(&self, source: &str) -> Option<String> {
+        use crate::memory::Bytes;
+        let cache = self.cache.as_ref()?;
+        let (tiled, all) = (self.tiled.iter().filter(|&&t| t).count(), self.tiled.len());
+        let which = match tiled == all {
+            true => format!("all {all} images are"),
+            false => format!("the {tiled} largest of {all} images are"),
+        };
+        Some(format!(
+            "{source}: the textures need {} in memory with their MIP levels, more than the \
+             texture memory of {} (--texture-memory): {which} read from tiled copies on disk \
+             through a cache of {}, more slowly",
+            Bytes(self.needed),
+            Bytes(self.memory),
+            Bytes(cache.capacity())
+        ))
+    }
 }
 
 /// Where tiled copies are written: the temporary folder (`TMPDIR`), unless it is held in
@@ -617,6 +679,31 @@ fn decode(format: Format, bytes: &[u8]) -> TexelArray {
 mod tests {
     use super::*;
     use std::path::Path;
+
+    #[test]
+    fn the_largest_images_go_to_the_cache_until_the_rest_fit_in_half_the_memory() {
+        let mib = 3 << 20; // 4 MiB in memory with MIP levels
+        let sizes = [10 * mib, mib, 4 * mib, mib, 6 * mib];
+        let fits = TexturePlan::within(100 << 20, &sizes, &[]);
+        assert!(fits.cache.is_none() && fits.notice("s").is_none());
+        // 88 MiB needed, 64 MiB of texture memory: the 40 and 24 MiB images go (24 MiB
+        // left, at most 32), the cache takes the other 40 MiB.
+        let plan = TexturePlan::within(64 << 20, &sizes, &[]);
+        assert_eq!(plan.tiled, [true, false, false, false, true]);
+        assert_eq!(plan.cache.as_ref().unwrap().capacity(), 40 << 20);
+        assert!(plan.cache_of(0).is_some() && plan.cache_of(1).is_none());
+        assert!(
+            plan.notice("s").unwrap().contains("88.0 MiB")
+                && plan
+                    .notice("s")
+                    .unwrap()
+                    .contains("the 2 largest of 5 images are read")
+        );
+        // A pinned image stays, however large; with little memory, all others go.
+        let plan = TexturePlan::within(1 << 20, &sizes, &[true]);
+        assert_eq!(plan.tiled, [false, true, true, true, true]);
+        assert_eq!(plan.cache.as_ref().unwrap().capacity(), 1 << 19);
+    }
 
     #[test]
     fn copies_are_not_written_to_memory() {

@@ -47,7 +47,7 @@ fn textures_through_the_cache_render_the_image_of_textures_in_memory() {
             let (memory, said) = render(scene, &dir.join("memory.exr"), &filter_args);
             assert!(!said.contains("tiled copies"), "{said}");
             // Three 128 x 128 images (256 KiB with their MIP levels) in a texture memory of
-            // 64 KiB: read through a cache of 64 KiB, evicting and reading tiles again.
+            // 64 KiB: all read through a cache of 64 KiB, evicting and reading tiles again.
             let stats = dir.join("stats.json");
             let mut args = vec![
                 "--texture-memory",
@@ -64,6 +64,20 @@ fn textures_through_the_cache_render_the_image_of_textures_in_memory() {
             );
             assert!(
                 memory == cached,
+                "{} {filter}: the images differ",
+                scene.display()
+            );
+            // 200 KiB: the two largest go to the cache (ties in file order), one stays.
+            let mut args = vec!["--texture-memory", "200K"];
+            args.extend_from_slice(&filter_args);
+            let (mixed, said) = render(scene, &dir.join("mixed.exr"), &args);
+            assert!(
+                said.contains("the 2 largest of 3 images are read from tiled copies")
+                    && said.contains("texture cache: 2 images in tiled files"),
+                "{said}"
+            );
+            assert!(
+                memory == mixed,
                 "{} {filter}: the images differ",
                 scene.display()
             );

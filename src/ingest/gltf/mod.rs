@@ -106,7 +106,7 @@ pub fn import_with(
         variant: None,
         animation: None,
         unsupported_material_extensions: Default::default(),
-        texture_cache: None,
+        texture_plan: Default::default(),
     };
     importer.plan_texture_memory();
     importer.select_variant(choices.material_variant)?;
@@ -144,9 +144,9 @@ pub(crate) struct Importer<'a> {
     animation: Option<usize>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
-    /// The tile cache images are read through when the textures do not fit in the texture
-    /// memory (`None`: they are kept in memory).
-    texture_cache: Option<Arc<crate::scene::texture_cache::TextureCache>>,
+    /// Which images are read through a tile cache (the textures do not fit in the texture
+    /// memory) and which are kept in memory.
+    texture_plan: crate::scene::texture_cache::TexturePlan,
 }
 
 /// The animated parts of a node's transform at one time (the rest come from the node).

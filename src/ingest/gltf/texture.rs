@@ -71,7 +71,7 @@ impl<'a> Importer<'a> {
             None => {
                 let bytes = self.image_bytes(&image)?;
                 let d = img::decode(&bytes).map_err(|r| self.err(&element, r))?;
-                let texels = match &self.texture_cache {
+                let texels = match self.texture_plan.cache_of(image.index()) {
                     Some(cache) => (d.texels)
                         .to_tiled(&element, d.width, d.height, cache)
                         .map_err(|e| {
@@ -137,32 +137,28 @@ impl<'a> Importer<'a> {
         }
     }
 
-    /// Chooses how the file's textures are held before any is decoded: in memory, or (when
+    /// Chooses how the file's images are held before any is decoded: in memory, or (when
     /// the images its textures show need more than the texture memory, decoded and with
-    /// their MIP levels, as their headers say) on disk through a tile cache, which the scene's
-    /// warnings then report.
+    /// their MIP levels, as their headers say) the largest on disk through a tile cache,
+    /// which the scene's warnings then report ([`texture_cache::TexturePlan`]).
     pub(super) fn plan_texture_memory(&mut self) {
-        let mut images = std::collections::BTreeSet::new();
+        let mut shown = std::collections::BTreeSet::new();
         for texture in self.doc.textures() {
             if let Ok(image) = self.texture_image(&texture) {
-                images.insert(image.index());
+                shown.insert(image.index());
             }
         }
-        let mut bytes = 0u64;
-        for image in self.doc.images().filter(|i| images.contains(&i.index())) {
-            if let Some(n) = self
-                .image_bytes(&image)
-                .ok()
-                .and_then(|b| img::decoded_bytes(&b))
-            {
-                bytes = bytes.saturating_add(n);
-            }
-        }
-        self.texture_cache = texture_cache::cache_for(bytes);
-        if let Some(cache) = &self.texture_cache {
-            self.scene
-                .warnings
-                .push(texture_cache::notice(&self.source, bytes, cache));
+        let sizes: Vec<u64> = (self.doc.images())
+            .map(|image| match shown.contains(&image.index()) {
+                true => (self.image_bytes(&image).ok())
+                    .and_then(|b| img::decoded_bytes(&b))
+                    .unwrap_or(0),
+                false => 0,
+            })
+            .collect();
+        self.texture_plan = texture_cache::TexturePlan::new(&sizes, &[]);
+        if let Some(notice) = self.texture_plan.notice(&self.source) {
+            self.scene.warnings.push(notice);
         }
     }
 
