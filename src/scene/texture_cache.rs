@@ -53,6 +53,9 @@ pub struct TexturePlan {
     tiled: Vec<bool>,
     /// Bytes all the images need in memory with their MIP levels, and the texture memory.
     needed: u64,
+    /// Images of a known size (those the caller could not measure, or that no texture
+    /// shows, have size 0 and stay in memory).
+    measured: usize,
     memory: u64,
 }
 
@@ -77,13 +80,14 @@ impl TexturePlan {
             cache: None,
             tiled: vec![false; sizes.len()],
             needed,
+            measured: sizes.iter().filter(|&&n| n > 0).count(),
             memory,
         };
         if needed <= memory {
             return plan;
         }
         let mut largest: Vec<usize> = (0..sizes.len())
-            .filter(|&i| !pinned.get(i).copied().unwrap_or(false))
+            .filter(|&i| sizes[i] > 0 && !pinned.get(i).copied().unwrap_or(false))
             .collect();
         largest.sort_by_key(|&i| std::cmp::Reverse(sizes[i]));
         let mut kept: u64 = sizes.iter().fold(0u64, |a, &b| a.saturating_add(b));
@@ -110,7 +114,8 @@ impl TexturePlan {
     pub fn notice(&self, source: &str) -> Option<String> {
         use crate::memory::Bytes;
         let cache = self.cache.as_ref()?;
-        let (tiled, all) = (self.tiled.iter().filter(|&&t| t).count(), self.tiled.len());
+        let tiled = self.tiled.iter().filter(|&&t| t).count();
+        let all = self.measured;
         let which = match tiled == all {
             true => format!("all {all} images are"),
             false => format!("the {tiled} largest of {all} images are"),
@@ -683,13 +688,14 @@ mod tests {
     #[test]
     fn the_largest_images_go_to_the_cache_until_the_rest_fit_in_half_the_memory() {
         let mib = 3 << 20; // 4 MiB in memory with MIP levels
-        let sizes = [10 * mib, mib, 4 * mib, mib, 6 * mib];
+        // The last image is one no texture shows (or that could not be measured).
+        let sizes = [10 * mib, mib, 4 * mib, mib, 6 * mib, 0];
         let fits = TexturePlan::within(100 << 20, &sizes, &[]);
         assert!(fits.cache.is_none() && fits.notice("s").is_none());
         // 88 MiB needed, 64 MiB of texture memory: the 40 and 24 MiB images go (24 MiB
         // left, at most 32), the cache takes the other 40 MiB.
         let plan = TexturePlan::within(64 << 20, &sizes, &[]);
-        assert_eq!(plan.tiled, [true, false, false, false, true]);
+        assert_eq!(plan.tiled, [true, false, false, false, true, false]);
         assert_eq!(plan.cache.as_ref().unwrap().capacity(), 40 << 20);
         assert!(plan.cache_of(0).is_some() && plan.cache_of(1).is_none());
         assert!(
@@ -701,7 +707,7 @@ mod tests {
         );
         // A pinned image stays, however large; with little memory, all others go.
         let plan = TexturePlan::within(1 << 20, &sizes, &[true]);
-        assert_eq!(plan.tiled, [false, true, true, true, true]);
+        assert_eq!(plan.tiled, [false, true, true, true, true, false]);
         assert_eq!(plan.cache.as_ref().unwrap().capacity(), 1 << 19);
     }
 

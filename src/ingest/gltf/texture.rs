@@ -142,6 +142,9 @@ impl<'a> Importer<'a> {
     /// their MIP levels, as their headers say) the largest on disk through a tile cache,
     /// which the scene's warnings then report ([`texture_cache::TexturePlan`]).
     pub(super) fn plan_texture_memory(&mut self) {
+        if crate::memory::texture_memory().is_none() {
+            return; // No limit: every image stays in memory, unmeasured.
+        }
         let mut shown = std::collections::BTreeSet::new();
         for texture in self.doc.textures() {
             if let Ok(image) = self.texture_image(&texture) {
