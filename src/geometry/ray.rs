@@ -98,7 +98,9 @@ pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
         if p.abs() < ORIGIN {
             p + FLOAT_SCALE * n
         } else {
-            let of_i = (INT_SCALE * n) as i32;
+            // `n` is a unit normal; a degenerate one (huge components from a scene's broken
+            // data) is held to it, so that negating the offset cannot overflow.
+            let of_i = (INT_SCALE * n.clamp(-1.0, 1.0)) as i32;
             let of_i = if p < 0.0 { -of_i } else { of_i };
             f32::from_bits((p.to_bits() as i32).wrapping_add(of_i) as u32)
         }
@@ -119,8 +121,10 @@ pub(crate) fn offset_ray_origin_lanes(p: crate::simd::V3, n: crate::simd::V3) ->
     #[inline(always)]
     fn axis(p: F8, n: F8) -> F8 {
         let near = p + F8::splat(FLOAT_SCALE) * n;
-        // `as i32` truncates, as the conversion does; NaN gives 0 there, i32::MIN here.
-        let of_i = (F8::splat(INT_SCALE) * n).to_i32() & n.eq(n).as_u8();
+        // `as i32` truncates, as the conversion does; NaN gives 0 there, i32::MIN here. The
+        // normal is held to [-1, 1] as in the scalar offset.
+        let held = n.max(F8::splat(-1.0)).min(F8::splat(1.0));
+        let of_i = (F8::splat(INT_SCALE) * held).to_i32() & n.eq(n).as_u8();
         let of_i = U8::select(p.lt(F8::ZERO), U8::splat(0) - of_i, of_i);
         let far = F8::from_bits(p.to_bits() + of_i);
         F8::select(p.abs().lt(F8::splat(ORIGIN)), near, far)
@@ -131,6 +135,28 @@ pub(crate) fn offset_ray_origin_lanes(p: crate::simd::V3, n: crate::simd::V3) ->
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_degenerate_normal_offsets_as_a_unit_one() {
+        // A normal of huge components (a scene's broken data, found by fuzzing): negating
+        // its integer offset overflowed; it is held to the unit normal's offset.
+        let p = Vec3::new(-0.5, 0.25, -3.0);
+        let huge = Vec3::new(-3e38, 1e30, f32::MAX);
+        let unit = Vec3::new(-1.0, 1.0, 1.0);
+        assert_eq!(
+            offset_ray_origin(p, huge).to_array().map(f32::to_bits),
+            offset_ray_origin(p, unit).to_array().map(f32::to_bits)
+        );
+        #[cfg(target_arch = "x86_64")]
+        if crate::simd::avx2_or_skip() {
+            use crate::simd::V3;
+            let lanes = offset_ray_origin_lanes(V3::splat(p), V3::splat(huge));
+            assert_eq!(
+                lanes.lane(3).to_array().map(f32::to_bits),
+                offset_ray_origin(p, huge).to_array().map(f32::to_bits)
+            );
+        }
+    }
 
     #[test]
     fn offset_moves_to_the_normal_side_at_every_magnitude() {
