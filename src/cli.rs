@@ -499,7 +499,9 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
         Command::Render(_) => {
             let job = job_from(sub, sub_definition)?;
             crate::memory::set_process_limit(job.max_memory.or_else(crate::memory::default_limit));
-            crate::memory::set_texture_memory(job.texture_memory);
+            let pyramids = job.options.settings.texture_filter
+                == crate::integrator::settings::TextureFilter::Mip;
+            crate::memory::set_texture_memory(job.texture_memory, pyramids);
             Ok(crate::job::run(&job)?.exit_code())
         }
         Command::Inspect {
@@ -518,7 +520,8 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
             };
             let max_memory = limit(max_memory, "--max-memory")?;
             crate::memory::set_process_limit(max_memory.or_else(crate::memory::default_limit));
-            crate::memory::set_texture_memory(limit(texture_memory, "--texture-memory")?);
+            // As a render with the default texture filter (bilinear: no MIP pyramids).
+            crate::memory::set_texture_memory(limit(texture_memory, "--texture-memory")?, false);
             let load = load_from(sub, sub_definition)?;
             print!(
                 "{}",

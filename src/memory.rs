@@ -7,7 +7,7 @@
 
 use crate::error::{Error, Result};
 use std::fmt;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Resident bytes of the program before any scene: code, thread stacks, allocator (the
 /// peak of rendering the embedded Cornell box at 64x64 is 11 MB).
@@ -193,9 +193,20 @@ pub fn process_limit() -> Option<u64> {
 /// The texture memory chosen by `--texture-memory` (0: half of the process limit).
 static TEXTURE_MEMORY: AtomicU64 = AtomicU64::new(0);
 
-/// Sets the texture memory [`texture_memory`] answers (`None`: half of the process limit).
-pub fn set_texture_memory(bytes: Option<u64>) {
+/// Whether the render builds MIP pyramids (`--texture-filter mip`), so that textures need a
+/// third more memory for each way they are read; until told, assumed.
+static MIP_PYRAMIDS: AtomicBool = AtomicBool::new(true);
+
+/// Sets the texture memory [`texture_memory`] answers (`None`: half of the process limit)
+/// and whether textures will have MIP pyramids ([`mip_pyramids`]).
+pub fn set_texture_memory(bytes: Option<u64>, pyramids: bool) {
     TEXTURE_MEMORY.store(bytes.unwrap_or(0), Ordering::Relaxed);
+    MIP_PYRAMIDS.store(pyramids, Ordering::Relaxed);
+}
+
+/// Whether the textures of this process's render will have MIP pyramids.
+pub fn mip_pyramids() -> bool {
+    MIP_PYRAMIDS.load(Ordering::Relaxed)
 }
 
 /// The most that a scene's textures may hold in memory, decoded and with their MIP

@@ -38,12 +38,6 @@ pub const TILE: u32 = 64;
 /// Bytes a cached tile costs beyond its texels: the entry, its key and its allocation.
 const TILE_OVERHEAD: u64 = 96;
 
-/// Bytes textures of `texel_bytes` (decoded, at full resolution) hold in memory with a MIP
-/// pyramid for each way of reading them: a third more for each.
-pub fn resident_bytes(texel_bytes: u64) -> u64 {
-    texel_bytes.saturating_add(texel_bytes / 3)
-}
-
 /// Which of a scene's images are read through the tile cache, decided before any is decoded.
 #[derive(Debug, Default)]
 pub struct TexturePlan {
@@ -51,8 +45,10 @@ pub struct TexturePlan {
     cache: Option<Arc<TextureCache>>,
     /// Per image (as numbered by the caller), whether it goes to the cache.
     tiled: Vec<bool>,
-    /// Bytes all the images need in memory with their MIP levels, and the texture memory.
+    /// Bytes all the images need in memory (with their MIP levels where `pyramids`), and the
+    /// texture memory.
     needed: u64,
+    pyramids: bool,
     /// Images of a known size (those the caller could not measure, or that no texture
     /// shows, have size 0 and stay in memory).
     measured: usize,
@@ -65,21 +61,27 @@ impl TexturePlan {
     /// size (an environment map, whose sampling tables read every texel).
     pub fn new(sizes: &[u64], pinned: &[bool]) -> Self {
         match crate::memory::texture_memory() {
-            Some(memory) => Self::within(memory, sizes, pinned),
+            Some(memory) => Self::within(memory, sizes, pinned, crate::memory::mip_pyramids()),
             None => Self::default(),
         }
     }
 
-    /// [`TexturePlan::new`] under a texture memory of `memory` bytes. All images stay in
-    /// memory when, with their MIP levels, they fit in it. Otherwise the largest go to tiled
-    /// files, one by one, until those left need at most half of it; the cache takes the
-    /// rest, so small images (and the many lookups they serve) keep the speed of memory.
-    pub fn within(memory: u64, sizes: &[u64], pinned: &[bool]) -> Self {
+    /// [`TexturePlan::new`] under a texture memory of `memory` bytes, images needing a MIP
+    /// pyramid (a third more) where `pyramids`. All images stay in memory when they fit in
+    /// it. Otherwise the largest go to tiled files, one by one, until those left need at
+    /// most half of it; the cache takes the rest, so small images (and the many lookups
+    /// they serve) keep the speed of memory.
+    pub fn within(memory: u64, sizes: &[u64], pinned: &[bool], pyramids: bool) -> Self {
+        let resident_bytes = |bytes: u64| match pyramids {
+            true => bytes.saturating_add(bytes / 3),
+            false => bytes,
+        };
         let needed = resident_bytes(sizes.iter().fold(0u64, |a, &b| a.saturating_add(b)));
         let mut plan = Self {
             cache: None,
             tiled: vec![false; sizes.len()],
             needed,
+            pyramids,
             measured: sizes.iter().filter(|&&n| n > 0).count(),
             memory,
         };
@@ -121,10 +123,15 @@ impl TexturePlan {
             false => format!("the {tiled} largest of {all} images are"),
         };
         Some(format!(
-            "{source}: the textures need {} in memory with their MIP levels, more than the \
-             texture memory of {} (--texture-memory): {which} read from tiled copies on disk \
-             through a cache of {}, more slowly",
+            "{source}: the textures need {} in memory{}, more than the texture memory of {} \
+             (--texture-memory): {which} read from tiled copies on disk through a cache of {}, \
+             more slowly",
             Bytes(self.needed),
+            if self.pyramids {
+                " with their MIP levels"
+            } else {
+                ""
+            },
             Bytes(self.memory),
             Bytes(cache.capacity())
         ))
@@ -690,11 +697,11 @@ mod tests {
         let mib = 3 << 20; // 4 MiB in memory with MIP levels
         // The last image is one no texture shows (or that could not be measured).
         let sizes = [10 * mib, mib, 4 * mib, mib, 6 * mib, 0];
-        let fits = TexturePlan::within(100 << 20, &sizes, &[]);
+        let fits = TexturePlan::within(100 << 20, &sizes, &[], true);
         assert!(fits.cache.is_none() && fits.notice("s").is_none());
         // 88 MiB needed, 64 MiB of texture memory: the 40 and 24 MiB images go (24 MiB
         // left, at most 32), the cache takes the other 40 MiB.
-        let plan = TexturePlan::within(64 << 20, &sizes, &[]);
+        let plan = TexturePlan::within(64 << 20, &sizes, &[], true);
         assert_eq!(plan.tiled, [true, false, false, false, true, false]);
         assert_eq!(plan.cache.as_ref().unwrap().capacity(), 40 << 20);
         assert!(plan.cache_of(0).is_some() && plan.cache_of(1).is_none());
@@ -705,8 +712,19 @@ mod tests {
                     .unwrap()
                     .contains("the 2 largest of 5 images are read")
         );
+        // Without MIP pyramids the same images need 66 MiB, within 70.
+        assert!(
+            TexturePlan::within(70 << 20, &sizes, &[], false)
+                .cache
+                .is_none()
+        );
+        assert!(
+            TexturePlan::within(70 << 20, &sizes, &[], true)
+                .cache
+                .is_some()
+        );
         // A pinned image stays, however large; with little memory, all others go.
-        let plan = TexturePlan::within(1 << 20, &sizes, &[true]);
+        let plan = TexturePlan::within(1 << 20, &sizes, &[true], true);
         assert_eq!(plan.tiled, [false, true, true, true, true, false]);
         assert_eq!(plan.cache.as_ref().unwrap().capacity(), 1 << 19);
     }
