@@ -498,10 +498,6 @@ fn run(matches: &ArgMatches, lucerna: &[OsString]) -> Result<u8> {
     match cli.command {
         Command::Render(_) => {
             let job = job_from(sub, sub_definition)?;
-            crate::memory::set_process_limit(job.max_memory.or_else(crate::memory::default_limit));
-            let pyramids = job.options.settings.texture_filter
-                == crate::integrator::settings::TextureFilter::Mip;
-            crate::memory::set_texture_memory(job.texture_memory, pyramids);
             Ok(crate::job::run(&job)?.exit_code())
         }
         Command::Inspect {

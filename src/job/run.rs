@@ -11,6 +11,13 @@ use crate::sequence::FrameList;
 pub fn run(job: &RenderJob) -> Result<Outcome> {
     let mut job = job.clone();
     job.finish()?;
+    // The limits readers hold to (images checked before decoding, textures beyond the
+    // texture memory read through a tile cache), for the command line, batch children and
+    // the Python package alike.
+    crate::memory::set_process_limit(job.max_memory.or_else(crate::memory::default_limit));
+    let pyramids =
+        job.options.settings.texture_filter == crate::integrator::settings::TextureFilter::Mip;
+    crate::memory::set_texture_memory(job.texture_memory, pyramids);
     if job.preview.is_some() && job.write_files {
         // An OCIO display or view that does not exist fails before the scene is read.
         crate::output::preview::check(&job.view)?;
