@@ -120,7 +120,7 @@ impl EmissionPyramid {
         // Texel indices of level 0 the box reaches, one beyond for bilinear filtering.
         let range = |lo: f32, hi: f32, n: usize| {
             let a = (lo as f64 * n as f64 - 0.5).floor() as i64;
-            let b = (hi as f64 * n as f64 - 0.5).floor() as i64 + 1;
+            let b = ((hi as f64 * n as f64 - 0.5).floor() as i64).saturating_add(1);
             (a, b)
         };
         let (x0, x1) = range(lo.x, hi.x, base.width);

@@ -214,14 +214,16 @@ impl Texture {
         let y = uv.y as f64 * height as f64 - 0.5;
         let (x0, y0) = (x.floor(), y.floor());
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
+        // Coordinates beyond i64 (texture coordinates near f32's limits) saturate, and the
+        // next texel wraps round: any texel of the image is as good an answer there.
         let (x0, y0) = (x0 as i64, y0 as i64);
         let xs = [
             wrap(x0, width, self.wrap_u),
-            wrap(x0 + 1, width, self.wrap_u),
+            wrap(x0.wrapping_add(1), width, self.wrap_u),
         ];
         let ys = [
             wrap(y0, height, self.wrap_v),
-            wrap(y0 + 1, height, self.wrap_v),
+            wrap(y0.wrapping_add(1), height, self.wrap_v),
         ];
         (xs, ys, fx, fy)
     }
@@ -559,6 +561,30 @@ mod tests {
         assert_eq!(wrap(4, 4, Wrap::MirroredRepeat), 3);
         assert_eq!(wrap(-1, 4, Wrap::MirroredRepeat), 0);
         assert_eq!(wrap(8, 4, Wrap::MirroredRepeat), 0);
+    }
+
+    #[test]
+    fn coordinates_at_the_limits_of_f32_read_a_texel() {
+        // Found by fuzzing: the texel index saturates at i64::MAX; the next one wrapped
+        // with an overflow.
+        for wrap_mode in [Wrap::Repeat, Wrap::MirroredRepeat, Wrap::ClampToEdge] {
+            let t = Texture {
+                wrap_u: wrap_mode,
+                wrap_v: wrap_mode,
+                ..grey(5, 3, |x, y| (x * 40 + y) as u8)
+            };
+            for uv in [
+                Vec2::new(3e38, -3e38),
+                Vec2::splat(f32::MAX),
+                Vec2::splat(f32::MIN),
+            ] {
+                assert!(t.sample(uv, true).is_finite());
+                assert!(
+                    t.sample_footprint(uv, [Vec2::X, Vec2::Y], false)
+                        .is_finite()
+                );
+            }
+        }
     }
 
     #[test]
