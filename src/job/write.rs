@@ -163,14 +163,7 @@ pub(super) fn write_view(
 
 /// What the tile cache of the world's textures did, if they are read through one.
 fn texture_cache_stats(world: &crate::world::World) -> Option<CacheStats> {
-    world
-        .surfaces
-        .textures
-        .iter()
-        .find_map(|t| match &*t.texels {
-            crate::scene::Texels::Tiled(image) => Some(image.cache().stats()),
-            _ => None,
-        })
+    crate::scene::texture::cache_of(&world.surfaces.textures).map(|cache| cache.stats())
 }
 
 /// `--stats-json`: the render's figures, counts as integers.

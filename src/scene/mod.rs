@@ -382,10 +382,7 @@ impl Scene {
     /// The tile cache its textures are read through, when they are too large to be held in
     /// memory (`texture_cache`).
     pub fn texture_cache(&self) -> Option<&Arc<texture_cache::TextureCache>> {
-        self.textures.iter().find_map(|t| match &*t.texels {
-            Texels::Tiled(image) => Some(image.cache()),
-            _ => None,
-        })
+        texture::cache_of(&self.textures)
     }
 
     /// Bytes of its bulk data: meshes, texels (shared texels once; for tiled ones, the tile

@@ -411,6 +411,15 @@ impl Texture {
     }
 }
 
+/// The tile cache the tiled images among `textures` are read through, if any is tiled (a
+/// scene's tiled images share one).
+pub fn cache_of(textures: &[Texture]) -> Option<&Arc<TextureCache>> {
+    textures.iter().find_map(|t| match &*t.texels {
+        Texels::Tiled(image) => Some(image.cache()),
+        _ => None,
+    })
+}
+
 /// Trilinear blend at (fractional) MIP level `lod` ≥ 0 of a pyramid whose `top` level is
 /// the coarsest, `at(level)` the bilinear lookup at an integer level.
 #[inline]

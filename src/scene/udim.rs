@@ -29,7 +29,6 @@ pub struct Udim<T> {
     /// For column `c` and row `r`, `COLUMNS * r + c`: one more than the index into
     /// `images` of the tile there, 0 where the set has none.
     grid: Vec<u32>,
-    rows: u32,
     /// The tiles' images, in the order of `tiles`.
     images: Vec<T>,
 }
@@ -65,7 +64,6 @@ impl<T> Udim<T> {
         Ok(Self {
             tiles,
             grid,
-            rows,
             images,
         })
     }
@@ -74,12 +72,10 @@ impl<T> Udim<T> {
     /// no tile (the fallback is read there).
     #[inline]
     pub fn tile(&self, uv: Vec2) -> Option<(&T, Vec2)> {
-        let (column, row) = (uv.x.floor(), (1.0 - uv.y).floor());
-        if !(column >= 0.0 && column < COLUMNS as f32 && row >= 0.0 && row < self.rows as f32) {
-            return None;
-        }
-        let slot = self.grid[(COLUMNS * row as u32 + column as u32) as usize];
+        let cell = number_at(uv)? - FIRST;
+        let slot = *self.grid.get(cell as usize)?;
         let image = self.images.get(slot.checked_sub(1)? as usize)?;
+        let (column, row) = ((cell % COLUMNS) as f32, (cell / COLUMNS) as f32);
         Some((image, uv - Vec2::new(column, -row)))
     }
 
@@ -93,7 +89,6 @@ impl<T> Udim<T> {
         Udim {
             tiles: self.tiles.clone(),
             grid: self.grid.clone(),
-            rows: self.rows,
             images: self.images.iter().map(f).collect(),
         }
     }

@@ -43,20 +43,26 @@ fn textures_through_the_cache_render_the_image_of_textures_in_memory() {
     lucerna_ok(&["convert", AVOCADO, "-o", scene_file.to_str().unwrap()]);
     for scene in [Path::new(AVOCADO), &scene_file] {
         for filter in ["bilinear", "mip"] {
-            let filter_args = ["--texture-filter", filter];
-            let (memory, said) = render(scene, &dir.join("memory.exr"), &filter_args);
+            // A render of `scene` with this filter and `extra` options.
+            let run = |out: &str, extra: &[&str]| {
+                let mut args = vec!["--texture-filter", filter];
+                args.extend_from_slice(extra);
+                render(scene, &dir.join(out), &args)
+            };
+            let (memory, said) = run("memory.exr", &[]);
             assert!(!said.contains("tiled copies"), "{said}");
             // Three 128 x 128 images (192 KiB, 256 KiB with MIP levels) in a texture memory
             // of 64 KiB: all read through a cache of 64 KiB, evicting and reading tiles again.
             let stats = dir.join("stats.json");
-            let mut args = vec![
-                "--texture-memory",
-                "64K",
-                "--stats-json",
-                stats.to_str().unwrap(),
-            ];
-            args.extend_from_slice(&filter_args);
-            let (cached, said) = render(scene, &dir.join("cache.exr"), &args);
+            let (cached, said) = run(
+                "cache.exr",
+                &[
+                    "--texture-memory",
+                    "64K",
+                    "--stats-json",
+                    stats.to_str().unwrap(),
+                ],
+            );
             assert!(
                 said.contains(match filter {
                     "mip" => "the textures need 256.0 KiB in memory with their MIP levels, more than the texture memory of 64.0 KiB",
@@ -73,9 +79,7 @@ fn textures_through_the_cache_render_the_image_of_textures_in_memory() {
             // The two largest go to the cache (ties in file order) until one, with its MIP
             // levels where they are built, fits in half the texture memory.
             let memory_size = if filter == "mip" { "200K" } else { "150K" };
-            let mut args = vec!["--texture-memory", memory_size];
-            args.extend_from_slice(&filter_args);
-            let (mixed, said) = render(scene, &dir.join("mixed.exr"), &args);
+            let (mixed, said) = run("mixed.exr", &["--texture-memory", memory_size]);
             assert!(
                 said.contains("the 2 largest of 3 images are read from tiled copies")
                     && said.contains("texture cache: 2 images in tiled files"),

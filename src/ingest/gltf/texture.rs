@@ -115,8 +115,8 @@ impl<'a> Importer<'a> {
         Ok(index)
     }
 
-    /// The encoded bytes of `image`, from its buffer view or its URI.
-    fn image_bytes(&self, image: &gltf::Image) -> Result<Vec<u8>> {
+    /// The encoded bytes of `image`: borrowed from its buffer view, or read from its URI.
+    fn image_bytes(&self, image: &gltf::Image) -> Result<std::borrow::Cow<'_, [u8]>> {
         let element = format!("images[{}]", image.index());
         match image.source() {
             gltf::image::Source::View { view, .. } => {
@@ -127,13 +127,13 @@ impl<'a> Importer<'a> {
                     .unwrap_or(&[]);
                 let end = view.offset().checked_add(view.length());
                 match end.and_then(|end| data.get(view.offset()..end)) {
-                    Some(slice) => Ok(slice.to_vec()),
+                    Some(slice) => Ok(slice.into()),
                     None => Err(self.err(&element, "bufferView runs past the end of its buffer")),
                 }
             }
-            gltf::image::Source::Uri { uri: u, .. } => {
-                uri::read(u, self.base).map_err(|r| self.err(format!("{element}.uri"), r))
-            }
+            gltf::image::Source::Uri { uri: u, .. } => (uri::read(u, self.base))
+                .map(Into::into)
+                .map_err(|r| self.err(format!("{element}.uri"), r)),
         }
     }
 
