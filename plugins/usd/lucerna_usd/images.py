@@ -9,6 +9,7 @@ tile number 1001 + u + 10 v; `<UVTILE>` for `u<u+1>_v<v+1>` (Mudbox's one-based 
 MaterialX defines it)."""
 
 import os
+import resource
 import tempfile
 
 import numpy as np
@@ -20,42 +21,121 @@ from pxr import Ar
 MAX_BYTES = None
 
 
+#: The plugin's own peak memory before it decodes images (the interpreter, usd-core,
+#: OpenImageIO, the stage), measured when first needed.
+_BASELINE = None
+
+
+def resident_budget():
+    """Bytes of decoded images kept for reuse: half of what MAX_BYTES leaves beside the
+    plugin's own footprint (None: no limit). Beyond it the least recently used images read
+    from files are dropped and decoded again when something asks for them, so a conversion
+    holds a bounded part of a texture set larger than memory, not all of it."""
+    global _BASELINE
+    if MAX_BYTES is None:
+        return None
+    if _BASELINE is None:
+        _BASELINE = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+    return max(0, MAX_BYTES - _BASELINE) // 2
+
+
 class Image:
     """A decoded image: `pixels` (H, W, 4) float32, with RGB replicated from a grey image
     and alpha 1 where the file has none; `eight_bit` tells whether the file stored 8-bit
     values (USD's `auto` colour space reads those as sRGB); `raw8` keeps the 8-bit values
-    as stored, for textures passed through unchanged. An 8-bit image is decoded to bytes
-    only; its float `pixels` are made the first time something asks for them (most
-    8-bit textures are passed through or packed as bytes and never need them)."""
+    as stored, for textures passed through unchanged (None for other images). An 8-bit
+    image is decoded to bytes only; its float `pixels` are made the first time something
+    asks for them (most 8-bit textures are passed through or packed as bytes and never
+    need them).
 
-    def __init__(self, path, pixels, eight_bit, raw8):
+    An image read from a file (`source`, the resolved path) is one of the resident images
+    (`_Resident`): its texels may be dropped when others are decoded and are then decoded
+    again, transparently, on the next use; shape and bit depth stay known. Images made in
+    memory (baked, fallbacks) always keep their texels."""
+
+    def __init__(self, path, pixels, eight_bit, raw8, source=None):
         self.path = path
         self._pixels = pixels
         self.eight_bit = eight_bit
-        self.raw8 = raw8
+        self._raw8 = raw8
+        self._shape = (raw8 if raw8 is not None else pixels).shape[:2]
+        self._source = source
+        if source is not None:
+            _RESIDENT.hold(self)
+
+    def _texels(self):
+        """Decodes the image again if its texels were dropped; marks it as just used."""
+        if self._source is None:
+            return
+        if self._raw8 is None and self._pixels is None:
+            pixels, _, raw8 = _decode(self._source, MAX_BYTES)
+            self._pixels, self._raw8 = pixels, raw8
+        _RESIDENT.hold(self)
+
+    def _drop(self):
+        self._pixels = self._raw8 = None
+
+    def _bytes(self):
+        return sum(a.nbytes for a in (self._pixels, self._raw8) if a is not None)
+
+    @property
+    def raw8(self):
+        if not self.eight_bit:
+            return None
+        self._texels()
+        return self._raw8
 
     @property
     def pixels(self):
+        self._texels()
         if self._pixels is None:
-            self._pixels = self.raw8.astype(np.float32) * np.float32(1.0 / 255.0)
+            self._pixels = self._raw8.astype(np.float32) * np.float32(1.0 / 255.0)
+            if self._source is not None:
+                _RESIDENT.hold(self)
         return self._pixels
 
     @property
     def shape(self):
-        return (self.raw8 if self._pixels is None else self._pixels).shape[:2]
+        return self._shape
 
 
-def _rgba(pixels):
-    h, w, c = pixels.shape
-    if c >= 4:
-        return np.ascontiguousarray(pixels[..., :4])
-    out = np.empty((h, w, 4), pixels.dtype)
-    if c >= 3:
-        out[..., :3] = pixels[..., :3]
-    else:
-        out[..., :3] = pixels[..., :1]
-    out[..., 3] = pixels[..., 1] if c == 2 else _one(pixels)
-    return out
+class _Resident:
+    """The images read from files whose texels are in memory, least recently used first,
+    kept within `resident_budget()` bytes (the image just used always stays)."""
+
+    def __init__(self):
+        self._images = {}  # id -> (image, bytes), in order of use
+
+    def hold(self, image):
+        """Marks `image` as just used, counting its texels, and drops others beyond the
+        budget."""
+        self._images.pop(id(image), None)
+        self._images[id(image)] = (image, image._bytes())
+        self.make_room(0, keep=id(image))
+
+    def make_room(self, incoming, keep=None):
+        """Drops the least recently used images (not `keep`) until `incoming` more bytes
+        fit in the budget: called before an image is decoded, so that it never sits in
+        memory beside those it will displace."""
+        budget = resident_budget()
+        if budget is None:
+            return
+        total = sum(b for _, b in self._images.values())
+        for key in list(self._images):
+            if total + incoming <= budget:
+                break
+            if key == keep:
+                continue
+            old, held = self._images.pop(key)
+            old._drop()
+            total -= held
+
+    def bytes(self):
+        """Bytes of texels held now."""
+        return sum(image._bytes() for image, _ in self._images.values())
+
+
+_RESIDENT = _Resident()
 
 
 def _one(pixels):
@@ -66,34 +146,75 @@ class OverBudget(OSError):
     """An image that would take more memory to decode than the limit allows."""
 
 
-def _read_file(path, limit):
-    buf = oiio.ImageBuf(path)
-    if buf.has_error:
-        raise OSError(buf.geterror().strip() or "cannot read the image")
-    spec = buf.spec()  # the header only: ImageBuf reads pixels on demand
-    if buf.has_error:
-        raise OSError(buf.geterror().strip() or "cannot read the image")
-    # Float pixels, RGBA floats, and the 8-bit copy: what decoding holds at its peak.
-    need = spec.width * spec.height * (spec.nchannels * 4 + 16 + 4 + spec.nchannels)
-    if limit is not None and need > limit:
-        raise OverBudget(f"an image of {spec.width}x{spec.height} pixels would need "
-                         f"{need / 2**20:.0f} MiB to decode, more than the "
-                         f"{max(limit, 0) / 2**20:.0f} MiB left of the limit of "
-                         f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
-    eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
-    if eight_bit:
-        raw = buf.get_pixels(oiio.UINT8)
-        if raw is None or buf.has_error:
-            raise OSError(buf.geterror().strip() or "cannot decode the image")
-        return None, True, _rgba(np.asarray(raw, np.uint8).reshape(spec.height, spec.width, spec.nchannels))
-    pixels = buf.get_pixels(oiio.FLOAT)
-    if pixels is None or buf.has_error:
-        raise OSError(buf.geterror().strip() or "cannot decode the image")
-    pixels = np.asarray(pixels, dtype=np.float32).reshape(spec.height, spec.width, spec.nchannels)
-    if not np.isfinite(pixels).all():
-        bad = int((~np.isfinite(pixels)).sum())
-        raise OSError(f"{bad} texel values are NaN or infinite")
-    return _rgba(pixels), False, None
+#: Bytes of file texels decoded at a time (the band of rows read into the RGBA array).
+BAND_BYTES = 1 << 22
+
+
+def _decode(path, limit):
+    """(float RGBA pixels or None, whether 8-bit, 8-bit RGBA or None) of the image file at
+    `path`, refusing one whose decoding would take more than `limit` bytes (None: any).
+    Read with ImageInput, not ImageBuf, so that OpenImageIO's image cache keeps no copy,
+    and a band of rows at a time into the RGBA array, so that decoding needs little more
+    than the array."""
+    # Texels as stored: OpenImageIO would premultiply a PNG's colour by its alpha, which
+    # texture files (glTF's, USD's: OpenUSD's Hio reads them so too) do not mean.
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(path, config)
+    if inp is None:
+        raise OSError(oiio.geterror().strip() or "cannot read the image")
+    try:
+        spec = inp.spec()  # the header only
+        width, height, channels = spec.width, spec.height, spec.nchannels
+        eight_bit = spec.format == oiio.TypeDesc(oiio.UINT8)
+        dtype = np.uint8 if eight_bit else np.float32
+        itemsize = np.dtype(dtype).itemsize
+        tiled = spec.tile_width > 0
+        rows = spec.tile_height if tiled else BAND_BYTES // max(1, width * channels * itemsize)
+        rows = min(max(rows, 1), max(height, 1))
+        # The RGBA array, and what the decoder holds: a band of tiles, or for scanline
+        # files the whole image (OpenImageIO's PNG reader decodes it at once).
+        held = (rows if tiled else height) * width * channels * itemsize
+        need = width * height * 4 * itemsize + held
+        if limit is not None and need > limit:
+            raise OverBudget(f"an image of {width}x{height} pixels would need "
+                             f"{need / 2**20:.0f} MiB to decode, more than the "
+                             f"{max(limit, 0) / 2**20:.0f} MiB left of the limit of "
+                             f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
+        _RESIDENT.make_room(need)
+        out = np.empty((height, width, 4), dtype)
+        fmt = oiio.UINT8 if eight_bit else oiio.FLOAT
+        for y in range(0, height, rows):
+            end = min(y + rows, height)
+            if tiled:
+                raw = inp.read_tiles(0, 0, spec.x, spec.x + width, spec.y + y, spec.y + end,
+                                     spec.z, spec.z + max(spec.depth, 1), 0, channels, fmt)
+            else:
+                raw = inp.read_scanlines(0, 0, spec.y + y, spec.y + end, spec.z, 0, channels, fmt)
+            if raw is None or inp.has_error:
+                raise OSError(inp.geterror().strip() or "cannot decode the image")
+            band = np.asarray(raw, dtype).reshape(end - y, width, channels)
+            if not eight_bit and not np.isfinite(band).all():
+                bad = int((~np.isfinite(band)).sum())
+                raise OSError(f"{bad} texel values are NaN or infinite in rows {y}-{end - 1}")
+            _fill_rgba(out[y:end], band)
+    finally:
+        inp.close()
+    return (None, True, out) if eight_bit else (out, False, None)
+
+
+def _fill_rgba(out, band):
+    """`band` (rows, W, C) into `out` (rows, W, 4): RGB replicated from grey, alpha from
+    a second channel of two, else 1 where the file has none."""
+    c = band.shape[2]
+    if c >= 3:
+        out[..., :3] = band[..., :3]
+    else:
+        out[..., :3] = band[..., :1]
+    if c >= 4:
+        out[..., 3] = band[..., 3]
+    else:
+        out[..., 3] = band[..., 1] if c == 2 else _one(band)
 
 
 def read(asset_path):
@@ -110,21 +231,29 @@ def read_resolved(resolved, limit=None):
     from . import heartbeat
 
     heartbeat()
+    resident_budget()  # the plugin's footprint is measured before the first image
     limit = MAX_BYTES if limit is None else limit
     if "[" in resolved and resolved.endswith("]"):
-        # Inside a package (.usdz): copy the bytes out for OpenImageIO.
+        # Inside a package (.usdz): copy the bytes out for OpenImageIO (the copy stays
+        # while the conversion runs, for decoding again an image that was dropped).
         asset = Ar.GetResolver().OpenAsset(Ar.ResolvedPath(resolved))
         if asset is None:
             raise OSError(f"cannot open {resolved}")
         data = bytes(asset.GetBuffer())
         suffix = os.path.splitext(resolved[:-1])[1]
-        with tempfile.NamedTemporaryFile(suffix=suffix) as f:
-            f.write(data)
-            f.flush()
-            pixels, eight_bit, raw8 = _read_file(f.name, limit)
+        f = tempfile.NamedTemporaryFile(suffix=suffix)
+        f.write(data)
+        f.flush()
+        _PACKAGED.append(f)
+        source = f.name
     else:
-        pixels, eight_bit, raw8 = _read_file(resolved, limit)
-    return Image(resolved, pixels, eight_bit, raw8)
+        source = resolved
+    pixels, eight_bit, raw8 = _decode(source, limit)
+    return Image(resolved, pixels, eight_bit, raw8, source=source)
+
+
+#: Copies of images read out of packages, removed when the plugin ends.
+_PACKAGED = []
 
 
 #: The tokens that make a path a UDIM texture set.
@@ -173,12 +302,12 @@ class TileSet:
 def read_tiles(path, layer, fallback):
     """The UDIM set `path` names, anchored at `layer` (the layer that authored it), with
     `fallback` (linear RGBA). A tile whose file cannot be read is left out (it reads the
-    fallback) and named in the set's `unreadable`. The tiles together stay within
-    MAX_BYTES (--max-memory): a tile that would pass it refuses the whole set, as an image
-    beyond it is refused. Raises OSError where no tile is read."""
+    fallback) and named in the set's `unreadable`; a tile beyond MAX_BYTES (--max-memory)
+    refuses the whole set, as an image beyond it is refused. The tiles are resident
+    images: a set larger than the plugin's budget is decoded a part at a time. Raises
+    OSError where no tile is read."""
     resolver = Ar.GetResolver()
     tiles, unreadable = {}, {}
-    held = 0
     for number in UDIM_SEARCH:
         candidate = udim_tile_path(path, number)
         anchored = layer.ComputeAbsolutePath(candidate) if layer else candidate
@@ -186,15 +315,13 @@ def read_tiles(path, layer, fallback):
         if not resolved:
             continue
         try:
-            tile = read_resolved(resolved, None if MAX_BYTES is None else MAX_BYTES - held)
+            tile = read_resolved(resolved)
         except OverBudget as e:
-            raise OverBudget(f"tile {number} after {len(tiles)} tiles of {held / 2**20:.0f} MiB: "
-                             f"{e}") from None
+            raise OverBudget(f"tile {number}: {e}") from None
         except OSError as e:
             unreadable[number] = f"{os.path.basename(resolved)}: {e}"
             continue
         tiles[number] = tile
-        held += (tile.raw8 if tile.raw8 is not None else tile.pixels).nbytes
     if not tiles:
         found = "; ".join(f"tile {n} ({r})" for n, r in unreadable.items())
         raise OSError(f"no tile of {path!r} read among {UDIM_SEARCH.start}-{UDIM_SEARCH.stop - 1}"

@@ -295,10 +295,11 @@ class MaterialConverter:
                 and diffuse.channels == [0, 1, 2]
                 and (opacity is None or (opacity.image is diffuse.image and opacity.plain
                                          and opacity.channels == [3]))):
-            texels = diffuse.image.raw8.copy()
-            if opacity is None:
+            texels, key = diffuse.image.raw8, ("as stored", diffuse.image.path)
+            if opacity is None and not np.all(texels[..., 3] == 255):
+                texels, key = texels.copy(), None  # alpha that is not coverage: opaque
                 texels[..., 3] = 255
-            return self.writer.add_texture(name + ":base_color", texels, src.wrap), src
+            return self.writer.add_texture(name + ":base_color", texels, src.wrap, key=key), src
         shape = max((s.image.shape for s in (diffuse, opacity) if s is not None),
                     key=lambda s: s[0] * s[1])
         out = np.ones((*shape, 4), np.float32)
@@ -326,7 +327,8 @@ class MaterialConverter:
     def _color_texture(self, source, name):
         if (source.plain and source.srgb and source.image.raw8 is not None
                 and source.channels == [0, 1, 2]):
-            return self.writer.add_texture(name, source.image.raw8, source.wrap)
+            return self.writer.add_texture(name, source.image.raw8, source.wrap,
+                                           key=("as stored", source.image.path))
         out = np.ones((*source.image.shape, 4), np.float32)
         out[..., :3] = source.values(3)
         return self.writer.add_texture(name, out, source.wrap)
@@ -356,7 +358,8 @@ class MaterialConverter:
     def _normal_texture(self, source, name):
         standard = (np.allclose(source.scale[:3], 2.0) and np.allclose(source.bias[:3], -1.0))
         if standard and not source.srgb and source.image.raw8 is not None and source.channels == [0, 1, 2]:
-            return self.writer.add_texture(name + ":normal", source.image.raw8, source.wrap)
+            return self.writer.add_texture(name + ":normal", source.image.raw8, source.wrap,
+                                           key=("as stored", source.image.path))
         n = source.values(3)
         out = np.ones((*source.image.shape, 4), np.float32)
         out[..., :3] = (n + 1.0) * 0.5

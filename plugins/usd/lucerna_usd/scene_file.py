@@ -84,8 +84,8 @@ class SceneWriter:
         self.warnings = []
         # The stage's UsdRender settings and products (render_settings.convert), or None.
         self.render_settings = None
-        # Texel arrays added so far by identity: an image several materials pass through
-        # unchanged is stored once (the arrays are kept, so identities stay unique).
+        # Textures added so far under a caller's key (an image several materials pass
+        # through unchanged is stored once): {(key, wrap): index}.
         self._texels = {}
 
     def _view(self, array, dtype, width):
@@ -161,13 +161,13 @@ class SceneWriter:
         self.materials.append(material)
         return len(self.materials) - 1
 
-    def add_texture(self, name, texels, wrap=("repeat", "repeat")):
+    def add_texture(self, name, texels, wrap=("repeat", "repeat"), key=None):
         """Adds an image (H, W, 4): uint8 (sRGB-encoded or data as the material slot
-        reads it) or float32 (linear); returns its index."""
-        key = (id(texels), tuple(wrap))
-        if key in self._texels:
-            return self._texels[key][0]
-        original = texels
+        reads it) or float32 (linear); returns its index. Texels added under a `key` (what
+        they are, e.g. an image passed through as stored) with the same wrap are stored
+        once. The texels are written out at once: the writer keeps no reference to them."""
+        if key is not None and (key, tuple(wrap)) in self._texels:
+            return self._texels[key, tuple(wrap)]
         texels = np.asarray(texels)
         height, width = texels.shape[:2]
         if texels.dtype == np.uint8:
@@ -184,7 +184,8 @@ class SceneWriter:
             "wrap_v": wrap[1],
             "nearest": False,
         })
-        self._texels[key] = (len(self.textures) - 1, original)
+        if key is not None:
+            self._texels[key, tuple(wrap)] = len(self.textures) - 1
         return len(self.textures) - 1
 
     def set_tiles(self, index, tiles, asset):

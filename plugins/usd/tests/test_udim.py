@@ -318,17 +318,50 @@ def test_materialx_graphs_over_a_udim_set_are_baked_tile_by_tile(stage_file, con
     assert fallback.shape[:2] == (1, 1) and fallback[0, 0, :3] == pytest.approx([0.5, 0, 0.5])
 
 
-def test_a_set_beyond_the_memory_limit_is_refused_whole(converted, tmp_path, monkeypatch):
-    """Ten tiles of 64x640 RGBA bytes hold 160 KiB each, and decoding one needs 1.37 MiB at
-    its peak: a limit of 2 MiB takes five, then refuses the set, naming the tile, what was
-    held and --max-memory; the fallback is used."""
+def test_a_set_beyond_the_memory_limit_is_converted_a_part_at_a_time(converted, tmp_path,
+                                                                     monkeypatch):
+    """Thirty tiles of 64x640 RGBA bytes (160 KiB each, 4.7 MiB in all) under a limit of
+    2 MiB: the plugin keeps at most half the limit of decoded images (and the one in use;
+    here the limit is taken as all the plugin's, its own footprint not counted),
+    decoding again those it dropped when they are packed, and writes every tile with the
+    texels of a conversion without a limit."""
     from lucerna_usd import images
 
     files = write_textures(tmp_path / "tex", udim_name)
+    stage = avocado_stage(tmp_path / "big.usda", files, "<UDIM>")
+    free = converted(stage)
+    held = []
+    hold = images._Resident.hold
+
+    def measured(self, image):
+        hold(self, image)
+        held.append(self.bytes())
+
+    monkeypatch.setattr(images._Resident, "hold", measured)
     monkeypatch.setattr(images, "MAX_BYTES", 2 << 20)
+    monkeypatch.setattr(images, "_BASELINE", 0)  # the budget is then half the limit
+    limited = converted(stage)
+    assert not limited["warnings"], limited["warnings"]
+    assert held and max(held) <= (1 << 20) + 64 * 640 * 4 * 5, max(held)
+    for slot in ("base_color_texture", "metallic_roughness_texture", "normal_texture"):
+        a, b = (s["textures"][s["materials"][0][slot]["texture"]] for s in (free, limited))
+        assert len(a["tiles"]) == len(b["tiles"]) == TILES
+        for (n, i), (m, j) in zip(a["tiles"], b["tiles"]):
+            assert n == m
+            assert np.array_equal(texels(free, {"texture": i}), texels(limited, {"texture": j}))
+
+
+def test_a_tile_beyond_the_memory_limit_refuses_the_set(converted, tmp_path, monkeypatch):
+    """Decoding one 64x640 RGB tile needs 280 KiB (the bytes read and their RGBA copy): a
+    limit of 256 KiB refuses the set at its first tile, naming it and --max-memory; the
+    fallback is used."""
+    from lucerna_usd import images
+
+    files = write_textures(tmp_path / "tex", udim_name)
+    monkeypatch.setattr(images, "MAX_BYTES", 256 << 10)
     scene = converted(avocado_stage(tmp_path / "big.usda", files, "<UDIM>"))
     refused = scene.warnings_about("--max-memory")
-    assert any("tile 1006 after 5 tiles of 1 MiB" in w and "fallback used" in w for w in refused), \
+    assert any("tile 1001: an image of 64x640" in w and "fallback used" in w for w in refused), \
         scene["warnings"]
     assert scene["materials"][0]["base_color_texture"] is None
 
