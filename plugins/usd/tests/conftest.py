@@ -72,13 +72,17 @@ def converted(tmp_path):
 
 
 def write_image(path, pixels, fmt=None):
-    """Writes an image file (8-bit unless `fmt` is another OpenImageIO type)."""
+    """Writes an image file (8-bit unless `fmt` is another OpenImageIO type), colour not
+    premultiplied by alpha."""
     import OpenImageIO as oiio
 
     fmt = oiio.UINT8 if fmt is None else fmt
     pixels = np.asarray(pixels, dtype=np.uint8 if fmt == oiio.UINT8 else np.float32)
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt)
+    # The texels as given: OpenImageIO would otherwise divide colour by alpha on writing.
+    spec.attribute("oiio:UnassociatedAlpha", 1)
     out = oiio.ImageOutput.create(str(path))
-    out.open(str(path), oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], fmt))
+    out.open(str(path), spec)
     out.write_image(pixels)
     out.close()
 
