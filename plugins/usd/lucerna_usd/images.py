@@ -68,7 +68,7 @@ class Image:
         if self._source is None:
             return
         if self._raw8 is None and self._pixels is None:
-            pixels, _, raw8 = _decode(self._source, MAX_BYTES)
+            pixels, _, raw8 = _decode(self._source)
             self._pixels, self._raw8 = pixels, raw8
         _RESIDENT.hold(self)
 
@@ -150,9 +150,9 @@ class OverBudget(OSError):
 BAND_BYTES = 1 << 22
 
 
-def _decode(path, limit):
+def _decode(path):
     """(float RGBA pixels or None, whether 8-bit, 8-bit RGBA or None) of the image file at
-    `path`, refusing one whose decoding would take more than `limit` bytes (None: any).
+    `path`, refusing one whose decoding would take more than MAX_BYTES (None: any).
     Read with ImageInput, not ImageBuf, so that OpenImageIO's image cache keeps no copy,
     and a band of rows at a time into the RGBA array, so that decoding needs little more
     than the array."""
@@ -176,11 +176,10 @@ def _decode(path, limit):
         # files the whole image (OpenImageIO's PNG reader decodes it at once).
         held = (rows if tiled else height) * width * channels * itemsize
         need = width * height * 4 * itemsize + held
-        if limit is not None and need > limit:
+        if MAX_BYTES is not None and need > MAX_BYTES:
             raise OverBudget(f"an image of {width}x{height} pixels would need "
-                             f"{need / 2**20:.0f} MiB to decode, more than the "
-                             f"{max(limit, 0) / 2**20:.0f} MiB left of the limit of "
-                             f"{MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
+                             f"{need / 2**20:.0f} MiB to decode, more than the limit "
+                             f"of {MAX_BYTES / 2**20:.0f} MiB (--max-memory)")
         _RESIDENT.make_room(need)
         out = np.empty((height, width, 4), dtype)
         fmt = oiio.UINT8 if eight_bit else oiio.FLOAT
@@ -225,14 +224,13 @@ def read(asset_path):
     return read_resolved(resolved)
 
 
-def read_resolved(resolved, limit=None):
+def read_resolved(resolved):
     """Reads the image at a path the asset resolver returned, refusing one that would take
-    more than `limit` bytes to decode (default: the whole MAX_BYTES). Raises OSError."""
+    more than MAX_BYTES to decode. Raises OSError."""
     from . import heartbeat
 
     heartbeat()
     resident_budget()  # the plugin's footprint is measured before the first image
-    limit = MAX_BYTES if limit is None else limit
     if "[" in resolved and resolved.endswith("]"):
         # Inside a package (.usdz): copy the bytes out for OpenImageIO (the copy stays
         # while the conversion runs, for decoding again an image that was dropped).
@@ -248,7 +246,7 @@ def read_resolved(resolved, limit=None):
         source = f.name
     else:
         source = resolved
-    pixels, eight_bit, raw8 = _decode(source, limit)
+    pixels, eight_bit, raw8 = _decode(source)
     return Image(resolved, pixels, eight_bit, raw8, source=source)
 
 
