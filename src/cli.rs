@@ -315,6 +315,12 @@ struct RenderArgs {
     /// 10-20 % more time a sample on textured assets). [default: bilinear]
     #[arg(long, help_heading = "Integrator")]
     texture_filter: Option<String>,
+    /// Rough microfacet lobes (metals, specular, coats, rough glass): multiscatter (the
+    /// energy single scattering loses between facets given back, as Cycles' Multiscatter
+    /// GGX) or single (single-scattering GGX: glTF's appendix B, Mitsuba's rough models).
+    /// [default: multiscatter]
+    #[arg(long, help_heading = "Integrator")]
+    microfacet: Option<String>,
     /// Shadow rays and BSDF samples at the first hit, e.g. nee=4,bsdf=1, or auto (learned
     /// from the first samples of every pixel). [default: nee=1,bsdf=1]
     #[arg(long, help_heading = "Integrator")]

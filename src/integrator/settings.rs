@@ -74,6 +74,37 @@ impl TextureFilter {
     }
 }
 
+/// Which microfacet model rough lobes follow.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MicrofacetModel {
+    /// Single-scattering GGX with the energy it loses between facets given back
+    /// (`material::energy`; Cycles' "Multiscatter GGX").
+    Multiscatter,
+    /// Single-scattering GGX alone: glTF's appendix B and Mitsuba's rough models exactly.
+    Single,
+}
+
+impl MicrofacetModel {
+    /// Parses `multiscatter` or `single`.
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "multiscatter" => Ok(Self::Multiscatter),
+            "single" => Ok(Self::Single),
+            other => Err(format!(
+                "unknown microfacet model {other:?} (multiscatter, single)"
+            )),
+        }
+    }
+
+    /// The textual form [`MicrofacetModel::parse`] reads.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Self::Multiscatter => "multiscatter",
+            Self::Single => "single",
+        }
+    }
+}
+
 /// Largest split count accepted.
 pub const MAX_SPLIT: u32 = 4096;
 
@@ -91,6 +122,8 @@ pub struct Settings {
     pub guiding: GuidingMode,
     /// How textures are looked up (`world::footprint`, `scene::texture`).
     pub texture_filter: TextureFilter,
+    /// The microfacet model of every material's rough lobes.
+    pub microfacet: MicrofacetModel,
     pub split: SplitChoice,
     pub sampler: SamplerKind,
     pub seed: u32,
@@ -101,7 +134,8 @@ impl Default for Settings {
     /// 0.01, 0.05, 0.1 and 0.2 at equal time on the Cornell box and the indirect room), no
     /// depth limit, light selection by power, area sampling, no guiding, bilinear texture
     /// lookups (as Mitsuba 3, Cycles and pbrt-v4 by default: MIP filtering costs 10-20 % a
-    /// sample on textured assets and pays only at few samples), no splitting, Owen-scrambled
+    /// sample on textured assets and pays only at few samples), multiple-scattering
+    /// microfacets (as Cycles, Arnold and Karma by default), no splitting, Owen-scrambled
     /// Sobol, seed 0.
     fn default() -> Self {
         Self {
@@ -112,6 +146,7 @@ impl Default for Settings {
             light_sampling: LightSampling::Auto,
             guiding: GuidingMode::Off,
             texture_filter: TextureFilter::Bilinear,
+            microfacet: MicrofacetModel::Multiscatter,
             split: SplitChoice::Fixed(Split { nee: 1, bsdf: 1 }),
             sampler: SamplerKind::Sobol,
             seed: 0,
@@ -151,7 +186,7 @@ impl Split {
 }
 
 /// Names of the integrator's settings, in the order they are written.
-pub const SETTING_NAMES: [&str; 10] = [
+pub const SETTING_NAMES: [&str; 11] = [
     "mis",
     "rr",
     "max-depth",
@@ -159,6 +194,7 @@ pub const SETTING_NAMES: [&str; 10] = [
     "light-sampling",
     "guiding",
     "texture-filter",
+    "microfacet",
     "split",
     "sampler",
     "seed",
@@ -182,6 +218,7 @@ impl Settings {
             "light-sampling" => self.light_sampling = LightSampling::parse(value)?,
             "guiding" => self.guiding = GuidingMode::parse(value)?,
             "texture-filter" => self.texture_filter = TextureFilter::parse(value)?,
+            "microfacet" => self.microfacet = MicrofacetModel::parse(value)?,
             "split" => self.split = SplitChoice::parse(value)?,
             "sampler" => {
                 self.sampler = SamplerKind::parse(value)
@@ -207,6 +244,7 @@ impl Settings {
             "light-sampling" => self.light_sampling.describe().into(),
             "guiding" => self.guiding.describe().into(),
             "texture-filter" => self.texture_filter.describe().into(),
+            "microfacet" => self.microfacet.describe().into(),
             "split" => self.split.describe(),
             "sampler" => self.sampler.name().into(),
             "seed" => self.seed.to_string(),
@@ -303,6 +341,7 @@ mod tests {
             ("light-select", "contribution"),
             ("light-sampling", "solid-angle"),
             ("texture-filter", "mip"),
+            ("microfacet", "single"),
             ("split", "nee=4,bsdf=2"),
             ("split", "auto"),
             ("sampler", "independent"),

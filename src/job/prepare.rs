@@ -11,7 +11,7 @@ use super::views::View;
 use crate::error::{Error, Result};
 use crate::film::Film;
 use crate::film::aov::Aov;
-use crate::integrator::settings::TextureFilter;
+use crate::integrator::settings::{MicrofacetModel, TextureFilter};
 use crate::output::denoise::Denoiser;
 use crate::output::exr;
 use crate::render::RenderOptions;
@@ -93,6 +93,11 @@ pub(super) fn prepare(
             ingest::set_constant_environment(&mut scene, Vec3::ONE);
         } else {
             log::warn!("{}: the scene has no light: it renders black", scene.source);
+        }
+    }
+    if options.settings.microfacet == MicrofacetModel::Single {
+        for material in &mut scene.materials {
+            material.multiscatter = false;
         }
     }
     // Subdivision surfaces are refined for this view before the memory estimate counts them.

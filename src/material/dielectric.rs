@@ -20,10 +20,16 @@
 //!   transmission extension's thin BTDF), weighted by the slab's reflectance at each
 //!   microfacet.
 //!
+//! Rough, both are scaled by `energy`'s compensation for the light single scattering loses
+//! between facets (1 / E(μo, η), and 1 / E(μo) of the reflection for the slab, whose lobes
+//! share the reflection's microfacets), unless built `with_multiscatter(false)`
+//! (Mitsuba's models exactly).
+//!
 //! Both take a transmission `tint` applied at each crossing (glTF's base colour, Mitsuba's
 //! `specular_transmittance`). Directions are local with +z the shading normal on the side of
 //! `wo`; `eta` is the index below the surface over the index on `wo`'s side.
 
+use super::energy::{self, Masking};
 use super::fresnel;
 use super::microfacet::{Ggx, Microfacet, reflect};
 use super::{BsdfSample, Lobe, PerLobe};
@@ -105,6 +111,8 @@ pub struct Dielectric {
     eta: f32,
     ggx: Ggx,
     tint: Vec3,
+    /// Rough lobes compensated for the energy single scattering loses.
+    multiscatter: bool,
 }
 
 impl Dielectric {
@@ -126,6 +134,26 @@ impl Dielectric {
                 },
             },
             tint: tint.clamp(Vec3::ZERO, Vec3::ONE),
+            multiscatter: true,
+        }
+    }
+
+    /// The same interface with energy compensation (`on`, the default) or without it:
+    /// single-scattering GGX.
+    pub fn with_multiscatter(self, on: bool) -> Self {
+        Self {
+            multiscatter: on,
+            ..self
+        }
+    }
+
+    /// The energy compensation's scale at `wo` (one for single scattering).
+    #[inline]
+    fn energy_scale(&self, wo: Vec3) -> f32 {
+        if self.multiscatter {
+            energy::dielectric_scale(self.ggx.alpha, self.eta, wo.z)
+        } else {
+            1.0
         }
     }
 
@@ -148,13 +176,14 @@ impl Dielectric {
         if self.is_smooth() {
             return lobes;
         }
+        let scale = self.energy_scale(wo);
         if wi.z > 0.0 {
             if let Some((h, value)) = rough_reflection(&self.ggx, wo, wi) {
-                lobes[1] = Vec3::splat(fresnel::dielectric(wo.dot(h), self.eta) * value);
+                lobes[1] = Vec3::splat(fresnel::dielectric(wo.dot(h), self.eta) * value * scale);
             }
         } else if let Some(r) = rough_refraction(&self.ggx, wo, wi, self.eta) {
             let t = 1.0 - fresnel::dielectric(wo.dot(r.wm), self.eta);
-            lobes[2] = self.tint * (t * r.value);
+            lobes[2] = self.tint * (t * r.value * scale);
         }
         lobes
     }
@@ -242,13 +271,34 @@ pub struct ThinDielectric {
     eta: f32,
     ggx: Ggx,
     tint: Vec3,
+    /// Rough lobes compensated for the energy single scattering loses.
+    multiscatter: bool,
 }
 
 impl ThinDielectric {
     /// A slab of relative index `eta`, GGX roughness `alpha` and transmission tint `tint`.
     pub fn new(eta: f32, alpha: f32, tint: Vec3) -> Self {
-        let Dielectric { eta, ggx, tint } = Dielectric::new(eta, alpha, tint);
-        Self { eta, ggx, tint }
+        let Dielectric {
+            eta,
+            ggx,
+            tint,
+            multiscatter,
+        } = Dielectric::new(eta, alpha, tint);
+        Self {
+            eta,
+            ggx,
+            tint,
+            multiscatter,
+        }
+    }
+
+    /// The same slab with energy compensation (`on`, the default) or without it:
+    /// single-scattering GGX.
+    pub fn with_multiscatter(self, on: bool) -> Self {
+        Self {
+            multiscatter: on,
+            ..self
+        }
     }
 
     /// The slab's reflectance and transmittance where a microfacet (or the surface) is seen
@@ -285,6 +335,11 @@ impl ThinDielectric {
             rough_reflection(&self.ggx, wo, if through { flip(wi) } else { wi })
         {
             let (r, t) = self.slab(wo.dot(h));
+            let value = if self.multiscatter {
+                value * energy::lossless_reflection_scale(Masking::Separable, self.ggx.alpha, wo.z)
+            } else {
+                value
+            };
             if through {
                 lobes[2] = self.tint * (t * value);
             } else {

@@ -22,11 +22,23 @@
 //! (the base is seen through the coat twice, in and out). A smooth coat is a delta lobe,
 //! like a smooth specular layer; when both are smooth their mirror reflections add up.
 //!
+//! A diffuse roughness above 0 (OpenPBR's, from USD; glTF has none) makes the diffuse lobe
+//! OpenPBR's energy-preserving Oren-Nayar (`oren_nayar`) in place of base / π, under the
+//! same weight.
+//!
+//! Rough specular and coat lobes are compensated for the energy single scattering loses
+//! between facets (`energy`: Turquin's albedo scaling with Kulla and Conty's
+//! multiple-bounce Fresnel, as Cycles' "Multiscatter GGX"), unless the BRDF is built
+//! `with_multiscatter(false)` (appendix B exactly). The diffuse weight stays the
+//! specification's.
+//!
 //! Sampling picks the coat, the specular lobe (GGX visible normals) or the diffuse lobe
 //! (cosine) with probabilities proportional to their albedo estimates at `wo`; the density
 //! is the mixture.
 
+use super::energy::{self, Masking};
 use super::microfacet::{Ggx, SMOOTH_ALPHA, reflect, schlick};
+use super::oren_nayar;
 use super::{BsdfSample, Lobe};
 use crate::color::luminance;
 use crate::sampling::warp::{cosine_hemisphere_pdf, square_to_cosine_hemisphere};
@@ -45,6 +57,10 @@ pub struct GltfPbr {
     /// Clear coat weight (0: no coat).
     coat: f32,
     coat_ggx: Ggx,
+    /// Rough lobes compensated for the energy single scattering loses.
+    multiscatter: bool,
+    /// Diffuse roughness (0: Lambert).
+    diffuse_roughness: f32,
 }
 
 /// What an uncoated [`GltfPbr`] is made of: base colour, metallic, GGX alpha and the
@@ -77,6 +93,29 @@ impl GltfPbr {
             }),
             coat: 0.0,
             coat_ggx: Ggx { alpha: 0.0 },
+            multiscatter: true,
+            diffuse_roughness: 0.0,
+        }
+    }
+
+    /// The same BRDF with a rough diffuse base (OpenPBR's EON) of `roughness` in [0, 1].
+    pub fn with_diffuse_roughness(self, roughness: f32) -> Self {
+        Self {
+            diffuse_roughness: if roughness.is_finite() {
+                roughness.clamp(0.0, 1.0)
+            } else {
+                0.0
+            },
+            ..self
+        }
+    }
+
+    /// The same BRDF with energy compensation (`on`, the default) or without it:
+    /// single-scattering GGX, as appendix B defines it.
+    pub fn with_multiscatter(self, on: bool) -> Self {
+        Self {
+            multiscatter: on,
+            ..self
         }
     }
 
@@ -131,6 +170,28 @@ impl GltfPbr {
         fd * (1.0 - self.metallic) + fm * self.metallic
     }
 
+    /// The energy compensation's scale of the rough specular lobe at cos θo = `cos` (one
+    /// where it is smooth or single-scattering); the packet kernel's lanes call it too.
+    #[inline]
+    pub(crate) fn specular_energy(&self, cos: f32) -> Vec3 {
+        if !self.multiscatter {
+            return Vec3::ONE;
+        }
+        let f_avg = energy::schlick_average(self.f0) * (1.0 - self.metallic)
+            + energy::schlick_average(self.base) * self.metallic;
+        energy::reflection_scale(Masking::Correlated, self.ggx.alpha, f_avg, cos)
+    }
+
+    /// The energy compensation's scale of the rough coat at cos θo = `cos`.
+    #[inline]
+    fn coat_energy(&self, cos: f32) -> f32 {
+        if !self.multiscatter {
+            return 1.0;
+        }
+        let f_avg = energy::schlick_average(Vec3::splat(COAT_F0)) * self.coat;
+        energy::reflection_scale(Masking::Correlated, self.coat_ggx.alpha, f_avg, cos).x
+    }
+
     /// Diffuse weight (1 - metallic)(1 - F_d(cos)) base.
     #[inline]
     fn diffuse_weight(&self, cos: f32) -> Vec3 {
@@ -173,11 +234,18 @@ impl GltfPbr {
     #[inline]
     fn eval_lobes_at(&self, wo: Vec3, wi: Vec3, h: Vec3) -> [Vec3; 2] {
         let v_h = wo.dot(h);
-        let mut diffuse = self.diffuse_weight(v_h) * FRAC_1_PI;
+        let mut diffuse = if self.diffuse_roughness > 0.0 {
+            let fd = schlick(self.f0, v_h);
+            oren_nayar::eval(self.base, self.diffuse_roughness, wo, wi)
+                * (1.0 - self.metallic)
+                * (Vec3::ONE - fd)
+        } else {
+            self.diffuse_weight(v_h) * FRAC_1_PI
+        };
         let mut glossy = Vec3::ZERO;
         if !self.smooth() {
             let vd = self.ggx.visibility(wi.z, wo.z) * self.ggx.d(h);
-            glossy += self.specular_fresnel(v_h) * vd;
+            glossy += self.specular_fresnel(v_h) * vd * self.specular_energy(wo.z);
         }
         if self.coat > 0.0 {
             let through = self.coat_transmission(wo.z, wi.z);
@@ -185,7 +253,7 @@ impl GltfPbr {
             glossy *= through;
             if !self.coat_smooth() {
                 let vd = self.coat_ggx.visibility(wi.z, wo.z) * self.coat_ggx.d(h);
-                glossy += Vec3::splat(self.coat_fresnel(v_h) * vd);
+                glossy += Vec3::splat(self.coat_fresnel(v_h) * vd * self.coat_energy(wo.z));
             }
         }
         [diffuse * wi.z, glossy * wi.z]
@@ -280,10 +348,10 @@ impl GltfPbr {
         BsdfSample::from_mixture(wi, diffuse + glossy, pdf, lobe)
     }
 
-    /// The parameters of a BRDF without a clear coat, which the packet kernel evaluates in
-    /// SIMD lanes (`material::lanes`); `None` for a coated one.
+    /// The parameters of a BRDF without a clear coat and with a Lambertian base, which the
+    /// packet kernel evaluates in SIMD lanes (`material::lanes`); `None` for the others.
     pub fn uncoated(&self) -> Option<UncoatedParts> {
-        (self.coat == 0.0).then_some(UncoatedParts {
+        (self.coat == 0.0 && self.diffuse_roughness == 0.0).then_some(UncoatedParts {
             base: self.base,
             metallic: self.metallic,
             alpha: self.ggx.alpha,

@@ -201,6 +201,19 @@ impl<'a> BsdfLanes<'a> {
         self.base * (F8::ONE - self.metallic) * (V3::broadcast(F8::ONE) - fd)
     }
 
+    /// The energy compensation's scale of each rough glTF lane's specular lobe at `wo`,
+    /// from the lane's scalar BRDF (one in the other lanes, whose glossy term is zero).
+    #[inline(always)]
+    fn specular_energy(&self, wo: V3) -> V3 {
+        let mut scale = [Vec3::ONE; LANES];
+        for lane in Lanes::new(self.pbr.bits() & !self.smooth.bits()) {
+            if let Bsdf::GltfPbr(p) = &self.bsdfs[lane] {
+                scale[lane] = p.specular_energy(wo.lane(lane).z);
+            }
+        }
+        V3::from_lanes(&scale)
+    }
+
     /// The glTF lobe probabilities (specular, diffuse) at `wo`.
     #[inline(always)]
     fn lobe_probabilities(&self, wo: V3) -> (F8, F8) {
@@ -215,14 +228,14 @@ impl<'a> BsdfLanes<'a> {
     }
 
     /// The glTF f · cos θi and density for directions above the surface with half vector
-    /// `h`, given the lobe probabilities at `wo`.
+    /// `h`, given the lobe probabilities and the specular energy scale at `wo`.
     #[inline(always)]
-    fn pbr_eval_pdf_at(&self, wo: V3, wi: V3, h: V3, (ps, pd): (F8, F8)) -> (V3, F8) {
+    fn pbr_eval_pdf_at(&self, wo: V3, wi: V3, h: V3, (ps, pd): (F8, F8), energy: V3) -> (V3, F8) {
         let ggx = GgxLanes { alpha: self.alpha };
         let v_h = wo.dot(h);
         let diffuse = self.diffuse_weight(v_h) * F8::splat(FRAC_1_PI);
         let vd = ggx.visibility(wi.z, wo.z) * ggx.d(h);
-        let glossy = self.specular_fresnel(v_h) * F8::select(self.smooth, F8::ZERO, vd);
+        let glossy = self.specular_fresnel(v_h) * F8::select(self.smooth, F8::ZERO, vd) * energy;
         let f = diffuse * wi.z + glossy * wi.z;
         let cosine = wi.z.max(F8::ZERO) / F8::splat(PI);
         let specular = F8::select(self.smooth, F8::ZERO, ps * ggx.reflection_pdf(wo, h));
@@ -239,7 +252,13 @@ impl<'a> BsdfLanes<'a> {
         let mut pdf = F8::select(wo.z.gt(F8::ZERO), cosine, F8::ZERO);
         if (self.pbr & M8::from_bits(lanes)).any() {
             let h = (wo + wi).normalize();
-            let (pf, ppdf) = self.pbr_eval_pdf_at(wo, wi, h, self.lobe_probabilities(wo));
+            let (pf, ppdf) = self.pbr_eval_pdf_at(
+                wo,
+                wi,
+                h,
+                self.lobe_probabilities(wo),
+                self.specular_energy(wo),
+            );
             f = V3::select(self.pbr, pf, f);
             pdf = F8::select(self.pbr, ppdf, pdf);
         }
@@ -292,7 +311,8 @@ impl<'a> BsdfLanes<'a> {
             let reflected = h * (wo.dot(h) * 2.0) - wo;
             let wi = V3::select(specular, reflected, cosine_wi);
             let hw = (wo + wi).normalize();
-            let (f, pdf) = self.pbr_eval_pdf_at(wo, wi, hw, probabilities);
+            let (f, pdf) =
+                self.pbr_eval_pdf_at(wo, wi, hw, probabilities, self.specular_energy(wo));
             let glossy_valid = wi.z.gt(F8::ZERO) & pdf.gt(F8::ZERO);
             // A perfect mirror: the specular reflectance over its probability.
             let mirror_wi = V3::new(-wo.x, -wo.y, wo.z);

@@ -25,13 +25,22 @@
 //! pure-glass materials use. A thin wall (transmission without KHR_materials_volume) reflects
 //! from both faces (`fresnel::thin_slab`) and transmits without bending.
 //!
+//! Rough specular, transmission and coat lobes are compensated for the energy single
+//! scattering loses between facets (`energy`), unless `multiscatter` is off: an opaque
+//! specular lobe as `gltf_pbr`'s, a transmissive material's reflection and transmission as
+//! the rough dielectric (or thin slab) it is where it transmits, the specular lobe's scale
+//! blended from the opaque one's by the transmitting share (1 - metallic) transmission.
+//! Iridescence's and the sheen's effect on the average Fresnel are not counted.
+//!
 //! Sampling picks one lobe (coat, sheen, specular reflection, transmission, diffuse) with
 //! probabilities proportional to their albedo estimates at `wo`; a direction's density is
 //! the mixture's. The sheen counts as diffuse in the lobe layers (Cycles does the same).
 
 use super::dielectric::{flip, reflection_pdf, rough_reflection, rough_refraction};
+use super::energy::{self, Masking};
 use super::fresnel;
 use super::microfacet::{AnisotropicGgx, Ggx, Microfacet, reflect, schlick};
+use super::oren_nayar;
 use super::sheen::Sheen;
 use super::thin_film;
 use super::{BsdfSample, Lobe, PerLobe};
@@ -85,6 +94,10 @@ pub struct LayeredParams {
     /// The coat's normal in the local shading frame.
     pub coat_normal: Vec3,
     pub film: Option<Film>,
+    /// Rough lobes compensated for the energy single scattering loses.
+    pub multiscatter: bool,
+    /// Diffuse roughness in [0, 1] (0: Lambert; above, OpenPBR's EON).
+    pub diffuse_roughness: f32,
 }
 
 /// The layered glTF BSDF at one surface point.
@@ -115,6 +128,11 @@ impl Layered {
         p.transmission = p.transmission.clamp(0.0, 1.0);
         p.transmission_tint = p.transmission_tint.clamp(Vec3::ZERO, Vec3::ONE);
         p.coat = p.coat.clamp(0.0, 1.0);
+        p.diffuse_roughness = if p.diffuse_roughness.is_finite() {
+            p.diffuse_roughness.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         p.specular_weight = p.specular_weight.clamp(0.0, 1.0);
         p.f0 = p.f0.clamp(Vec3::ZERO, Vec3::ONE);
         let clamp_alpha = |a: f32| {
@@ -254,6 +272,39 @@ impl Layered {
         self.coat_ggx.alpha < super::microfacet::SMOOTH_ALPHA
     }
 
+    /// The energy compensation's scales at `wo` of the rough specular reflection and of
+    /// the rough transmission (ones where smooth or single-scattering).
+    fn specular_energy(&self, wo: Vec3) -> (Vec3, f32) {
+        let p = &self.p;
+        if !p.multiscatter || self.specular_smooth() {
+            return (Vec3::ONE, 1.0);
+        }
+        let alpha = (self.ggx.alpha_x * self.ggx.alpha_y).sqrt();
+        let f_avg = energy::schlick_average(p.f0) * (p.specular_weight * (1.0 - p.metallic))
+            + energy::schlick_average(p.base) * p.metallic;
+        if !p.exact {
+            let scale = energy::reflection_scale(Masking::Correlated, alpha, f_avg, wo.z);
+            return (scale, 1.0);
+        }
+        let opaque = energy::reflection_scale(Masking::Separable, alpha, f_avg, wo.z);
+        let lossless = if p.thin || !p.eta.is_finite() {
+            energy::lossless_reflection_scale(Masking::Separable, alpha, wo.z)
+        } else {
+            energy::dielectric_scale(alpha, p.eta, wo.z)
+        };
+        let share = p.transmission * (1.0 - p.metallic);
+        (opaque.lerp(Vec3::splat(lossless), share), lossless)
+    }
+
+    /// The energy compensation's scale of the rough coat at `wo_c` (in the coat's frame).
+    fn coat_energy(&self, wo_c: Vec3) -> f32 {
+        if !self.p.multiscatter {
+            return 1.0;
+        }
+        let f_avg = energy::schlick_average(Vec3::splat(COAT_F0)) * self.p.coat;
+        energy::reflection_scale(Masking::Correlated, self.coat_ggx.alpha, f_avg, wo_c.z).x
+    }
+
     /// Probabilities of sampling each lobe at `wo`, proportional to their albedo estimates.
     fn probabilities(&self, wo: Vec3) -> Probabilities {
         let p = &self.p;
@@ -307,11 +358,16 @@ impl Layered {
                 };
                 let dg = self.ggx.d(h_a) * g / (4.0 * wo.z);
                 let f = fd * (1.0 - p.metallic) + self.metal_fresnel(v_h) * p.metallic;
-                lobes[1] += f * (dg * under);
+                lobes[1] += f * self.specular_energy(wo).0 * (dg * under);
             }
             let diffuse_weight =
                 (1.0 - p.metallic) * (1.0 - p.transmission) * (1.0 - fd.max_element());
-            lobes[0] += p.base * (diffuse_weight * FRAC_1_PI * wi.z * under);
+            let diffuse_brdf = if p.diffuse_roughness > 0.0 {
+                oren_nayar::eval(p.base, p.diffuse_roughness, wo, wi)
+            } else {
+                p.base * FRAC_1_PI
+            };
+            lobes[0] += diffuse_brdf * (diffuse_weight * wi.z * under);
             if let Some(sheen) = &p.sheen {
                 lobes[0] += sheen.eval(wo, wi) * self.through_coat(wo, wi);
             }
@@ -322,13 +378,14 @@ impl Layered {
                 if let Some((h_c, _)) = rough_reflection(&self.coat_ggx, wo_c, wi_c) {
                     let g = self.coat_ggx.g_correlated(wo_c, wi_c);
                     let f_cos = self.coat_fresnel(wo_c.dot(h_c)) * self.coat_ggx.d(h_c) * g
-                        / (4.0 * wo_c.z);
+                        / (4.0 * wo_c.z)
+                        * self.coat_energy(wo_c);
                     lobes[1] += Vec3::splat(f_cos);
                 }
             }
         } else if p.transmission > 0.0 && p.metallic < 1.0 && !self.specular_smooth() {
             let (wo_a, wi_a) = (self.to_aniso(wo), self.to_aniso(wi));
-            let weight = (1.0 - p.metallic) * p.transmission * under;
+            let weight = (1.0 - p.metallic) * p.transmission * under * self.specular_energy(wo).1;
             if p.thin {
                 if let Some((h_a, value)) = rough_reflection(&self.ggx, wo_a, flip(wi_a)) {
                     let fd = self.dielectric_fresnel(wo_a.dot(h_a));

@@ -987,6 +987,7 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && m.specular_color
                 .is_none_or(|c| c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= 1.0)
             && (0.0..=1.0).contains(&m.clearcoat_roughness)
+            && (0.0..=1.0).contains(&m.diffuse_roughness)
             && phong_ok
             && alpha_ok
             && extensions_ok)

@@ -19,6 +19,11 @@ pub struct Material {
     pub base_color_texture: Option<TextureRef>,
     pub metallic: f32,
     pub roughness: f32,
+    /// Roughness of the diffuse base in [0, 1] (OpenPBR's `base_diffuse_roughness`):
+    /// 0 is Lambert, above it OpenPBR's energy-preserving Oren-Nayar (`material::oren_nayar`).
+    /// glTF has none.
+    #[serde(default)]
+    pub diffuse_roughness: f32,
     /// Metalness in B, roughness in G (glTF layout).
     pub metallic_roughness_texture: Option<TextureRef>,
     pub normal_texture: Option<TextureRef>,
@@ -84,10 +89,20 @@ pub struct Material {
     /// Transmissive materials are seen from both sides whatever it says (a volume's inside
     /// must be, and light crossing a thin wall reaches its back).
     pub double_sided: bool,
+    /// Rough microfacet lobes are compensated for the energy that single scattering loses
+    /// between facets (`material::energy`, Cycles' "Multiscatter GGX"); false: the
+    /// single-scattering GGX of glTF's appendix B and Mitsuba's rough models (the
+    /// `--microfacet single` setting clears it on every material).
+    #[serde(default = "yes")]
+    pub multiscatter: bool,
 }
 
 fn one() -> f32 {
     1.0
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// The inside of a dielectric volume: Beer-Lambert absorption.
@@ -186,6 +201,7 @@ impl Default for Material {
             base_color_texture: None,
             metallic: 1.0,
             roughness: 1.0,
+            diffuse_roughness: 0.0,
             metallic_roughness_texture: None,
             normal_texture: None,
             normal_scale: 1.0,
@@ -210,6 +226,7 @@ impl Default for Material {
             unlit: false,
             alpha_mode: AlphaMode::Opaque,
             double_sided: false,
+            multiscatter: true,
         }
     }
 }
@@ -234,7 +251,11 @@ impl Material {
         if self.model != BsdfModel::GltfPbr || self.unlit || !(uncoated && unsheened) {
             return None;
         }
-        if self.specular.weight == 0.0 && self.metallic == 0.0 && !self.transmits() {
+        if self.specular.weight == 0.0
+            && self.metallic == 0.0
+            && !self.transmits()
+            && self.diffuse_roughness == 0.0
+        {
             return Some(Reduced::Lambert);
         }
         let metal = self.metallic >= 1.0 && self.metallic_roughness_texture.is_none();

@@ -632,7 +632,9 @@ struct Case {
 }
 
 /// The opaque BSDF configurations: Lambert, Phong and `gltf_pbr`.
-fn bsdfs() -> Vec<(String, Bsdf<'static>)> {
+/// The opaque BSDFs, with rough lobes compensated for multiple scattering or not.
+fn bsdfs(multiscatter: bool) -> Vec<(String, Bsdf<'static>)> {
+    let gltf = |b: GltfPbr| Bsdf::GltfPbr(b.with_multiscatter(multiscatter));
     let mut all = vec![(
         "lambert".to_string(),
         Bsdf::Lambert(Lambert {
@@ -648,7 +650,7 @@ fn bsdfs() -> Vec<(String, Bsdf<'static>)> {
     ] {
         all.push((
             format!("gltf base={base} metallic={metallic} roughness={roughness}"),
-            Bsdf::GltfPbr(GltfPbr::new(base, metallic, roughness, 1.5)),
+            gltf(GltfPbr::new(base, metallic, roughness, 1.5)),
         ));
     }
     // Clear coats: rough over diffuse, smooth over rough metal, rough over a smooth metal,
@@ -663,9 +665,19 @@ fn bsdfs() -> Vec<(String, Bsdf<'static>)> {
             format!(
                 "gltf base={base} metallic={metallic} roughness={roughness} coat={coat} coat_roughness={coat_roughness}"
             ),
-            Bsdf::GltfPbr(
+            gltf(
                 GltfPbr::new(base, metallic, roughness, 1.5)
                     .with_clearcoat(coat, coat_roughness),
+            ),
+        ));
+    }
+    // A rough diffuse base (OpenPBR's EON) under rough and smooth specular layers.
+    for roughness in [0.5f32, 0.0] {
+        all.push((
+            format!("gltf diffuse roughness 0.7 roughness={roughness}"),
+            gltf(
+                GltfPbr::new(Vec3::new(0.8, 0.6, 0.4), 0.0, roughness, 1.5)
+                    .with_diffuse_roughness(0.7),
             ),
         ));
     }
@@ -673,7 +685,7 @@ fn bsdfs() -> Vec<(String, Bsdf<'static>)> {
     for roughness in [0.4f32, 0.0] {
         all.push((
             format!("gltf specular workflow roughness={roughness}"),
-            Bsdf::GltfPbr(
+            gltf(
                 GltfPbr::new(Vec3::new(0.3, 0.5, 0.2), 0.0, roughness, 1.5)
                     .with_specular_color(Vec3::new(0.9, 0.5, 0.1)),
             ),
@@ -694,7 +706,9 @@ fn bsdfs() -> Vec<(String, Bsdf<'static>)> {
 
 /// Dielectrics: smooth and rough volume boundaries from outside and inside (total internal
 /// reflection), index-matched, tinted; thin walls.
-fn dielectrics() -> Vec<Case> {
+fn dielectrics(multiscatter: bool) -> Vec<Case> {
+    let glass = |d: Dielectric| Bsdf::Dielectric(d.with_multiscatter(multiscatter));
+    let wall = |d: ThinDielectric| Bsdf::ThinDielectric(d.with_multiscatter(multiscatter));
     let tint = Vec3::new(0.9, 0.7, 0.4);
     let mut cases = Vec::new();
     for (eta, alpha) in [
@@ -708,15 +722,12 @@ fn dielectrics() -> Vec<Case> {
     ] {
         cases.push(Case {
             name: format!("dielectric eta={eta} alpha={alpha}"),
-            bsdf: Bsdf::Dielectric(Dielectric::new(eta, alpha, tint)),
-            below: Some((
-                Bsdf::Dielectric(Dielectric::new(1.0 / eta, alpha, tint)),
-                eta,
-            )),
+            bsdf: glass(Dielectric::new(eta, alpha, tint)),
+            below: Some((glass(Dielectric::new(1.0 / eta, alpha, tint)), eta)),
         });
     }
     for alpha in [0.0f32, 0.2, 0.6] {
-        let thin = Bsdf::ThinDielectric(ThinDielectric::new(1.5, alpha, tint));
+        let thin = wall(ThinDielectric::new(1.5, alpha, tint));
         cases.push(Case {
             name: format!("thin dielectric alpha={alpha}"),
             bsdf: thin,
@@ -732,7 +743,7 @@ fn layered(p: LayeredParams) -> Bsdf<'static> {
 }
 
 /// The layered glTF model: each extension alone and some together.
-fn layered_cases() -> Vec<Case> {
+fn layered_cases(multiscatter: bool) -> Vec<Case> {
     let base = LayeredParams {
         base: Vec3::new(0.7, 0.4, 0.3),
         metallic: 0.0,
@@ -750,6 +761,8 @@ fn layered_cases() -> Vec<Case> {
         coat_alpha: 0.0,
         coat_normal: Vec3::Z,
         film: None,
+        multiscatter,
+        diffuse_roughness: 0.0,
     };
     let flip = |p: LayeredParams| LayeredParams {
         eta: 1.0 / p.eta,
@@ -774,6 +787,15 @@ fn layered_cases() -> Vec<Case> {
         "sheen over a rough base",
         LayeredParams {
             sheen: Some(Sheen::new(Vec3::new(0.9, 0.8, 1.0), 0.4)),
+            ..base
+        },
+        false,
+    );
+    add(
+        "rough diffuse (EON) with specular weight",
+        LayeredParams {
+            diffuse_roughness: 0.8,
+            specular_weight: 0.5,
             ..base
         },
         false,
@@ -887,13 +909,16 @@ fn layered_cases() -> Vec<Case> {
 }
 
 /// Every BSDF configuration.
-fn all_cases() -> Vec<Case> {
-    let opaque = bsdfs().into_iter().map(|(name, bsdf)| Case {
+fn all_cases(multiscatter: bool) -> Vec<Case> {
+    let opaque = bsdfs(multiscatter).into_iter().map(|(name, bsdf)| Case {
         name,
         bsdf,
         below: None,
     });
-    opaque.chain(dielectrics()).chain(layered_cases()).collect()
+    opaque
+        .chain(dielectrics(multiscatter))
+        .chain(layered_cases(multiscatter))
+        .collect()
 }
 
 /// Chi-square test of each case's sampled (non-delta) directions against its density, at
@@ -918,7 +943,7 @@ fn check_sampling(cases: Vec<Case>) {
 
 #[test]
 fn bsdf_sampling_matches_pdf() {
-    let cases = bsdfs()
+    let cases = bsdfs(true)
         .into_iter()
         .map(|(name, bsdf)| Case {
             name,
@@ -931,18 +956,25 @@ fn bsdf_sampling_matches_pdf() {
 
 #[test]
 fn dielectric_sampling_matches_pdf() {
-    check_sampling(dielectrics());
+    check_sampling(dielectrics(true));
 }
 
 #[test]
 fn layered_sampling_matches_pdf() {
-    check_sampling(layered_cases());
+    check_sampling(layered_cases(true));
 }
 
 #[test]
 fn bsdf_sample_eval_pdf_agree_and_are_reciprocal() {
     let mut rng = Pcg32::new(10, 0);
-    for Case { name, bsdf, below } in all_cases() {
+    // Energy compensation scales a lobe by a function of wo alone, which gives up
+    // reciprocity (as albedo scaling does in Cycles): the compensated BSDFs are checked for
+    // sample, eval and pdf agreeing, their single-scattering forms for reciprocity too.
+    let cases = all_cases(true)
+        .into_iter()
+        .map(|c| (c, true))
+        .chain(all_cases(false).into_iter().map(|c| (c, false)));
+    for (Case { name, bsdf, below }, multiscatter) in cases {
         for _ in 0..20_000 {
             let wo = warp::square_to_cosine_hemisphere(u2(&mut rng));
             if wo.z < 1e-3 {
@@ -975,6 +1007,9 @@ fn bsdf_sample_eval_pdf_agree_and_are_reciprocal() {
                 s.weight,
                 expected
             );
+            if multiscatter {
+                continue;
+            }
             // f(wo, wi) = f(wi, wo): eval includes |cos θi|, so compare f = eval / |cos|.
             // Light crossing an interface obeys generalised reciprocity instead (Veach 1997
             // §5.3): f(wo → wi) η² = f(wi → wo) with η the index below over the index
@@ -1007,7 +1042,8 @@ fn bsdfs_do_not_create_energy() {
     // Also exempt: the layered model's dielectrics with a diffuse base, which it weighs as
     // appendix B does (and must, to agree with `gltf_pbr`). Energy is counted as flux, so light leaving a denser medium (its radiance scaled
     // by η², see `material::dielectric`) counts 1/η² of its weight.
-    for Case { name, bsdf, below } in all_cases() {
+    // With energy compensation, the tables' interpolation may add up to 2e-3.
+    for Case { name, bsdf, below } in all_cases(true) {
         if matches!(bsdf, Bsdf::GltfPbr(_)) && !name.contains("metallic=1") {
             continue;
         }
@@ -1041,7 +1077,7 @@ fn bsdfs_do_not_create_energy() {
             let se = ((sum2 / n as f64 - mean * mean) / n as f64).max(glam::DVec3::ZERO);
             for c in 0..3 {
                 assert!(
-                    mean[c] <= 1.0 + 4.5 * se[c].sqrt() + 1e-6,
+                    mean[c] <= 1.0 + 4.5 * se[c].sqrt() + 2e-3,
                     "{name} theta={theta}: albedo {mean}"
                 );
             }

@@ -20,6 +20,15 @@ fn settings() -> Settings {
     }
 }
 
+/// [`settings`] without roulette and with a depth bound no path reaches: every path of a
+/// lossless scene then leaves with its full weight.
+fn without_roulette() -> Settings {
+    let mut exact = settings();
+    exact.set("rr", "off").unwrap();
+    exact.set("max-depth", "100000").unwrap();
+    exact
+}
+
 /// The image mean is 1 within 1%.
 fn assert_within_one_percent(name: &str, film: &Film) {
     for c in 0..3 {
@@ -68,10 +77,10 @@ fn unit_albedo_lambert_sphere_disappears() {
 #[test]
 fn f0_one_ggx_spheres_disappear() {
     // Base colour 1, metallic 1: F0 = 1. The smooth sphere is a perfect mirror: exactly 1.
-    // Rough ones lose energy to the multiple scattering single-scatter GGX leaves out
-    // (0.8% of the image at roughness 0.25, more at the silhouette); they must stay within
-    // 1%, and rough_f0_one_ggx_shows_its_directional_albedo checks the exact loss.
-    for roughness in [0.0, 0.1, 0.25] {
+    // Rough ones are compensated for the energy single-scattering GGX loses between facets
+    // (`material::energy`), so they disappear at every roughness too (at roughness 1 a
+    // single-scattering sphere reflects 31 % at its centre).
+    for roughness in [0.0, 0.25, 0.6, 1.0] {
         let s = scene(
             vec![(icosphere(4), DMat4::IDENTITY)],
             material(BsdfModel::GltfPbr, Vec3::ONE, 1.0, roughness),
@@ -79,12 +88,30 @@ fn f0_one_ggx_spheres_disappear() {
             ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
         );
         let (film, _) = render(s, (40, 40), 64, settings(), 2);
-        let name = format!("GGX F0=1 roughness {roughness}");
-        if roughness == 0.0 {
-            assert_invisible(&name, &film);
-        } else {
-            assert_within_one_percent(&name, &film);
-        }
+        assert_invisible(&format!("GGX F0=1 roughness {roughness}"), &film);
+    }
+}
+
+/// A white rough diffuse surface (OpenPBR's EON, no specular layer) reflects all the
+/// light at every diffuse roughness: the sphere disappears.
+#[test]
+fn rough_diffuse_sphere_disappears() {
+    for diffuse_roughness in [0.5f32, 1.0] {
+        let s = scene(
+            vec![(icosphere(4), DMat4::IDENTITY)],
+            lucerna::scene::Material {
+                diffuse_roughness,
+                specular: lucerna::scene::Specular {
+                    weight: 0.0,
+                    ..Default::default()
+                },
+                ..material(BsdfModel::GltfPbr, Vec3::ONE, 0.0, 0.5)
+            },
+            Vec3::ONE,
+            ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
+        );
+        let (film, _) = render(s, (40, 40), 64, settings(), 2);
+        assert_invisible(&format!("EON diffuse roughness {diffuse_roughness}"), &film);
     }
 }
 
@@ -104,31 +131,42 @@ fn directional_albedo(bsdf: &Bsdf, wo: Vec3) -> f64 {
     sum * 2.0 * std::f64::consts::PI / (n * n) as f64
 }
 
+/// Single-scattering GGX (`--microfacet single`) loses energy: a white rough metal shows
+/// exactly its directional albedo, below 1; compensated, the same plane shows 1.
 #[test]
 fn rough_f0_one_ggx_shows_its_directional_albedo() {
     // A tilted plane seen by an orthographic camera: every covered pixel sees the same angle.
-    for roughness in [0.5f32, 1.0] {
-        for tilt in [0.0f64, 1.0] {
-            let transform = DMat4::from_rotation_x(tilt);
-            let s = scene(
-                vec![(quad(), transform)],
-                material(BsdfModel::GltfPbr, Vec3::ONE, 1.0, roughness),
-                Vec3::ONE,
-                ortho_camera(DVec3::new(0.0, 0.0, 5.0), 0.4),
-            );
-            let (film, _) = render(s, (24, 24), 256, settings(), 2);
-            let alpha = &film.planes(Aov::Beauty)[3];
-            let wo = Vec3::new(0.0, tilt.sin() as f32, tilt.cos() as f32);
-            let expected = directional_albedo(
-                &Bsdf::GltfPbr(GltfPbr::new(Vec3::ONE, 1.0, roughness, 1.5)),
-                wo,
-            );
-            let (m, se) = mean_and_error(&film, 0, |i| alpha[i] == 1.0);
-            assert!(
-                (m - expected).abs() <= 4.5 * se + 1e-3,
-                "roughness {roughness} tilt {tilt}: rendered {m} ± {se}, albedo {expected}"
-            );
-            assert!(expected < 1.0);
+    for multiscatter in [false, true] {
+        for roughness in [0.5f32, 1.0] {
+            for tilt in [0.0f64, 1.0] {
+                let transform = DMat4::from_rotation_x(tilt);
+                let s = scene(
+                    vec![(quad(), transform)],
+                    lucerna::scene::Material {
+                        multiscatter,
+                        ..material(BsdfModel::GltfPbr, Vec3::ONE, 1.0, roughness)
+                    },
+                    Vec3::ONE,
+                    ortho_camera(DVec3::new(0.0, 0.0, 5.0), 0.4),
+                );
+                let (film, _) = render(s, (24, 24), 256, settings(), 2);
+                let alpha = &film.planes(Aov::Beauty)[3];
+                let wo = Vec3::new(0.0, tilt.sin() as f32, tilt.cos() as f32);
+                let metal =
+                    GltfPbr::new(Vec3::ONE, 1.0, roughness, 1.5).with_multiscatter(multiscatter);
+                let expected = directional_albedo(&Bsdf::GltfPbr(metal), wo);
+                let (m, se) = mean_and_error(&film, 0, |i| alpha[i] == 1.0);
+                let name = format!("multiscatter {multiscatter} roughness {roughness} tilt {tilt}");
+                assert!(
+                    (m - expected).abs() <= 4.5 * se + 1e-3,
+                    "{name}: rendered {m} ± {se}, albedo {expected}"
+                );
+                if multiscatter {
+                    assert!((expected - 1.0).abs() < 2e-3, "{name}: albedo {expected}");
+                } else {
+                    assert!(expected < 0.95, "{name}: albedo {expected}");
+                }
+            }
         }
     }
 }
@@ -205,12 +243,49 @@ fn smooth_glass_disappears() {
             Vec3::ONE,
             ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
         );
-        let mut exact = settings();
-        exact.set("rr", "off").unwrap();
-        exact.set("max-depth", "100000").unwrap();
-        let (film, stats) = render(s, (32, 32), 16, exact, 2);
+        let (film, stats) = render(s, (32, 32), 16, without_roulette(), 2);
         assert_eq!(stats.discarded, 0, "{name}");
         assert_invisible(name, &film);
+    }
+}
+
+/// Rough glass loses nothing either once compensated: over a rough glass ball and a rough
+/// thin glass shell the furnace reads 1, within noise and the albedo tables' interpolation
+/// (2e-3 over the many crossings of a path), where single-scattering ones lose 3-4 %.
+/// (Pixel by pixel the paths' weights are too heavy-tailed at these sample counts for
+/// `assert_invisible`'s per-pixel bound.)
+#[test]
+fn rough_glass_disappears() {
+    for roughness in [0.3f32, 0.7] {
+        for (name, volume) in [
+            ("rough glass ball", Some(Vec3::ZERO)),
+            ("rough thin glass shell", None),
+        ] {
+            for multiscatter in [true, false] {
+                let m = lucerna::scene::Material {
+                    roughness,
+                    multiscatter,
+                    ..glass(volume, 1.5)
+                };
+                let s = scene(
+                    vec![(icosphere(3), DMat4::IDENTITY)],
+                    m,
+                    Vec3::ONE,
+                    ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
+                );
+                let (film, _) = render(s, (32, 32), 256, without_roulette(), 2);
+                let alpha = &film.planes(Aov::Beauty)[3];
+                let name = format!("{name} roughness {roughness} multiscatter {multiscatter}");
+                for c in 0..3 {
+                    let (m, se) = mean_and_error(&film, c, |i| alpha[i] == 1.0);
+                    if multiscatter {
+                        assert!((m - 1.0).abs() <= 4.5 * se + 2e-3, "{name}: {m} ± {se}");
+                    } else {
+                        assert!(m < 0.98, "{name}: {m} ± {se}");
+                    }
+                }
+            }
+        }
     }
 }
 

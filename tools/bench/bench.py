@@ -81,8 +81,10 @@ def machine():
 
 
 class Lucerna:
-    def __init__(self, spec, scene):
-        self.name, self.settings, self.scene = spec["name"], spec.get("settings", {}), scene
+    def __init__(self, spec, scene, model):
+        """`model`: the settings of bench.toml's `model`, which the references use too."""
+        self.name, self.scene = spec["name"], scene
+        self.settings = dict(model, **spec.get("settings", {}))
 
     def render(self, resolution, seed, out, budget=None, spp=None):
         settings = dict(self.settings, seed=seed, filter="box", aov="beauty")
@@ -290,10 +292,12 @@ def main():
             lt.convert(scene["path"], scene["scene_file"])
             reference_spp = scene.get("reference_spp", config["reference_spp"])
             print(f"{scene['name']}: reference ({reference_spp} spp, cached under {lt.CACHE})", flush=True)
-            ref, ref_info = lt.reference(scene["path"], resolution, reference_spp, filter="box")
+            ref, ref_info = lt.reference(scene["path"], resolution, reference_spp, filter="box",
+                                         **config.get("model", {}))
             renderers = []
             for spec in config["renderer"]:
-                r = Lucerna(spec, scene) if spec["kind"] == "lucerna" else Mitsuba(spec, scene)
+                r = (Lucerna(spec, scene, config.get("model", {})) if spec["kind"] == "lucerna"
+                     else Mitsuba(spec, scene))
                 if isinstance(r, Mitsuba):
                     try:
                         r.calibrate(resolution, tmp / "calibration")

@@ -15,6 +15,7 @@ A material whose surface shader lucerna does not know is warned about, naming th
 prim and its id, and the gprim shows its displayColor instead (as usdview's fallback
 does). A gprim without a material shows displayColor, and displayOpacity as coverage."""
 
+import math
 import numpy as np
 from pxr import UsdShade
 
@@ -264,6 +265,9 @@ class MaterialConverter:
             out["specular"] = {"weight": max(float(surface.specular_weight), 0.0), "weight_texture": None,
                                "color": [max(float(c), 0.0) for c in surface.specular_color],
                                "color_texture": None}
+        roughness = float(surface.diffuse_roughness)
+        if math.isfinite(roughness) and roughness > 0.0:
+            out["diffuse_roughness"] = min(roughness, 1.0)
         out["clearcoat"] = min(max(float(surface.coat), 0.0), 1.0)
         out["clearcoat_roughness"] = min(max(float(surface.coat_roughness), 0.0), 1.0)
         if surface.sheen_color is not None and max(surface.sheen_color) > 0.0:

@@ -19,10 +19,13 @@ Each reader maps one shading model onto it:
 - MDL OmniPBR, OmniGlass and OmniSurface (Omniverse's materials, known by their module's
   subIdentifier) by their parameter names; their textures are asset-valued inputs. MDL
   emission is radiant exitance: radiance = colour x intensity / pi.
-- RenderMan PxrSurface (diffuse, specular face colour, roughness, refraction, glow,
-  clearcoat, fuzz, presence) and PxrDisney (Burley's parameters).
+- RenderMan PxrSurface (diffuse and its roughness, specular face colour, roughness,
+  refraction, glow, clearcoat, fuzz, presence) and PxrDisney (Burley's parameters).
 
-What does not map (subsurface scattering, diffuse roughness, coat colour and ior other
+Diffuse roughness (standard_surface, OpenPBR, OmniSurface, PxrSurface) becomes lucerna's
+EON diffuse (OpenPBR's energy-preserving Oren-Nayar).
+
+What does not map (subsurface scattering, coat colour and ior other
 than 1.5, a metal's edge tint, transmission scatter, ...) is approximated and warned about
 once per material, naming the parameter."""
 
@@ -72,6 +75,7 @@ class Surface:
         self.coat_roughness = 0.0
         self.sheen_color = None
         self.sheen_roughness = 0.5
+        self.diffuse_roughness = 0.0      # 0: Lambert; above: OpenPBR's EON
         self.anisotropy = None            # (strength, rotation in radians)
         self.iridescence = None           # (factor, ior, thickness in nm)
         self.unlit = False
@@ -260,9 +264,7 @@ class Reader:
         thickness = number("film_thickness") * film_nm
         if film > 0.0 and thickness > 0.0:
             out.iridescence = (film, number("film_ior"), thickness)
-        if number("diffuse_roughness") > 0.0:
-            self.warn(material, f"{name('diffuse_roughness')} (Oren-Nayar) is approximated by "
-                      "Lambertian diffuse")
+        out.diffuse_roughness = number("diffuse_roughness")
         out.normal = self.normal(self.net.source(shader, name("normal"), None), material, name("normal"))
         return out
 
@@ -454,6 +456,7 @@ class Reader:
         if coat.max() > 0.0:
             out.coat = 1.0
             out.coat_roughness = float(net.value(shader, "clearcoatRoughness", 0.0))
+        out.diffuse_roughness = float(net.value(shader, "diffuseRoughness", 0.0))
         fuzz = float(net.value(shader, "fuzzGain", 0.0))
         if fuzz > 0.0:
             out.sheen_color = tuple(fuzz * c for c in self.color(

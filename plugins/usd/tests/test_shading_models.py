@@ -217,6 +217,29 @@ def test_standard_surface_approximations_are_warned(stage_file, converted):
     assert m["transmission"] == pytest.approx(0.5)
 
 
+@pytest.mark.parametrize("node, name", [("ND_standard_surface_surfaceshader", "diffuse_roughness"),
+                                         ("ND_open_pbr_surface_surfaceshader", "base_diffuse_roughness")])
+def test_diffuse_roughness_is_the_rough_diffuse_lobe(stage_file, converted, node, name):
+    """MaterialX diffuse roughness becomes lucerna's EON diffuse, without a warning; none
+    leaves the Lambertian base (no field written)."""
+    s = converted(stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            float inputs:{name} = 0.6
+            token outputs:out
+        }}''')))
+    assert material(s)["diffuse_roughness"] == pytest.approx(0.6)
+    assert not s.warnings_about("Oren-Nayar") and not s.warnings_about("diffuse")
+    s = converted(stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            token outputs:out
+        }}'''), name="lambert.usda"))
+    assert "diffuse_roughness" not in material(s)
+
+
 def test_scalar_input_from_a_primvar_falls_back_with_a_warning(stage_file, converted):
     """OpenUSD's testPreviewSurfaceConnectedScalar: roughness read per gprim through a
     UsdPrimvarReader_float. lucerna holds roughness per material: the input's default is

@@ -95,7 +95,7 @@ def camera(scene):
     return [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, centre[0], centre[1], centre[2] + distance, 1], yfov
 
 
-def render_lucerna(gltf, work, width, height, spp, seed):
+def render_lucerna(gltf, work, width, height, spp, seed, model):
     scene_file = work / "scene.lucerna"
     if not scene_file.exists():
         lt.convert(gltf, scene_file)
@@ -110,8 +110,11 @@ def render_lucerna(gltf, work, width, height, spp, seed):
     path = scene.write(work / "compare.lucerna")
     out = work / f"lucerna-{seed}.exr"
     start = time.perf_counter()
+    # The glTF model is single-scattering GGX (as Cycles is told in that mode); imported,
+    # both renderers compensate rough lobes for multiple scattering (their defaults).
+    microfacet = "single" if model == "gltf" else "multiscatter"
     image, _, channels = lt.render(path, out, (width, height), spp=spp, seed=seed,
-                                   env=",".join(map(str, ENVIRONMENT)), aov="beauty")
+                                   env=",".join(map(str, ENVIRONMENT)), aov="beauty", microfacet=microfacet)
     return image, channels["A"], time.perf_counter() - start, (matrix, yfov)
 
 
@@ -156,8 +159,8 @@ def render_both(gltf, name, width, height, spp, model):
     """Both renderers, two seeds each: (renders as `figures` takes them, timing)."""
     with tempfile.TemporaryDirectory(prefix=f"cycles-{name}-") as work:
         work = Path(work)
-        lucerna, alpha, seconds, cam = render_lucerna(gltf, work, width, height, spp, 1)
-        lucerna_b, _, _, _ = render_lucerna(gltf, work, width, height, spp, 2)
+        lucerna, alpha, seconds, cam = render_lucerna(gltf, work, width, height, spp, 1, model)
+        lucerna_b, _, _, _ = render_lucerna(gltf, work, width, height, spp, 2, model)
         cycles, cycles_seconds, blender = render_cycles(gltf, work, width, height, spp, cam, 1, model)
         cycles_b, _, _ = render_cycles(gltf, work, width, height, spp, cam, 2, model)
     renders = {"lucerna": lucerna, "lucerna_b": lucerna_b, "cycles": cycles, "cycles_b": cycles_b, "alpha": alpha}

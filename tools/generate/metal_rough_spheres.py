@@ -1,0 +1,48 @@
+#!/usr/bin/env python3
+"""Generate a grid of glTF PBR spheres for comparing rough lobes with other renderers (as
+Khronos' MetalRoughSpheresNoTextures, whose sample-assets repository is too large to fetch
+here): rows of a white metal (base colour 1, metallic 1: a white furnace for the specular
+lobe), a gold metal and a white dielectric (base 0.8, metallic 0), columns of perceptual
+roughness 0, 0.25, 0.5, 0.75 and 1. The spheres lie in the XY plane, seen by a camera on
++Z that they fill at 3:2; no light: tools/compare/cycles/compare.py lights them.
+
+    python3 tools/generate/metal_rough_spheres.py DIR
+
+writes DIR/MetalRoughGrid/glTF/MetalRoughGrid.gltf (buffer inlined), the layout compare.py's
+--models reads.
+"""
+import sys
+from pathlib import Path
+
+from lucerna_tools.gltf_writer import GltfWriter, icosphere
+
+NAME = "MetalRoughGrid"
+ROUGHNESS = [0.0, 0.25, 0.5, 0.75, 1.0]
+ROWS = [
+    ("white metal", (1.0, 1.0, 1.0), 1.0),
+    ("gold", (1.0, 0.78, 0.34), 1.0),
+    ("white dielectric", (0.8, 0.8, 0.8), 0.0),
+]
+
+
+def build():
+    w = GltfWriter("lucerna tools/generate/metal_rough_spheres.py")
+    verts, faces = icosphere(4)
+    for row, (name, base, metallic) in enumerate(ROWS):
+        for column, roughness in enumerate(ROUGHNESS):
+            label = f"{name} roughness {roughness}"
+            material = w.material(label, base=base, metallic=metallic, roughness=roughness, double_sided=False)
+            mesh = w.mesh(label, verts, faces, material, normals=verts)
+            w.node(mesh=mesh, translation=[2.2 * (column - 2), -2.2 * (row - 1), 0.0])
+    w.camera("camera", yfov=0.6, aspect=1.5, translation=(0.0, 0.0, 13.0), target=(0.0, 0.0, 0.0), znear=0.1)
+    return w
+
+
+def main():
+    out = Path(sys.argv[1]) / NAME / "glTF" / f"{NAME}.gltf"
+    build().write_gltf(out)
+    print(f"wrote {out}")
+
+
+if __name__ == "__main__":
+    main()
