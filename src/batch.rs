@@ -171,10 +171,13 @@ pub fn plan(job_path: &Path, logs: &Path) -> Result<Vec<Task>> {
         };
         let pattern = base.join(&render.output);
         let pattern_text = pattern.to_string_lossy();
-        if frames.len() > 1 && !pattern_text.contains("{frame}") {
+        if frames.len() > 1 && !crate::sequence::has_frame_token(&pattern_text) {
             return Err(bad(
                 "output",
-                "several frames need {frame} in the output name".into(),
+                format!(
+                    "several frames need a frame token ({}) in the output name",
+                    crate::sequence::FRAME_TOKENS
+                ),
             ));
         }
         if pattern_text.contains("{camera}") && render.camera.is_none() {

@@ -184,13 +184,14 @@ struct RenderArgs {
     #[command(flatten)]
     load: LoadArgs,
 
-    /// Output EXR file; `{frame}` (four digits), `{scene}` (the file's stem) and `{camera}`
-    /// are replaced, e.g. `out/{scene}.{camera}.{frame}.exr`. [default: the render products
-    /// a USD stage declares, else render.exr]
+    /// Output EXR file; the frame tokens `{frame}` (four digits), `####` (as many digits as
+    /// `#`), `%04d`, `$F4` and `<F4>`, and `{scene}` (the file's stem) and `{camera}` are
+    /// replaced, e.g. `out/{scene}.{camera}.####.exr`. [default: the render products a USD
+    /// stage declares, else render.exr]
     #[arg(short, long, help_heading = "Output")]
     output: Option<PathBuf>,
-    /// Frames to render, e.g. 1-24, 1-24x2 (every second), 1,5,10-12; the output needs
-    /// `{frame}`. [default: one frame, --frame]
+    /// Frames to render, e.g. 1-24, 1-24x2 (every second), 1,5,10-12; the output needs a
+    /// frame token (`{frame}`, `####`, ...). [default: one frame, --frame]
     #[arg(long, conflicts_with = "frame", help_heading = "Output")]
     frames: Option<String>,
     /// AOV layers to write besides the beauty, comma-separated (e.g.

@@ -1,5 +1,6 @@
 //! Frame sequences: the frame lists of `--frames` and of batch jobs, and the output name
-//! patterns (`{frame}`, `{scene}`, `{camera}`) that give every frame its file.
+//! patterns (`{frame}`, `####`, `%04d`, `$F4`, `<F4>`, `{scene}`, `{camera}`) that give every
+//! frame its file.
 
 use std::path::{Path, PathBuf};
 
@@ -41,8 +42,8 @@ impl FrameList {
     }
 }
 
-/// The file of `frame` of `scene` through `camera`: `pattern` with `{frame}` (four digits
-/// for whole frames), `{scene}` and `{camera}` replaced.
+/// The file of `frame` of `scene` through `camera`: `pattern` with its frame tokens (see
+/// [`expand_frame`]), `{scene}` and `{camera}` replaced.
 pub fn output_path(
     pattern: &Path,
     frame: Option<f64>,
@@ -50,21 +51,96 @@ pub fn output_path(
     camera: &str,
 ) -> Result<PathBuf, String> {
     let text = pattern.to_string_lossy();
-    let frame_text = match frame {
-        Some(f) if f.fract() == 0.0 => format!("{:04}", f as i64),
-        Some(f) => format!("{f}"),
-        None if text.contains("{frame}") => {
+    let text = match frame {
+        Some(f) => expand_frame(&text, f),
+        None if has_frame_token(&text) => {
             return Err(format!(
-                "{text:?} has {{frame}} but no frame was given (--frame or --frames)"
+                "{text:?} has a frame token ({FRAME_TOKENS}) but no frame was given (--frame or --frames)"
             ));
         }
-        None => String::new(),
+        None => text.into_owned(),
     };
     Ok(PathBuf::from(
-        text.replace("{frame}", &frame_text)
-            .replace("{scene}", &file_name_part(scene))
+        text.replace("{scene}", &file_name_part(scene))
             .replace("{camera}", &file_name_part(camera)),
     ))
+}
+
+/// The frame tokens an output name may hold, as messages list them.
+pub const FRAME_TOKENS: &str = "{frame}, ####, %04d, $F4 or <F4>";
+
+/// A frame token at the start of `text`: its length in bytes and the frame's width (0 for
+/// unpadded). `{frame}` is four digits wide; a run of N `#` is N wide (Nuke, RenderMan);
+/// `%0Nd` and `%Nd` are N wide (printf, Nuke); `$F` and `$FN` (Houdini, husk) and `<F>` and
+/// `<FN>` (RenderMan) are N wide, unpadded without N.
+fn frame_token(text: &str) -> Option<(usize, usize)> {
+    let b = text.as_bytes();
+    let digit = |i: usize| {
+        b.get(i)
+            .filter(|c| c.is_ascii_digit())
+            .map(|c| (c - b'0') as usize)
+    };
+    if text.starts_with("{frame}") {
+        return Some((7, 4));
+    }
+    match b.first()? {
+        b'#' => {
+            let n = b.iter().take_while(|&&c| c == b'#').count();
+            Some((n, n))
+        }
+        b'%' => {
+            let at = if b.get(1) == Some(&b'0') { 2 } else { 1 };
+            let width = digit(at)?;
+            (b.get(at + 1) == Some(&b'd')).then_some((at + 2, width))
+        }
+        b'$' if b.get(1) == Some(&b'F') => Some(match digit(2) {
+            Some(width) => (3, width),
+            None => (2, 0),
+        }),
+        b'<' if b.get(1) == Some(&b'F') => match (digit(2), b.get(2), b.get(3)) {
+            (Some(width), _, Some(b'>')) => Some((4, width)),
+            (None, Some(b'>'), _) => Some((3, 0)),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// True if `text` holds a frame token.
+pub fn has_frame_token(text: &str) -> bool {
+    text.char_indices()
+        .any(|(i, _)| frame_token(&text[i..]).is_some())
+}
+
+/// `text` with every frame token replaced by `frame`: a whole frame zero-padded to the
+/// token's width (the sign before the digits), a fractional one as it is (`7.5`), as the
+/// USD plugin expands a RenderProduct's name.
+pub fn expand_frame(text: &str, frame: f64) -> String {
+    let formatted = |width: usize| {
+        if frame.fract() != 0.0 {
+            return format!("{frame}");
+        }
+        let whole = frame as i64;
+        let digits = format!("{:0width$}", whole.unsigned_abs());
+        if whole < 0 {
+            format!("-{digits}")
+        } else {
+            digits
+        }
+    };
+    let mut out = String::with_capacity(text.len() + 8);
+    let mut i = 0;
+    while i < text.len() {
+        if let Some((length, width)) = frame_token(&text[i..]) {
+            out.push_str(&formatted(width));
+            i += length;
+        } else {
+            let c = text[i..].chars().next().expect("i is a char boundary");
+            out.push(c);
+            i += c.len_utf8();
+        }
+    }
+    out
 }
 
 /// A scene-controlled name (a camera's, a file stem) made safe to put in a file name: path
@@ -132,5 +208,41 @@ mod tests {
         let half = output_path(Path::new("{frame}.exr"), Some(7.5), "s", "c").unwrap();
         assert_eq!(half, PathBuf::from("7.5.exr"));
         assert!(output_path(Path::new("{frame}.exr"), None, "s", "c").is_err());
+    }
+
+    /// The frame tokens of Nuke, printf, Houdini and RenderMan, as the USD plugin expands a
+    /// product name's (plugins/usd/lucerna_usd/render_settings.py).
+    #[test]
+    fn frame_tokens_of_other_tools() {
+        for (pattern, frame, expected) in [
+            ("out.####.exr", 7.0, "out.0007.exr"),
+            ("out.#.exr", 12.0, "out.12.exr"),
+            ("out.%04d.exr", 7.0, "out.0007.exr"),
+            ("out.%4d.exr", 7.0, "out.0007.exr"),
+            ("out.$F4.exr", 7.0, "out.0007.exr"),
+            ("out.$F.exr", 7.0, "out.7.exr"),
+            ("out.<F3>.exr", 7.0, "out.007.exr"),
+            ("out.<F>.exr", 7.0, "out.7.exr"),
+            ("out.{frame}.exr", -3.0, "out.-0003.exr"),
+            ("a.##.b.%03d.exr", 5.0, "a.05.b.005.exr"),
+            ("out.####.exr", 7.5, "out.7.5.exr"),
+            ("$Fx%dy<G>#", 1.0, "1x%dy<G>1"),
+            ("résumé.####.exr", 1.0, "résumé.0001.exr"),
+        ] {
+            assert_eq!(expand_frame(pattern, frame), expected, "{pattern}");
+        }
+        for (text, has) in [
+            ("out.exr", false),
+            ("out.####.exr", true),
+            ("out.%04d.exr", true),
+            ("out.%d.exr", false),
+            ("$HOME/out.exr", false),
+            ("out.$F.exr", true),
+            ("out.<F>.exr", true),
+            ("out.{frame}.exr", true),
+        ] {
+            assert_eq!(has_frame_token(text), has, "{text}");
+        }
+        assert!(output_path(Path::new("o.####.exr"), None, "s", "c").is_err());
     }
 }

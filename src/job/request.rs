@@ -389,12 +389,15 @@ impl RenderJob {
             && self
                 .output
                 .as_ref()
-                .is_some_and(|o| !o.to_string_lossy().contains("{frame}"))
+                .is_some_and(|o| !crate::sequence::has_frame_token(&o.to_string_lossy()))
         {
             return Err(Error::bad_input(
                 "",
                 "--output",
-                "several frames need {frame} in the output name",
+                format!(
+                    "several frames need a frame token ({}) in the output name",
+                    crate::sequence::FRAME_TOKENS
+                ),
             ));
         }
         if let Some(p) = &self.output

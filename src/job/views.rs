@@ -40,11 +40,14 @@ pub(super) fn frame_views(
         None if !settings.products.is_empty() => declared_views(job, options, settings)?,
         _ => {
             let pattern = job.output.clone().unwrap_or_else(|| "render.exr".into());
-            if several_frames && !pattern.to_string_lossy().contains("{frame}") {
+            if several_frames && !crate::sequence::has_frame_token(&pattern.to_string_lossy()) {
                 return Err(Error::bad_input(
                     "",
                     "--output",
-                    "several frames need {frame} in the output name",
+                    format!(
+                        "several frames need a frame token ({}) in the output name",
+                        crate::sequence::FRAME_TOKENS
+                    ),
                 ));
             }
             // The settings' camera, size and window apply where the job gives none.

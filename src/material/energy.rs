@@ -49,6 +49,7 @@ pub enum Masking {
 /// The cell of an axis of `n` evenly spaced samples over [0, `max`] that `x` falls in, and
 /// the position in it (NaN and values outside the axis are clamped onto it).
 #[inline]
+#[allow(clippy::manual_clamp)] // max then min maps NaN to 0; clamp would keep it.
 fn cell(x: f32, n: usize, max: f32) -> (usize, f32) {
     let s = (x / max).max(0.0).min(1.0) * (n - 1) as f32;
     let i = (s as usize).min(n - 2);

@@ -125,7 +125,8 @@ fn bright_centroid_x(exr: &Path) -> f32 {
 }
 
 /// `--frames 6-18x6` at 24 fps renders t = 0.25, 0.5, 0.75 s into `{frame}`-named files,
-/// and the quad moves right from frame to frame; several frames need `{frame}`.
+/// and the quad moves right from frame to frame; several frames need a frame token, which
+/// may also be `####`, `%03d` or `$F`.
 #[test]
 fn frames_render_a_sequence() {
     let dir = temp_dir("frames");
@@ -166,6 +167,28 @@ fn frames_render_a_sequence() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&run.stderr).contains("{frame}"));
+    // Nuke's, printf's and Houdini's frame tokens name the files as well.
+    for (pattern, names) in [
+        ("nuke.####.exr", ["nuke.0006.exr", "nuke.0012.exr"]),
+        ("printf.%03d.exr", ["printf.006.exr", "printf.012.exr"]),
+        ("houdini.$F.exr", ["houdini.6.exr", "houdini.12.exr"]),
+    ] {
+        let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+            .args(["render", "-q", "--resolution", "8x4", "--spp", "1"])
+            .arg(&scene)
+            .args(["--frames", "6-12x6", "-o"])
+            .arg(dir.join(pattern))
+            .output()
+            .unwrap();
+        assert!(
+            run.status.success(),
+            "{pattern}: {}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        for name in names {
+            assert!(dir.join(name).is_file(), "{pattern}: no {name}");
+        }
+    }
 }
 
 /// Two animations of one node are clips: the first plays (warned, naming --animation);
