@@ -483,7 +483,7 @@ fn punctual_lights_follow_the_specification() {
 }
 
 #[test]
-fn extras_select_lambert_and_phong() {
+fn extras_select_lambert_phong_and_diffuse_roughness() {
     let dir = temp();
     let phong = quad_scene(
         dir.path(),
@@ -512,6 +512,16 @@ fn extras_select_lambert_and_phong() {
         &[],
     );
     assert_eq!(other_extras.materials[0].model, BsdfModel::GltfPbr);
+    // A diffuse roughness (OpenPBR's EON), which glTF itself lacks, for the glTF BRDF.
+    let rough = quad_scene(
+        dir.path(),
+        "rough",
+        json!({"extras": {"lucerna": {"diffuse_roughness": 0.5}}}),
+        &[],
+    );
+    assert_eq!(rough.materials[0].model, BsdfModel::GltfPbr);
+    assert_eq!(rough.materials[0].diffuse_roughness, 0.5);
+    assert_eq!(other_extras.materials[0].diffuse_roughness, 0.0);
 }
 
 #[test]

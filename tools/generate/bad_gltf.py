@@ -159,6 +159,12 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna", "unknown bsdf \"velvet\"")
+    yield ("diffuse-roughness-out-of-range.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"diffuse_roughness": 2.0}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna", "diffuse_roughness 2 must be in [0, 1]")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

@@ -4,7 +4,10 @@ Khronos' MetalRoughSpheresNoTextures, whose sample-assets repository is too larg
 here): rows of a white metal (base colour 1, metallic 1: a white furnace for the specular
 lobe), a gold metal, a white dielectric (base 0.8, metallic 0) and a clear glass
 (KHR_materials_transmission 1 bounding a volume, ior 1.5), columns of perceptual roughness
-0, 0.25, 0.5, 0.75 and 1. The spheres lie in the XY plane, seen by a camera on
+0, 0.25, 0.5, 0.75 and 1; and a row of rough diffuse spheres (base 0.8, no specular layer:
+KHR_materials_specular 0) whose columns are the diffuse roughness (lucerna's
+`extras.lucerna.diffuse_roughness`, OpenPBR's EON; compare.py's Blender script sets the
+Principled BSDF's Diffuse Roughness from it). The spheres lie in the XY plane, seen by a camera on
 +Z that they fill at 3:2; no light: tools/compare/cycles/compare.py lights them.
 
     python3 tools/generate/metal_rough_spheres.py DIR
@@ -24,9 +27,11 @@ ROWS = [
     ("gold", (1.0, 0.78, 0.34), 1.0),
     ("white dielectric", (0.8, 0.8, 0.8), 0.0),
     ("glass", (1.0, 1.0, 1.0), 0.0),
+    ("rough diffuse", (0.8, 0.8, 0.8), 0.0),
 ]
 GLASS = {"KHR_materials_transmission": {"transmissionFactor": 1.0},
          "KHR_materials_volume": {"thicknessFactor": 2.0}}
+DIFFUSE = {"KHR_materials_specular": {"specularFactor": 0.0}}
 
 
 def build():
@@ -38,10 +43,15 @@ def build():
             material = w.material(label, base=base, metallic=metallic, roughness=roughness, double_sided=False)
             if name == "glass":
                 w.doc["materials"][material]["extensions"] = GLASS
-                w.doc["extensionsUsed"] = list(GLASS)
+                w.doc.setdefault("extensionsUsed", []).extend(GLASS)
+            if name == "rough diffuse":
+                w.doc["materials"][material]["extensions"] = DIFFUSE
+                w.doc["materials"][material]["extras"] = {"lucerna": {"diffuse_roughness": roughness}}
+                w.doc.setdefault("extensionsUsed", []).extend(DIFFUSE)
             mesh = w.mesh(label, verts, faces, material, normals=verts)
-            w.node(mesh=mesh, translation=[2.2 * (column - 2), -2.2 * (row - 1.5), 0.0])
-    w.camera("camera", yfov=0.75, aspect=1.5, translation=(0.0, 0.0, 13.0), target=(0.0, 0.0, 0.0), znear=0.1)
+            w.node(mesh=mesh, translation=[2.2 * (column - 2), -2.2 * (row - 2), 0.0])
+    w.doc["extensionsUsed"] = sorted(set(w.doc["extensionsUsed"]))
+    w.camera("camera", yfov=0.9, aspect=1.5, translation=(0.0, 0.0, 13.0), target=(0.0, 0.0, 0.0), znear=0.1)
     return w
 
 

@@ -141,7 +141,7 @@ impl<'a> Importer<'a> {
                 return Err(self.err(element, format!("{key} is outside its range (factors are in [0, 1], strengths and cutoffs not negative)")));
             }
         }
-        let model = self.bsdf_model(m, element)?;
+        let (model, diffuse_roughness) = self.lucerna_extras(m, element)?;
         let base_color_texture = self.info_ref(pbr.base_color_texture())?;
         let metallic_roughness_texture = self.info_ref(pbr.metallic_roughness_texture())?;
         let normal = m.normal_texture();
@@ -184,6 +184,7 @@ impl<'a> Importer<'a> {
             ior: m.ior().unwrap_or(1.5),
             alpha_mode,
             double_sided: m.double_sided(),
+            diffuse_roughness,
             ..Material::default()
         };
         if !(material.ior == 0.0 || material.ior >= 1.0) || !material.ior.is_finite() {
@@ -423,28 +424,45 @@ impl<'a> Importer<'a> {
         }
     }
 
-    /// The BSDF model from `extras.lucerna` (default: the glTF BRDF).
-    pub(super) fn bsdf_model(&self, m: &gltf::Material, element: &str) -> Result<BsdfModel> {
+    /// The BSDF model and the diffuse roughness from `extras.lucerna` (default: the glTF
+    /// BRDF, a Lambertian base).
+    pub(super) fn lucerna_extras(
+        &self,
+        m: &gltf::Material,
+        element: &str,
+    ) -> Result<(BsdfModel, f32)> {
         let Some(raw) = m.extras() else {
-            return Ok(BsdfModel::GltfPbr);
+            return Ok((BsdfModel::GltfPbr, 0.0));
         };
         let e = format!("{element}.extras.lucerna");
         let value: serde_json::Value =
             serde_json::from_str(raw.get()).map_err(|err| self.err(&e, err.to_string()))?;
         let Some(section) = value.get("lucerna") else {
-            return Ok(BsdfModel::GltfPbr);
+            return Ok((BsdfModel::GltfPbr, 0.0));
         };
         let extras: LucernaExtras =
             serde_json::from_value(section.clone()).map_err(|err| self.err(&e, err.to_string()))?;
+        let diffuse_roughness = extras.diffuse_roughness.unwrap_or(0.0);
+        if !(0.0..=1.0).contains(&diffuse_roughness) {
+            return Err(self.err(
+                &e,
+                format!("diffuse_roughness {diffuse_roughness} must be in [0, 1]"),
+            ));
+        }
+        Ok((self.bsdf_of(&extras, &e)?, diffuse_roughness))
+    }
+
+    /// The BSDF model `extras` name (`e`: their element, for messages).
+    fn bsdf_of(&self, extras: &LucernaExtras, e: &str) -> Result<BsdfModel> {
         match extras.bsdf.as_str() {
             "gltf" => Ok(BsdfModel::GltfPbr),
             "lambert" => Ok(BsdfModel::Lambert),
             "phong" => {
                 let exponent = extras
                     .exponent
-                    .ok_or_else(|| self.err(&e, "phong needs an \"exponent\""))?;
+                    .ok_or_else(|| self.err(e, "phong needs an \"exponent\""))?;
                 if !(exponent.is_finite() && (0.0..=1e7).contains(&exponent)) {
-                    return Err(self.err(&e, format!("exponent {exponent} must be in [0, 1e7]")));
+                    return Err(self.err(e, format!("exponent {exponent} must be in [0, 1e7]")));
                 }
                 let specular = match extras.specular {
                     None => Vec3::splat(0.04),
@@ -455,12 +473,12 @@ impl<'a> Importer<'a> {
                     && specular.min_element() >= 0.0
                     && specular.max_element() <= 1.0)
                 {
-                    return Err(self.err(&e, "specular must be in [0, 1]"));
+                    return Err(self.err(e, "specular must be in [0, 1]"));
                 }
                 Ok(BsdfModel::Phong { exponent, specular })
             }
             other => Err(self.err(
-                &e,
+                e,
                 format!("unknown bsdf {other:?} (expected gltf, lambert or phong)"),
             )),
         }

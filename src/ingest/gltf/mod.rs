@@ -161,9 +161,16 @@ pub(super) struct NodePose {
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct LucernaExtras {
+    #[serde(default = "gltf_bsdf")]
     bsdf: String,
     exponent: Option<f32>,
     specular: Option<SpecularValue>,
+    /// The diffuse base's roughness in [0, 1] (OpenPBR's EON), which glTF lacks.
+    diffuse_roughness: Option<f32>,
+}
+
+fn gltf_bsdf() -> String {
+    "gltf".into()
 }
 
 #[derive(serde::Deserialize)]

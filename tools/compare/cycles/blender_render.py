@@ -107,6 +107,23 @@ def gltf_model():
                     node.inputs["Density"].default_value = top
 
 
+def diffuse_roughness():
+    """lucerna's `extras.lucerna.diffuse_roughness` (glTF has no diffuse roughness; the
+    importer ignores extras) as the Principled BSDF's Diffuse Roughness, whose model is the
+    same (OpenPBR's EON), in both modes. A `.glb` file's materials are left as imported."""
+    if not job["gltf"].endswith(".gltf"):
+        return
+    roughness = {m.get("name"): m["extras"]["lucerna"]["diffuse_roughness"]
+                 for m in json.load(open(job["gltf"])).get("materials", [])
+                 if "diffuse_roughness" in m.get("extras", {}).get("lucerna", {})}
+    for material in bpy.data.materials:
+        if material.node_tree and material.name in roughness:
+            for node in material.node_tree.nodes:
+                if node.type == "BSDF_PRINCIPLED":
+                    node.inputs["Diffuse Roughness"].default_value = roughness[material.name]
+
+
+diffuse_roughness()
 if job.get("model", "imported") == "gltf":
     gltf_model()
 for obj in [o for o in scene.objects if o.type == "CAMERA"]:
