@@ -315,7 +315,7 @@ fn output_state(task: &Task) -> OutputState {
     if asked.load_settings(&task.settings).is_err()
         || asked.finish().is_err()
         || made
-            .load_settings(header.text("lucerna/settings").unwrap_or_default())
+            .load_recorded_settings(header.text("lucerna/settings").unwrap_or_default())
             .is_err()
     {
         return OutputState::Stale("its settings cannot be read".into());

@@ -79,7 +79,7 @@ pub(super) fn read_checkpoint(
     }
     let mut earlier = RenderOptions::default();
     earlier
-        .load_settings(header.text("lucerna/settings").unwrap_or_default())
+        .load_recorded_settings(header.text("lucerna/settings").unwrap_or_default())
         .map_err(|e| bad("lucerna/settings", e))?;
     if let Some(what) = earlier.differs_from(options) {
         return Err(bad(

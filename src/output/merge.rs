@@ -161,7 +161,7 @@ fn check(parts: &[Part]) -> Result<()> {
         .map(|p| {
             let mut options = RenderOptions::default();
             options
-                .load_settings(p.header.text("lucerna/settings").unwrap_or_default())
+                .load_recorded_settings(p.header.text("lucerna/settings").unwrap_or_default())
                 .map(|()| (options.settings.seed, options.sample_range()))
                 .map_err(|e| Error::bad_input(&p.path, "lucerna/settings", e))
         })
@@ -369,7 +369,7 @@ fn merged_header(parts: &[Part], planes: &Planes) -> Result<Header> {
     if let Some(text) = parts[0].header.text("lucerna/settings") {
         let mut options = RenderOptions::default();
         options
-            .load_settings(text)
+            .load_recorded_settings(text)
             .map_err(|e| Error::bad_input(&parts[0].path, "lucerna/settings", e))?;
         options.pass = None;
         options.crop = (planes.window != Window::full(planes.display.0, planes.display.1))

@@ -160,6 +160,23 @@ impl RenderOptions {
         Ok(())
     }
 
+    /// Applies the settings an EXR header records (`lucerna/settings`): as
+    /// [`RenderOptions::load_settings`], with what the absence of a setting meant when the
+    /// file was written: a file without `microfacet` was rendered before the setting
+    /// existed, with single-scattering GGX, so that checkpoints, merges and batch reruns do
+    /// not take it for today's default.
+    pub fn load_recorded_settings(&mut self, text: &str) -> Result<(), String> {
+        let pairs = read_settings_toml(text)?;
+        if !pairs.iter().any(|(name, _)| name == "microfacet") {
+            self.settings.microfacet = crate::integrator::settings::MicrofacetModel::Single;
+        }
+        for (name, value) in pairs {
+            self.set(&name, &value)
+                .map_err(|e| format!("{name}: {e}"))?;
+        }
+        Ok(())
+    }
+
     /// Every setting as TOML, with `spp` the samples actually taken (a pass's total): the
     /// header's record of how an image was made, readable back as a settings file.
     pub fn to_toml(&self, spp_taken: u32) -> String {
@@ -330,6 +347,33 @@ impl RenderOptions {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A header from before `microfacet` existed records a single-scattering render: read
+    /// back, it differs from today's default, so it is neither continued nor skipped as if
+    /// it were one; a recorded value is taken as it is.
+    #[test]
+    fn headers_without_the_microfacet_setting_were_single_scattering() {
+        use crate::integrator::settings::MicrofacetModel;
+        let mut old = RenderOptions::default();
+        old.load_recorded_settings("spp = 16\nmis = \"power:2\"\n")
+            .unwrap();
+        assert_eq!(old.settings.microfacet, MicrofacetModel::Single);
+        assert!(
+            old.differs_from(&RenderOptions {
+                spp: Some(16),
+                ..Default::default()
+            })
+            .is_some()
+        );
+        let mut new = RenderOptions::default();
+        new.load_recorded_settings(&RenderOptions::default().to_toml(16))
+            .unwrap();
+        assert_eq!(new.settings.microfacet, MicrofacetModel::Multiscatter);
+        // A settings file the user writes keeps the default.
+        let mut file = RenderOptions::default();
+        file.load_settings("spp = 16\n").unwrap();
+        assert_eq!(file.settings.microfacet, MicrofacetModel::Multiscatter);
+    }
 
     /// Every render setting a header records reads back to the same options.
     #[test]
