@@ -43,7 +43,9 @@ impl FrameList {
 }
 
 /// The file of `frame` of `scene` through `camera`: `pattern` with its frame tokens (see
-/// [`expand_frame`]), `{scene}` and `{camera}` replaced.
+/// [`expand_frame`]), `{scene}` and `{camera}` replaced. A still (no frame) keeps the other
+/// tools' tokens as written (`take#2.exr` names a file, as before they were tokens) and
+/// refuses `{frame}`, lucerna's own.
 pub fn output_path(
     pattern: &Path,
     frame: Option<f64>,
@@ -53,9 +55,9 @@ pub fn output_path(
     let text = pattern.to_string_lossy();
     let text = match frame {
         Some(f) => expand_frame(&text, f),
-        None if has_frame_token(&text) => {
+        None if text.contains("{frame}") => {
             return Err(format!(
-                "{text:?} has a frame token ({FRAME_TOKENS}) but no frame was given (--frame or --frames)"
+                "{text:?} has {{frame}} but no frame was given (--frame or --frames)"
             ));
         }
         None => text.into_owned(),
@@ -243,6 +245,8 @@ mod tests {
         ] {
             assert_eq!(has_frame_token(text), has, "{text}");
         }
-        assert!(output_path(Path::new("o.####.exr"), None, "s", "c").is_err());
+        // A still keeps them as written; {frame} needs a frame.
+        let still = output_path(Path::new("take#2.%04d.exr"), None, "s", "c").unwrap();
+        assert_eq!(still, PathBuf::from("take#2.%04d.exr"));
     }
 }
