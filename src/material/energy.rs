@@ -31,8 +31,9 @@
 
 use super::microfacet::SMOOTH_ALPHA;
 use super::microfacet_albedo::{
-    CORRELATED, CORRELATED_AVERAGE, DIELECTRIC, GLASS_T, SEPARABLE, SEPARABLE_AVERAGE, SIZE, T_MAX,
+    CORRELATED, CORRELATED_AVERAGE, DIELECTRIC, GLASS_T, SEPARABLE, SEPARABLE_AVERAGE, T_MAX,
 };
+use super::table::{bilinear, cell, linear};
 use glam::Vec3;
 
 /// The smallest albedo divided by.
@@ -44,32 +45,6 @@ pub const MIN_ALBEDO: f32 = 0.1;
 pub enum Masking {
     Correlated,
     Separable,
-}
-
-/// The cell of an axis of `n` evenly spaced samples over [0, `max`] that `x` falls in, and
-/// the position in it (NaN and values outside the axis are clamped onto it).
-#[inline]
-#[allow(clippy::manual_clamp)] // max then min maps NaN to 0; clamp would keep it.
-fn cell(x: f32, n: usize, max: f32) -> (usize, f32) {
-    let s = (x / max).max(0.0).min(1.0) * (n - 1) as f32;
-    let i = (s as usize).min(n - 2);
-    (i, s - i as f32)
-}
-
-/// A table over (roughness, cos θo) read at perceptual roughness `r` and `cos`.
-#[inline]
-fn bilinear(table: &[[f32; SIZE]; SIZE], r: f32, cos: f32) -> f32 {
-    let (i, fi) = cell(r, SIZE, 1.0);
-    let (j, fj) = cell(cos, SIZE, 1.0);
-    let row = |k: usize| table[k][j] + (table[k][j + 1] - table[k][j]) * fj;
-    row(i) + (row(i + 1) - row(i)) * fi
-}
-
-/// A table over roughness read at `r`.
-#[inline]
-fn linear(table: &[f32; SIZE], r: f32) -> f32 {
-    let (i, f) = cell(r, SIZE, 1.0);
-    table[i] + (table[i + 1] - table[i]) * f
 }
 
 /// Perceptual roughness of GGX `alpha`.

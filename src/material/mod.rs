@@ -23,6 +23,7 @@ pub mod oren_nayar;
 pub mod phong;
 pub mod sheen;
 mod sheen_albedo;
+mod table;
 pub mod thin_film;
 
 use crate::scene::{Material, Texture, TextureRef};

@@ -10,7 +10,7 @@
 //! Roughness is clamped below at [`MIN_ROUGHNESS`]: the distribution collapses onto the
 //! horizon as α goes to 0, and the fitted visibility there is not meant for it.
 
-use super::sheen_albedo::{ALBEDO, SIZE};
+use super::sheen_albedo::ALBEDO;
 use glam::Vec3;
 use std::f32::consts::PI;
 
@@ -85,13 +85,7 @@ impl Sheen {
     /// table.
     #[inline]
     pub fn albedo(&self, cos: f32) -> f32 {
-        let last = (SIZE - 1) as f32;
-        let x = cos.clamp(0.0, 1.0) * last;
-        let y = self.roughness * last;
-        let (i, j) = ((x as usize).min(SIZE - 2), (y as usize).min(SIZE - 2));
-        let (fx, fy) = (x - i as f32, y - j as f32);
-        let row = |j: usize| ALBEDO[j][i] * (1.0 - fx) + ALBEDO[j][i + 1] * fx;
-        row(j) * (1.0 - fy) + row(j + 1) * fy
+        super::table::bilinear(&ALBEDO, self.roughness, cos)
     }
 
     /// The share of the layer below that shows through, for light arriving along `wi` and

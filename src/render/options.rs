@@ -153,7 +153,12 @@ impl RenderOptions {
 
     /// Applies a TOML settings file's keys.
     pub fn load_settings(&mut self, text: &str) -> Result<(), String> {
-        for (name, value) in read_settings_toml(text)? {
+        self.apply(read_settings_toml(text)?)
+    }
+
+    /// Sets each (name, value) pair.
+    fn apply(&mut self, pairs: Vec<(String, String)>) -> Result<(), String> {
+        for (name, value) in pairs {
             self.set(&name, &value)
                 .map_err(|e| format!("{name}: {e}"))?;
         }
@@ -170,11 +175,7 @@ impl RenderOptions {
         if !pairs.iter().any(|(name, _)| name == "microfacet") {
             self.settings.microfacet = crate::integrator::settings::MicrofacetModel::Single;
         }
-        for (name, value) in pairs {
-            self.set(&name, &value)
-                .map_err(|e| format!("{name}: {e}"))?;
-        }
-        Ok(())
+        self.apply(pairs)
     }
 
     /// Every setting as TOML, with `spp` the samples actually taken (a pass's total): the
