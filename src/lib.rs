@@ -27,6 +27,7 @@ pub mod job;
 pub mod light;
 pub mod logging;
 pub mod material;
+pub mod medium;
 pub mod memory;
 pub mod output;
 pub mod render;

@@ -35,6 +35,10 @@ pub enum Aov {
     GlossyIndirect,
     TransmissionDirect,
     TransmissionIndirect,
+    /// Light whose first scattering event was in a participating medium, direct and
+    /// indirect (Cycles' volume passes); the lobe layers above take the rest.
+    VolumeDirect,
+    VolumeIndirect,
     /// Light of light group K (`lg_<name>`, named by the [`AovSet`]) after one or more
     /// scattering events (on request, with `lightgroups`).
     LightGroup(u16),
@@ -53,14 +57,16 @@ pub enum Aov {
 }
 
 /// The lobe layers (`--aov lobes`): full contributions by the lobe of the first scattering
-/// event, direct and indirect, then the lobe albedos.
-pub const LOBES: [Aov; 9] = [
+/// event (or the medium it was in), direct and indirect, then the lobe albedos.
+pub const LOBES: [Aov; 11] = [
     Aov::DiffuseDirect,
     Aov::DiffuseIndirect,
     Aov::GlossyDirect,
     Aov::GlossyIndirect,
     Aov::TransmissionDirect,
     Aov::TransmissionIndirect,
+    Aov::VolumeDirect,
+    Aov::VolumeIndirect,
     Aov::DiffuseColor,
     Aov::GlossyColor,
     Aov::TransmissionColor,
@@ -125,6 +131,8 @@ impl Aov {
             Self::GlossyIndirect => "glossy_indirect",
             Self::TransmissionDirect => "transmission_direct",
             Self::TransmissionIndirect => "transmission_indirect",
+            Self::VolumeDirect => "volume_direct",
+            Self::VolumeIndirect => "volume_indirect",
             Self::DiffuseColor => "diffuse_color",
             Self::GlossyColor => "glossy_color",
             Self::TransmissionColor => "transmission_color",
@@ -214,8 +222,8 @@ impl Aov {
         ALL.iter().chain(&LOBES).copied().find(|a| a.name() == name)
     }
 
-    /// The lobe (0 diffuse, 1 glossy, 2 transmission) and whether indirect, of a lobe
-    /// light layer.
+    /// The lobe (0 diffuse, 1 glossy, 2 transmission, 3 a medium) and whether indirect, of
+    /// a lobe light layer.
     pub(super) fn lobe_split(self) -> Option<(usize, usize)> {
         Some(match self {
             Self::DiffuseDirect => (0, 0),
@@ -224,6 +232,8 @@ impl Aov {
             Self::GlossyIndirect => (1, 1),
             Self::TransmissionDirect => (2, 0),
             Self::TransmissionIndirect => (2, 1),
+            Self::VolumeDirect => (3, 0),
+            Self::VolumeIndirect => (3, 1),
             _ => return None,
         })
     }

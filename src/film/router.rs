@@ -4,6 +4,7 @@
 
 use super::aov::{Aov, AovSet, MAX_DEPTH_AOV, mean_data};
 use super::record::{Contribution, FirstHit, Recorder, Source};
+use crate::material::PerLobe;
 use glam::Vec3;
 
 /// Rows of the routing table: depths 0 to [`MAX_DEPTH_AOV`], then one for every deeper one.
@@ -20,8 +21,8 @@ pub struct Router {
     /// Slots of `direct_nee_unweighted` and `direct_bsdf_unweighted`.
     pub single_technique: [Option<u8>; 2],
     /// [lobe][direct, indirect] → slot of the lobe layers, which take each contribution
-    /// times its lobe share.
-    pub lobes: [[Option<u8>; 2]; 3],
+    /// times its lobe share; lobe 3 is a medium (see [`medium_share`]).
+    pub lobes: [[Option<u8>; 2]; 4],
     /// Slot of each light group's layer.
     group_slots: Vec<u8>,
     /// Slot of each light's group (empty without light groups).
@@ -52,7 +53,7 @@ impl Router {
                     .collect()
             })
         });
-        let mut lobes = [[None; 2]; 3];
+        let mut lobes = [[None; 2]; 4];
         let mut group_slots = Vec::new();
         for (i, aov) in slots.iter().enumerate() {
             if let Some((lobe, indirect)) = aov.lobe_split() {
@@ -191,7 +192,8 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
         }
         if let Some(shares) = c.lobes.filter(|_| c.depth >= 1) {
             let indirect = usize::from(c.depth >= 2);
-            for (share, slots) in shares.iter().zip(&self.router.lobes) {
+            let all = [shares[0], shares[1], shares[2], medium_share(&shares)];
+            for (share, slots) in all.iter().zip(&self.router.lobes) {
                 if let Some(slot) = slots[indirect] {
                     self.values[slot as usize] += c.value * *share;
                 }
@@ -213,4 +215,14 @@ impl<const ROUTED: bool> Recorder for SampleRecord<'_, ROUTED> {
             self.discarded += 1;
         }
     }
+}
+
+/// The share of a contribution owed to a medium as its first scattering event: a path that
+/// first scattered in a medium carries lobe shares of zero (`integrator::path::medium`),
+/// and a surface's shares add up to one in every channel that carries light, so a channel
+/// whose shares are all zero is the medium's.
+#[inline]
+fn medium_share(shares: &PerLobe) -> Vec3 {
+    let total = shares[0] + shares[1] + shares[2];
+    Vec3::select(total.cmpeq(Vec3::ZERO), Vec3::ONE, Vec3::ZERO)
 }

@@ -70,6 +70,9 @@ pub(crate) struct PathState {
     pub(crate) crossed: f32,
     /// The current ray's cone, which sizes texture footprints (`world::footprint`).
     pub(crate) cone: RayCone,
+    /// Whether the camera's first surface has been recorded (data layers, coverage): the
+    /// first one that is not an interface around a medium, which the camera sees through.
+    pub(crate) first_hit_recorded: bool,
 }
 
 impl PathState {
@@ -89,6 +92,7 @@ impl PathState {
             media: Media::default(),
             crossed: 0.0,
             cone,
+            first_hit_recorded: false,
         }
     }
 

@@ -1,28 +1,53 @@
-//! The dielectric volumes a path is inside, for absorption and for the index of refraction
-//! on the far side of an interface.
+//! The volumes a path is inside, for the medium that absorbs and scatters along its rays
+//! (`crate::medium`) and for the index of refraction on the far side of an interface.
 //!
 //! The rule (documented in the README): a path keeps the volumes it has entered, innermost
-//! last, up to [`MAX_NESTED`]. Refracting into the front of a volume's boundary enters it;
-//! refracting out through the back of a boundary leaves that volume, wherever it is in the
-//! list (overlapping volumes need not be properly nested). Along a ray the innermost
-//! volume absorbs. At a boundary, the index outside it is the innermost other volume's (1,
-//! air, when there is none), so that water inside a glass refracts by 1.33 / 1.5 where it
-//! meets the glass. A path that starts inside a volume (a camera in the water) knows
+//! last, up to [`MAX_NESTED`]. Refracting into the front of a volume's boundary enters it,
+//! as does crossing the front of an interface (a boundary that does not scatter);
+//! refracting or crossing out through the back of a boundary leaves that volume, wherever
+//! it is in the list (overlapping volumes need not be properly nested). Along a ray the
+//! innermost volume's medium absorbs and scatters (shadow rays too, through interfaces:
+//! [`Media::shadow_transmittance`]). At a boundary, the index outside it is the innermost
+//! other refracting volume's (1, air, when there is none; an interface has no index), so
+//! that water inside a glass refracts by 1.33 / 1.5 where it meets the glass. A path that starts inside a volume (a camera in the water) knows
 //! nothing of it until it leaves through a back face: it then sees air outside, which is
 //! what such scenes usually mean. Reflection changes nothing; thin walls bound no volume.
 
-use crate::scene::Material;
-use crate::world::{Interaction, Surfaces};
+use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::medium::{Flight, Homogeneous};
+use crate::scene::{BsdfModel, Material};
+use crate::world::{Interaction, Surfaces, World};
 use glam::Vec3;
+
+/// The most boundaries a shadow ray crosses on its way through media; beyond, it counts as
+/// blocked (a ray through this many interfaces carries no measurable light in any scene
+/// that is not built to have it).
+const MAX_SHADOW_CROSSINGS: u32 = 64;
 
 /// The deepest nesting kept: entering a fifth volume forgets the outermost.
 pub const MAX_NESTED: usize = 4;
 
-/// The volumes (their materials) a path is inside, innermost last.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// The volumes (their materials) a path is inside, innermost last, and the colour channel
+/// its free flights are sampled in, with the densities of the path's flights so far in each
+/// channel relative to that one's (see `crate::medium`).
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct Media {
     materials: [u32; MAX_NESTED],
     len: u8,
+    /// The channel the path samples distances in ([`UNCHOSEN`] until its first flight).
+    channel: u8,
+    /// Per channel, the density of the path's flights relative to `channel`'s, scaled to
+    /// a mean of 1 (the throughput is scaled alike: see [`Media::fly`]).
+    ratios: Vec3,
+}
+
+/// No channel chosen yet: the path has not flown through a scattering medium.
+const UNCHOSEN: u8 = u8::MAX;
+
+impl Default for Media {
+    fn default() -> Self {
+        Self::EMPTY
+    }
 }
 
 impl Media {
@@ -30,7 +55,34 @@ impl Media {
     pub(crate) const EMPTY: Self = Self {
         materials: [0; MAX_NESTED],
         len: 0,
+        channel: UNCHOSEN,
+        ratios: Vec3::ONE,
     };
+
+    /// The free flight through `medium` along a segment of length `length`, from `u`: the
+    /// path's first flight chooses its channel from `u` (and the rest of `u` its distance).
+    /// The weight returned is the balance heuristic's over the channels for the path so far:
+    /// the throughput times it divided by the mean of the relative densities, with the
+    /// densities rescaled to a mean of one, so that the throughput needs no other
+    /// correction wherever it is recorded.
+    #[inline]
+    pub(crate) fn fly(&mut self, medium: &Homogeneous, u: f32, length: f32) -> Flight {
+        let u = if self.channel == UNCHOSEN {
+            let channel = ((u * 3.0) as u8).min(2);
+            self.channel = channel;
+            (u * 3.0 - f32::from(channel)).clamp(0.0, 1.0)
+        } else {
+            u
+        };
+        let (flight, ratios) = medium.sample_flight(u, length, self.channel as usize);
+        let ratios = self.ratios * ratios;
+        let scale = 3.0 / ratios.element_sum();
+        if !(scale.is_finite() && scale > 0.0) {
+            return Flight::Pass { weight: Vec3::ZERO };
+        }
+        self.ratios = ratios * scale;
+        flight.scaled(scale)
+    }
 
     /// True outside every volume.
     #[inline]
@@ -85,6 +137,12 @@ impl Media {
         }
     }
 
+    /// The medium of the innermost volume, where it absorbs or scatters.
+    #[inline]
+    pub(crate) fn medium<'s>(&self, surfaces: &'s Surfaces) -> Option<&'s Homogeneous> {
+        self.innermost().and_then(|m| surfaces.medium(m))
+    }
+
     /// The index of refraction outside the boundary of `it`'s volume (1 where it bounds
     /// none, or where air lies outside).
     #[inline]
@@ -99,7 +157,7 @@ impl Media {
         };
         outside
             .map(|m| &surfaces.materials[m as usize])
-            .filter(|m| m.volume.is_some() && m.ior > 0.0)
+            .filter(|m| refracts(m))
             .map_or(1.0, |m| m.ior)
     }
 
@@ -111,7 +169,7 @@ impl Media {
     pub(crate) fn radiance_scale(&self, surfaces: &Surfaces) -> f32 {
         self.innermost()
             .map(|m| &surfaces.materials[m as usize])
-            .filter(|m| m.volume.is_some() && m.ior > 0.0)
+            .filter(|m| refracts(m))
             .map_or(1.0, |m| m.ior * m.ior)
     }
 
@@ -119,14 +177,75 @@ impl Media {
     /// volume (one outside every volume and in clear ones).
     #[inline]
     pub(crate) fn transmittance(&self, surfaces: &Surfaces, length: f32) -> Vec3 {
-        match self.innermost().and_then(|m| surfaces.absorption(m)) {
-            // Channels that do not absorb stay 1 even along an infinite ray.
-            Some(sigma) => {
-                Vec3::select(sigma.cmpgt(Vec3::ZERO), (-sigma * length).exp(), Vec3::ONE)
-            }
-            None => Vec3::ONE,
-        }
+        self.medium(surfaces)
+            .map_or(Vec3::ONE, |m| m.transmittance(length))
     }
+
+    /// What arrives at `shadow`'s origin, inside these media, of light leaving its end: the
+    /// transmittance of the media along it, times the straight transmission of the filters
+    /// it crosses, zero where something opaque (or a refracting boundary) blocks it. It
+    /// walks the ray from surface to surface (closest hits, in order, as pbrt-v4's
+    /// transmittance does), entering and leaving the media of the interfaces it crosses.
+    /// Adds the rays it traced to `traced`.
+    pub(crate) fn shadow_transmittance(
+        self,
+        world: &World,
+        shadow: &Ray,
+        traced: &mut u64,
+    ) -> Vec3 {
+        let surfaces = &world.surfaces;
+        let mut media = self;
+        let mut ray = *shadow;
+        let mut through = Vec3::ONE;
+        for _ in 0..MAX_SHADOW_CROSSINGS {
+            *traced += 1;
+            let hit = world.intersect(&ray);
+            let t = hit.map_or(ray.tmax, |h| h.t);
+            through *= media.transmittance(surfaces, t * ray.dir.length());
+            let Some(hit) = hit else {
+                return through;
+            };
+            let it = world.interaction(&ray, &hit);
+            let m = &surfaces.materials[it.material as usize];
+            let Some(straight) = surfaces.straight_transmission(&it, &ray) else {
+                return Vec3::ZERO;
+            };
+            through *= straight;
+            if !(through.max_element() > 0.0) {
+                return Vec3::ZERO;
+            }
+            if m.model == BsdfModel::Interface {
+                media = media.crossed(it.material, it.front);
+            }
+            // On from the far side, towards the same end (a target point or infinity).
+            let origin = offset_ray_origin(
+                it.p,
+                if ray.dir.dot(it.ng) > 0.0 {
+                    it.ng
+                } else {
+                    -it.ng
+                },
+            );
+            ray = if ray.tmax.is_finite() {
+                let end = ray.origin + ray.dir * ray.tmax;
+                Ray {
+                    origin,
+                    dir: end - origin,
+                    tmax: 1.0,
+                }
+            } else {
+                Ray::new(origin, ray.dir)
+            };
+        }
+        Vec3::ZERO
+    }
+}
+
+/// True for a volume's boundary that refracts: a material with a volume and an index,
+/// not an interface.
+#[inline]
+fn refracts(m: &Material) -> bool {
+    m.volume.is_some() && m.ior > 0.0 && m.model != BsdfModel::Interface
 }
 
 #[cfg(test)]
@@ -151,5 +270,52 @@ mod tests {
         // A fifth volume forgets the outermost.
         let deep = (1..=5).fold(air, |m, v| m.crossed(v, true));
         assert_eq!(deep.materials, [2, 3, 4, 5]);
+    }
+
+    /// A path's flights through a chromatic medium, combined over its channel by the
+    /// balance heuristic, are unbiased in every channel where the flights of a path
+    /// multiply: a rod (light scattering only forwards or backwards, with probability 1/2
+    /// each) through a slab of optical depth 12, 4 and 1 by channel reflects
+    /// σL/2 / (1 + σL/2) of the light in each. Mixing the channels' densities per flight
+    /// reads about 10 % low in the densest channel at this sample count.
+    #[test]
+    fn flights_through_a_chromatic_slab_converge_in_every_channel() {
+        use crate::sampling::pcg::Pcg32;
+        let sigma = Vec3::new(12.0, 4.0, 1.0);
+        let medium = Homogeneous::new(Vec3::ZERO, sigma, 0.0).unwrap();
+        let mut rng = Pcg32::new(5, 3);
+        let n = 100_000;
+        let (mut sum, mut squares) = (Vec3::ZERO, Vec3::ZERO);
+        for _ in 0..n {
+            let (mut x, mut forward, mut beta) = (0.0f32, true, Vec3::ONE);
+            let mut media = Media::EMPTY;
+            loop {
+                let length = if forward { 1.0 - x } else { x };
+                match media.fly(&medium, rng.next_f32(), length) {
+                    Flight::Scatter { t, weight } => {
+                        beta *= weight;
+                        x += if forward { t } else { -t };
+                        forward = rng.next_f32() < 0.5;
+                    }
+                    Flight::Pass { weight } => {
+                        if !forward {
+                            beta *= weight;
+                            sum += beta;
+                            squares += beta * beta;
+                        }
+                        break;
+                    }
+                }
+            }
+        }
+        let mean = sum / n as f32;
+        let se = ((squares / n as f32 - mean * mean) / n as f32).powf(0.5);
+        let exact = sigma / 2.0 / (Vec3::ONE + sigma / 2.0);
+        for c in 0..3 {
+            assert!(
+                (mean[c] - exact[c]).abs() < 4.5 * se[c],
+                "reflectance {mean} ± {se}, exact {exact}"
+            );
+        }
     }
 }

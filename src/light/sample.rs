@@ -2,7 +2,7 @@
 //! ([`LightSampling`]), and the conversion every area light shares from a point on its
 //! surface to a sample seen from a shading point.
 
-use crate::geometry::ray::offset_ray_origin;
+use crate::geometry::ray::{Ray, offset_ray_origin};
 use glam::{Vec2, Vec3};
 
 /// A point on a light as seen from a shading point.
@@ -24,6 +24,22 @@ pub struct LightSample {
     /// delta lights 1.
     pub pdf: f32,
     pub delta: bool,
+}
+
+impl LightSample {
+    /// The shadow ray from `origin` towards the sample: to its (offset) point, or along
+    /// `wi` without end for lights at infinity.
+    #[inline]
+    pub fn shadow_ray(&self, origin: Vec3) -> Ray {
+        match self.target {
+            Some(target) => Ray {
+                origin,
+                dir: target - origin,
+                tmax: 1.0,
+            },
+            None => Ray::new(origin, self.wi),
+        }
+    }
 }
 
 /// The measure area lights are sampled in.

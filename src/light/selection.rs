@@ -133,7 +133,7 @@ impl LightSet {
     }
 
     /// Chooses a light for shading point `p` with shading normal `n`: (index, probability).
-    #[inline]
+    #[inline(always)]
     pub fn select(&self, u: f32, p: Vec3, n: Vec3) -> Option<(usize, f32)> {
         match self.selector.as_ref()? {
             Selector::Uniform { lights, .. } => {

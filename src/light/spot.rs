@@ -18,9 +18,14 @@ pub struct SpotLight {
     pub cos_outer: f32,
 }
 
-/// The glTF spot cone falloff (KHR_lights_punctual): a squared linear ramp in cos angle.
+/// The glTF spot cone falloff (KHR_lights_punctual): a squared linear ramp in cos angle;
+/// a hard edge where the inner cone is as wide as the outer (the ramp's limit, as Mitsuba's
+/// spot with `beam_width` = `cutoff_angle`).
 #[inline]
 pub fn spot_falloff(cos_angle: f32, cos_inner: f32, cos_outer: f32) -> f32 {
+    if cos_inner <= cos_outer {
+        return if cos_angle >= cos_outer { 1.0 } else { 0.0 };
+    }
     let scale = 1.0 / (cos_inner - cos_outer).max(0.001);
     let a = ((cos_angle - cos_outer) * scale).clamp(0.0, 1.0);
     a * a
@@ -79,5 +84,8 @@ mod tests {
         assert_eq!(spot_falloff(0.95, ci, co), 1.0);
         assert_eq!(spot_falloff(0.6, ci, co), 0.0);
         assert!((spot_falloff(0.8, ci, co) - 0.25).abs() < 1e-5);
+        // Equal cones: a hard edge.
+        assert_eq!(spot_falloff(0.7001, 0.7, 0.7), 1.0);
+        assert_eq!(spot_falloff(0.6999, 0.7, 0.7), 0.0);
     }
 }

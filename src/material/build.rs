@@ -74,15 +74,20 @@ fn build(
     ctx: &ShadingContext,
 ) -> Built {
     let base = base_color(m, textures, attrs).truncate();
-    if m.unlit {
-        // A clear filter: every ray but the camera's passes (see `integrator::path`).
-        return Built::Compact(Bsdf::ThinDielectric(ThinDielectric::new(
+    // A clear filter: every ray (but the camera's, at an unlit surface) passes (see
+    // `integrator::path`).
+    let clear = || {
+        Built::Compact(Bsdf::ThinDielectric(ThinDielectric::new(
             1.0,
             0.0,
             Vec3::ONE,
-        )));
+        )))
+    };
+    if m.unlit {
+        return clear();
     }
     match m.model {
+        BsdfModel::Interface => clear(),
         BsdfModel::Lambert => Built::Compact(Bsdf::Lambert(Lambert {
             albedo: base.clamp(Vec3::ZERO, Vec3::ONE),
         })),

@@ -74,9 +74,9 @@ pub struct Kernel {
     pub routing: bool,
     /// Eight paths at a time in SIMD lanes (`integrator::packet`): where neither routing
     /// nor first-hit data is needed, the CPU has AVX2 and FMA, roulette does not learn
-    /// (`rr = efficiency`), and (in `auto`) some material has a GGX lobe or some mesh a
-    /// uniform material ([`SceneFeatures::uniform_meshes`]), which is what the lanes speed
-    /// up. Where no surface is uniform and none glossy, the lanes would shade nothing and
+    /// (`rr = efficiency`), no participating medium is in the scene (media are scalar
+    /// only), and (in `auto`) some material has a GGX lobe or some mesh a uniform material
+    /// ([`SceneFeatures::uniform_meshes`]), which is what the lanes speed up. Where no surface is uniform and none glossy, the lanes would shade nothing and
     /// only add their bookkeeping, so `auto` keeps the scalar kernel (`--plan packet` runs
     /// it there too). Passes that learn the first vertex's split (`--split auto`) run in it
     /// too. A technique the packet kernel does not have yet keeps it out of the render
@@ -142,6 +142,7 @@ impl RenderPlan {
                 && !first_hit_data
                 && !routing
                 && !roulette_learns
+                && features.participating_media == 0
                 && crate::integrator::packet_kernel_available(),
         };
         Self {
@@ -217,6 +218,13 @@ impl fmt::Display for RenderPlan {
             yes_no(s.lobes.specular),
             yes_no(s.lobes.transmission)
         )?;
+        if s.participating_media > 0 {
+            writeln!(
+                f,
+                "  participating media: {} materials bound one (scalar kernel)",
+                s.participating_media
+            )?;
+        }
         writeln!(
             f,
             "  materials in use: {} textured, {} normal-mapped, {} with alpha (tested during traversal only for their primitives); glTF PBR with zero-weight lobes skipped: {} rendered as Lambert, {} as a conductor",

@@ -50,6 +50,8 @@ pub struct VertexSample {
     pub rr: f32,
     pub bsdf: Vec2,
     pub lobe: f32,
+    /// The free flight through a medium on the way to the vertex (`crate::medium`).
+    pub medium: f32,
 }
 
 /// The random numbers of one pixel sample. Dimensions come in 4D sets: set 0 is the camera,
@@ -195,7 +197,8 @@ pub(crate) fn vertex_seeds_lanes(
 
 impl VertexSample {
     /// A vertex's numbers from its two sets: light position, light selection and roulette
-    /// from the first; BSDF direction and lobe from the second.
+    /// from the first; BSDF direction, lobe and the free flight that reaches the vertex from
+    /// the second.
     #[inline(always)]
     pub(crate) fn from_sets(a: [f32; 4], b: [f32; 4]) -> Self {
         Self {
@@ -204,6 +207,7 @@ impl VertexSample {
             rr: a[3],
             bsdf: Vec2::new(b[0], b[1]),
             lobe: b[2],
+            medium: b[3],
         }
     }
 }

@@ -36,6 +36,11 @@ impl Lobes {
                 glossy: specular.max_element() > 0.0,
                 ..Self::default()
             },
+            // Crossed in a straight line, as a clear filter is.
+            BsdfModel::Interface => Self {
+                transmission: true,
+                ..Self::default()
+            },
             BsdfModel::GltfPbr if m.reduced() == Some(Reduced::Lambert) => Self {
                 diffuse: true,
                 ..Self::default()
@@ -114,6 +119,11 @@ pub struct SceneFeatures {
     /// Materials in use whose BSDF has a GGX lobe (a rough glTF surface): work the packet
     /// kernel's lanes speed up.
     pub microfacet_materials: usize,
+    /// Materials in use that bound a participating medium: one that scatters, or any
+    /// medium behind an interface (`BsdfModel::Interface`), which shadow rays cross. Media
+    /// work (free-flight sampling, light samples in media, shadow rays through media) is
+    /// done only where this is non-zero.
+    pub participating_media: usize,
     /// Meshes placed once whose material is the same at every point and does not emit (no
     /// texture, no vertex colours): the packet kernel's lanes compute their shading points
     /// (`world::lanes`).
@@ -216,6 +226,7 @@ impl SceneFeatures {
             reduced_to_lambert: count(&|m| m.reduced() == Some(Reduced::Lambert)),
             reduced_to_conductor: count(&|m| m.reduced() == Some(Reduced::Conductor)),
             microfacet_materials: count(&|m| m.model == BsdfModel::GltfPbr && Lobes::of(m).glossy),
+            participating_media: count(&Material::bounds_participating_medium),
             uniform_meshes: scene
                 .meshes
                 .iter()

@@ -964,7 +964,9 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
         let extensions_ok = unit(m.transmission)
             && m.transmission_color.is_none_or(colour)
             && m.clearcoat_normal_scale.is_finite()
-            && m.volume.is_none_or(|v| colour(v.absorption))
+            && m.volume.is_none_or(|v| {
+                colour(v.absorption) && colour(v.scattering) && v.anisotropy.abs() < 1.0
+            })
             && unit(m.specular.weight)
             && colour(m.specular.color)
             && m.sheen.is_none_or(|s| colour(s.color) && unit(s.roughness))

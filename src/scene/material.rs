@@ -105,12 +105,35 @@ fn yes() -> bool {
     true
 }
 
-/// The inside of a dielectric volume: Beer-Lambert absorption.
+/// The inside of a closed surface: a homogeneous medium that absorbs and scatters
+/// (`crate::medium`). Clear (all zero) inside plain glass.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Volume {
     /// Absorption coefficient per world unit, per channel (-ln(attenuationColor) /
-    /// attenuationDistance); zero for a clear volume.
+    /// attenuationDistance for KHR_materials_volume); zero for a clear volume.
     pub absorption: Vec3,
+    /// Scattering coefficient per world unit, per channel.
+    #[serde(default)]
+    pub scattering: Vec3,
+    /// Henyey-Greenstein mean cosine of scattering, in (−1, 1).
+    #[serde(default)]
+    pub anisotropy: f32,
+}
+
+impl Volume {
+    /// A volume that only absorbs.
+    pub fn absorbing(absorption: Vec3) -> Self {
+        Self {
+            absorption,
+            scattering: Vec3::ZERO,
+            anisotropy: 0.0,
+        }
+    }
+
+    /// True where light scatters inside.
+    pub fn scatters(&self) -> bool {
+        self.scattering.max_element() > 0.0
+    }
 }
 
 /// KHR_materials_specular: `weight` scales the dielectric's reflection (F0 and F90), `color`
@@ -267,11 +290,12 @@ impl Material {
     }
 
     /// True if some point of the material can transmit light (its glTF BSDF has a
-    /// transmission lobe): such surfaces are seen from both sides.
+    /// transmission lobe, or it is an interface): such surfaces are seen from both sides.
     pub fn transmits(&self) -> bool {
-        self.model == BsdfModel::GltfPbr
-            && (self.transmission > 0.0 || self.transmission_texture.is_some())
-            && (self.metallic < 1.0 || self.metallic_roughness_texture.is_some())
+        self.model == BsdfModel::Interface
+            || self.model == BsdfModel::GltfPbr
+                && (self.transmission > 0.0 || self.transmission_texture.is_some())
+                && (self.metallic < 1.0 || self.metallic_roughness_texture.is_some())
     }
 
     /// True if some point of the material can be a filter that light crosses in a straight
@@ -279,11 +303,20 @@ impl Material {
     /// such surfaces, attenuated (see `integrator::path`).
     pub fn can_filter(&self) -> bool {
         self.unlit
+            || self.model == BsdfModel::Interface
             || (self.transmits()
                 && self.volume.is_none()
                 && (self.roughness * self.roughness < SMOOTH_ALPHA
                     || self.metallic_roughness_texture.is_some()
                     || self.anisotropy.is_some()))
+    }
+
+    /// True if the material bounds a participating medium: its volume scatters, or it is
+    /// an interface around a medium (which shadow rays cross into).
+    pub fn bounds_participating_medium(&self) -> bool {
+        self.volume.is_some_and(|v| {
+            v.scatters() || (self.model == BsdfModel::Interface && v.absorption != Vec3::ZERO)
+        })
     }
 
     /// True for the texture slots (by [`Material::texture_slots`] name) that are read as
@@ -382,6 +415,9 @@ pub enum BsdfModel {
     /// The modified (energy-normalised) Phong BRDF: base colour as diffuse albedo `kd`,
     /// `specular` as `ks`, lobe exponent `exponent`.
     Phong { exponent: f32, specular: Vec3 },
+    /// No surface: the boundary of the medium inside (`volume`), which every ray crosses
+    /// unchanged (Mitsuba's `null` BSDF around a medium). Fog in a box, smoke in a hull.
+    Interface,
 }
 
 impl BsdfModel {
@@ -391,6 +427,7 @@ impl BsdfModel {
             Self::GltfPbr => "gltf-pbr",
             Self::Lambert => "lambert",
             Self::Phong { .. } => "phong",
+            Self::Interface => "interface",
         }
     }
 }

@@ -20,6 +20,7 @@ use crate::light::{
     DirectionalLight, DistantCone, Light, LightSet, PointLight, QuadricLight, SphereLight,
     SpotLight, TriangleLight,
 };
+use crate::medium::Homogeneous;
 use crate::memory::MemoryEstimate;
 use crate::scene::features::SceneFeatures;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
@@ -858,15 +859,15 @@ impl World {
                 placements,
                 spheres,
                 quadrics,
-                absorption: scene
+                media: scene
                     .materials
                     .iter()
-                    .map(|m| {
-                        m.volume
-                            .map(|v| v.absorption / space.scale as f32)
-                            .filter(|a| *a != Vec3::ZERO)
-                    })
+                    .map(|m| Homogeneous::inside(m, space.scale))
                     .collect(),
+                participating: scene
+                    .materials
+                    .iter()
+                    .any(Material::bounds_participating_medium),
                 filters: scene.materials.iter().any(Material::can_filter),
                 scalar_only: scene
                     .materials

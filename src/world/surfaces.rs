@@ -9,6 +9,7 @@ use crate::geometry::ray::Ray;
 use crate::geometry::triangle::geometric_normal;
 use crate::geometry::{Hit, NOT_PLACED, PrimitiveHit, sphere};
 use crate::material::{self, SurfaceAttributes};
+use crate::medium::Homogeneous;
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{AlphaMode, Material, Mesh, Texture};
 use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
@@ -65,9 +66,13 @@ pub struct Surfaces {
     /// Primitive index to the index of the light it is ([`NO_LIGHT`] for none); empty when
     /// nothing emits.
     pub prim_light: Vec<u32>,
-    /// By material, the absorption coefficient inside its volume per render-space unit
-    /// (`None` for no volume, or a clear one).
-    pub absorption: Vec<Option<Vec3>>,
+    /// By material, the medium inside its volume in render-space units (`None` for no
+    /// volume, or a clear one).
+    pub media: Vec<Option<Homogeneous>>,
+    /// True if some material bounds a participating medium
+    /// ([`Material::bounds_participating_medium`]): paths sample free flights and shadow
+    /// rays cross media only then.
+    pub participating: bool,
     /// True if some material can be a filter that shadow rays cross
     /// ([`Material::can_filter`]).
     pub filters: bool,
@@ -153,7 +158,8 @@ impl Surfaces {
             textures: Vec::new(),
             prims,
             prim_light: Vec::new(),
-            absorption: Vec::new(),
+            media: Vec::new(),
+            participating: false,
             filters: false,
             scalar_only: Vec::new(),
         }
@@ -302,22 +308,34 @@ impl Surfaces {
             instance: placement,
         };
         let it = self.interaction(ray, &surface);
+        match self.straight_transmission(&it, ray) {
+            Some(straight) => {
+                *through *= straight;
+                *through == Vec3::ZERO
+            }
+            None => true,
+        }
+    }
+
+    /// What crosses the surface at `it` in a straight line along `ray` (its filter's
+    /// straight transmission); `None` where the material is no filter (light does not pass
+    /// it unbent).
+    pub fn straight_transmission(&self, it: &Interaction, ray: &Ray) -> Option<Vec3> {
         let m = &self.materials[it.material as usize];
         if !m.can_filter() {
-            return true;
+            return None;
         }
         let mut storage = material::BsdfStorage::default();
         let ctx = it.shading_context(1.0);
         let bsdf = material::bsdf_in(m, &self.textures, &it.attrs, &ctx, &mut storage);
-        *through *= bsdf.straight_transmission(it.frame.to_local(-ray.dir.normalize()));
-        *through == Vec3::ZERO
+        Some(bsdf.straight_transmission(it.frame.to_local(-ray.dir.normalize())))
     }
 
-    /// The absorption coefficient (per render-space unit) inside the volume of material
-    /// `material`, where it absorbs.
+    /// The medium (in render-space units) inside the volume of material `material`, where
+    /// it absorbs or scatters.
     #[inline]
-    pub fn absorption(&self, material: u32) -> Option<Vec3> {
-        self.absorption.get(material as usize).copied().flatten()
+    pub fn medium(&self, material: u32) -> Option<&Homogeneous> {
+        self.media.get(material as usize).and_then(Option::as_ref)
     }
 
     /// The alpha decision for a hit with surface attributes `attrs`; `key` identifies the
@@ -528,7 +546,7 @@ impl Surfaces {
 
     /// The emitted radiance of primitive `prim` where its emission is not textured (then
     /// [`Surfaces::emission_at`] returns it at every point).
-    #[inline]
+    #[inline(always)]
     pub fn untextured_emission(&self, prim: u32) -> Option<Vec3> {
         let mat = &self.materials[self.material_of(prim) as usize];
         mat.emissive_texture.is_none().then_some(mat.emissive)

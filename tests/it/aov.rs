@@ -351,7 +351,8 @@ fn cornell_with_every_lobe() -> Scene {
 /// colour is the albedo: Lambertian walls (diffuse), the mirror and the metal plates
 /// (glossy). In the glass box, light through the glass ball and the rough slab fills the
 /// transmission layers (the thin pane is a filter: what is seen through it keeps the lobes
-/// of what lies behind).
+/// of what lies behind); in the chromatic cube, light first scattered in the medium fills
+/// the volume layers, and they are empty everywhere else.
 #[test]
 fn lobe_layers_and_emission_make_the_beauty() {
     let plates = ingest::load(
@@ -370,21 +371,32 @@ fn lobe_layers_and_emission_make_the_beauty() {
         &Default::default(),
     )
     .unwrap();
+    let media = ingest::load(
+        std::path::Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/scenes/media/chromatic-cube.gltf"
+        )),
+        &Default::default(),
+    )
+    .unwrap();
     let aovs = AovSet::parse("lobes,emission,albedo,direct,indirect").unwrap();
-    // (scene, whether it has diffuse surfaces (the plates are all metal), whether it transmits)
+    // (scene, whether it has diffuse surfaces (the plates are all metal), glossy ones
+    // (the media scene is Lambertian), whether it transmits, whether light scatters in a
+    // medium)
     let scenes = [
-        (cornell_with_every_lobe(), true, false),
-        (plates, false, false),
-        (glass, true, true),
+        (cornell_with_every_lobe(), true, true, false, false),
+        (plates, false, true, false, false),
+        (glass, true, true, true, false),
+        (media, true, false, false, true),
     ];
-    for (scene, has_diffuse, transmits) in scenes {
+    for (scene, has_diffuse, has_glossy, transmits, scatters_in_media) in scenes {
         let (film, stats) = render_aovs(scene, (48, 40), 16, Settings::default(), 2, aovs.clone());
         assert_eq!(stats.discarded, 0);
         let p = |aov: Aov| film.planes(aov);
         let (beauty, emission, albedo) = (p(Aov::Beauty), p(Aov::Emission), p(Aov::Albedo));
         let (direct, indirect) = (p(Aov::Direct), p(Aov::Indirect));
-        // The six light layers of LOBES (then come the colours).
-        let lobes: Vec<_> = LOBES[..6].iter().map(|&a| p(a)).collect();
+        // The eight light layers of LOBES (then come the colours).
+        let lobes: Vec<_> = LOBES[..8].iter().map(|&a| p(a)).collect();
         let colours = [Aov::DiffuseColor, Aov::GlossyColor, Aov::TransmissionColor].map(p);
         assert_layers_and_emission_make_beauty(
             "lobes + emission = beauty",
@@ -393,11 +405,14 @@ fn lobe_layers_and_emission_make_the_beauty() {
             &beauty,
         );
         let (mut glossy_light, mut diffuse_light, mut transmitted_light) = (0.0, 0.0, 0.0);
+        let mut medium_light = 0.0;
         for i in 0..beauty[0].len() {
             for c in 0..3 {
-                let direct_sum = lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i];
+                let direct_sum =
+                    lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i] + lobes[6][c][i];
                 assert_close("direct lobes = direct", direct[c][i], direct_sum);
-                let indirect_sum = lobes[1][c][i] + lobes[3][c][i] + lobes[5][c][i];
+                let indirect_sum =
+                    lobes[1][c][i] + lobes[3][c][i] + lobes[5][c][i] + lobes[7][c][i];
                 assert_close("indirect lobes = indirect", indirect[c][i], indirect_sum);
                 if !transmits {
                     assert!(
@@ -420,10 +435,13 @@ fn lobe_layers_and_emission_make_the_beauty() {
                 diffuse_light += lobes[0][c][i] + lobes[1][c][i];
                 glossy_light += lobes[2][c][i] + lobes[3][c][i];
                 transmitted_light += lobes[4][c][i] + lobes[5][c][i];
+                medium_light += lobes[6][c][i] + lobes[7][c][i];
             }
         }
-        assert!(glossy_light > 0.0 && (diffuse_light > 0.0) == has_diffuse);
+        assert_eq!(diffuse_light > 0.0, has_diffuse);
+        assert_eq!(glossy_light > 0.0, has_glossy);
         assert_eq!(transmitted_light > 0.0, transmits);
+        assert_eq!(medium_light > 0.0, scatters_in_media);
     }
 }
 

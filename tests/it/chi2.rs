@@ -95,6 +95,22 @@ fn ggx_visible_normals() {
 }
 
 #[test]
+fn henyey_greenstein_phase_function() {
+    use lucerna::medium::phase::HenyeyGreenstein;
+    let dir = Vec3::new(0.2, -0.3, 0.9).normalize();
+    for g in [-0.7f32, 0.0, 0.3, 0.9] {
+        let hg = HenyeyGreenstein::new(g);
+        let mut rng = Pcg32::new(11, (g * 100.0) as u64);
+        chi2::sphere(
+            &format!("Henyey-Greenstein g={g}"),
+            N,
+            |_| Some(hg.sample(dir, u2(&mut rng)).0),
+            |d| hg.eval(dir.dot(d)) as f64,
+        );
+    }
+}
+
+#[test]
 fn uniform_disk() {
     let mut rng = Pcg32::new(5, 0);
     chi2::plane(
@@ -1234,6 +1250,7 @@ fn guided_continuations_match_the_mixture_pdf() {
                     rr: 0.0,
                     bsdf: u2(&mut rng),
                     lobe: rng.next_f32(),
+                    medium: 0.0,
                 };
                 guided_sample(&bsdf, wo, &frame, &guide, &vs).map(|s| s.wi)
             },

@@ -3,8 +3,10 @@
 //! Each setting (each MIS heuristic, each Russian roulette mode, splitting fixed and learned, each
 //! light selection and light sampling strategy, each sampler, path guiding) renders the Cornell box, the
 //! MIS plates (also under a sun with an angular size), the indirect room, the glass box
-//! (smooth and rough glass, a thin pane) and the Cornell box lit by a textured screen (light
-//! samples that follow the texture, or uniform ones) at a small resolution; every 4×4-pixel block's mean
+//! (smooth and rough glass, a thin pane), the Cornell box lit by a textured screen (light
+//! samples that follow the texture, or uniform ones) and the Cornell box with a chromatic
+//! scattering cube (media: free flights, light samples and phase sampling in a medium,
+//! shadow rays through interfaces, spectral MIS) at a small resolution; every 4×4-pixel block's mean
 //! (per colour channel) is compared with the same block of a reference rendered with the
 //! default settings and another seed. Each render's `variance` layer (the variance of each
 //! pixel mean) gives the block mean's variance, so under "both estimators have the same
@@ -190,6 +192,11 @@ fn every_configuration_converges_to_the_same_image() {
             256,
         ),
         ("cornell+screen", cornell_with_a_screen(), 256),
+        (
+            "chromatic-cube",
+            ingest::load(&root.join("media/chromatic-cube.gltf"), &Default::default()).unwrap(),
+            256,
+        ),
     ];
     let blocks = (RESOLUTION.0 / BLOCK * RESOLUTION.1 / BLOCK * 3) as usize;
     let comparisons = scenes.len() * CONFIGURATIONS.len() * blocks;

@@ -196,6 +196,15 @@ fn plans_of_small_scenes_are_as_expected() {
         available
     );
     assert!(!plan_for(&plates, "albedo", PlanMode::Auto).kernel.packet);
+    // Participating media are the scalar kernel's alone, even where asked for lanes; clear
+    // glass volumes are not participating media.
+    let fog = shipped("scenes/media/fog-spot.gltf");
+    assert_eq!(SceneFeatures::of(&fog).participating_media, 1);
+    for mode in [PlanMode::Auto, PlanMode::Packet] {
+        assert!(!plan_for(&fog, "", mode).kernel.packet);
+    }
+    let glass = shipped("scenes/glass-box/glass-box.gltf");
+    assert_eq!(SceneFeatures::of(&glass).participating_media, 0);
     assert_eq!((beauty.light_layers, beauty.squares), (1, false));
     let albedo = plan_for(&scene, "albedo", PlanMode::Auto);
     assert!(albedo.kernel.first_hit_data && !albedo.kernel.routing && !albedo.kernel.packet);

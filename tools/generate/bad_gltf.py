@@ -165,6 +165,26 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna", "diffuse_roughness 2 must be in [0, 1]")
+    yield ("medium-negative-scattering.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface",
+                                                  "medium": {"scattering": [1.0, -2.0, 1.0]}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium", "absorption and scattering must be in [0, 1e8] per metre")
+    yield ("medium-density-1e30.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface", "medium": {"absorption": 1e30}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium", "absorption and scattering must be in [0, 1e8] per metre")
+    yield ("medium-anisotropy-one.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface",
+                                                  "medium": {"scattering": 1.0, "anisotropy": 1.0}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium.anisotropy", "1 must be in (-1, 1)")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

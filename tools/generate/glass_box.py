@@ -38,15 +38,16 @@ def glass(w, name, base, roughness, volume):
     return m
 
 
-def build():
-    w = GltfWriter("lucerna tools/generate/glass_box.py")
+def cornell(w, skip=("short_block", "tall_block")):
+    """The Cornell box's walls and light (metres, Lambertian) in `w`, without the parts named
+    in `skip`; its materials by name."""
     lambert = {"lucerna": {"bsdf": "lambert"}}
     colours = {"white": cb.WHITE, "red": cb.RED, "green": cb.GREEN}
     materials = {name: w.material(name, base=c, extras=lambert) for name, c in colours.items()}
     materials["light"] = w.material("light", base=cb.LIGHT_ALBEDO, emissive=cb.LIGHT_RADIANCE,
                                     double_sided=False, extras=lambert)
     for name, (mat, ref, mode, quads) in cb.QUADS.items():
-        if name.endswith("_block"):
+        if name in skip:
             continue
         positions, triangles = [], []
         for quad in quads:
@@ -55,6 +56,19 @@ def build():
             positions.extend(tuple(c * cb.MM for c in p) for p in quad)
             triangles += [(base, base + 1, base + 2), (base, base + 2, base + 3)]
         w.node(name=name, mesh=w.mesh(name, positions, triangles, materials[mat]))
+    return materials
+
+
+def cornell_camera(w):
+    """The Cornell box's camera."""
+    cam = w._list("cameras", {"name": "camera", "type": "perspective",
+                              "perspective": {"yfov": 0.6860514, "aspectRatio": 1.0, "znear": 0.01}})
+    w.node(name="camera", camera=cam, translation=[0.278, 0.273, -0.8], rotation=[0.0, 1.0, 0.0, 0.0])
+
+
+def build():
+    w = GltfWriter("lucerna tools/generate/glass_box.py")
+    cornell(w)
     centre, radius = SPHERE
     w.sphere("glass_sphere", centre, radius, glass(w, "smooth_glass", (1.0, 1.0, 1.0), 0.0, True), subdivisions=3)
     positions, triangles = box(*SLAB)
@@ -62,9 +76,7 @@ def build():
     w.node(name="glass_slab", mesh=w.mesh("glass_slab", positions, triangles, slab))
     pane = glass(w, "thin_glass", (1.0, 1.0, 1.0), 0.0, False)
     w.node(name="glass_pane", mesh=w.mesh("glass_pane", PANE, [(0, 1, 2), (0, 2, 3)], pane))
-    cam = w._list("cameras", {"name": "camera", "type": "perspective",
-                              "perspective": {"yfov": 0.6860514, "aspectRatio": 1.0, "znear": 0.01}})
-    w.node(name="camera", camera=cam, translation=[0.278, 0.273, -0.8], rotation=[0.0, 1.0, 0.0, 0.0])
+    cornell_camera(w)
     return w
 
 

@@ -54,16 +54,30 @@ def render_lucerna(scene, spp, seed, width, height, workdir):
     return image, header["lucerna/render_seconds"]
 
 
-def compare(spp, width, height, scene=CORNELL):
+def scene_file_of(scene, workdir, hard_spots=False):
+    """lucerna's scene file of `scene` in `workdir`, which both renderers then render; with
+    `hard_spots`, every spot light's inner cone widened to its outer one (a hard edge, the
+    falloff both renderers share; glTF cannot say it)."""
+    scene_file = Path(workdir) / "scene.lucerna"
+    lt.convert(scene, scene_file)
+    if hard_spots:
+        manifest = json.loads(scene_file.read_text())
+        for light in manifest["lights"]:
+            if spot := light["kind"].get("spot"):
+                spot["inner_cone"] = spot["outer_cone"]
+        scene_file.write_text(json.dumps(manifest))
+    return scene_file
+
+
+def compare(spp, width, height, scene=CORNELL, hard_spots=False):
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     with tempfile.TemporaryDirectory() as workdir:
-        scene_file = Path(workdir) / "scene.lucerna"
-        lt.convert(scene, scene_file)
+        scene_file = scene_file_of(scene, workdir, hard_spots)
         exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
         mitsuba_a, seconds_a = render_mitsuba(exported, spp, 1)
         mitsuba_b, seconds_b = render_mitsuba(exported, spp, 2)
-        lucerna_a, lucerna_seconds = render_lucerna(scene, spp, 1, width, height, workdir)
+        lucerna_a, lucerna_seconds = render_lucerna(scene_file, spp, 1, width, height, workdir)
     result = {
         "spp": spp,
         "resolution": [width, height],
@@ -78,19 +92,18 @@ def compare(spp, width, height, scene=CORNELL):
     return result
 
 
-def mean_agreement(spp, width, height, seeds, scene=CORNELL):
+def mean_agreement(spp, width, height, seeds, scene=CORNELL, hard_spots=False):
     """Per renderer: the mean over `seeds` renders of the off-light pixel mean, its standard
     error, and the relative difference (lucerna / Mitsuba - 1) with its standard error."""
     import mitsuba as mi
     mi.set_variant("scalar_rgb")
     means = {"lucerna": [], "mitsuba": []}
     with tempfile.TemporaryDirectory() as workdir:
-        scene_file = Path(workdir) / "scene.lucerna"
-        lt.convert(scene, scene_file)
+        scene_file = scene_file_of(scene, workdir, hard_spots)
         exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
         for s in range(seeds):
             mitsuba, _ = render_mitsuba(exported, spp, 1000 + s)
-            lucerna, _ = render_lucerna(scene, spp, 1000 + s, width, height, workdir)
+            lucerna, _ = render_lucerna(scene_file, spp, 1000 + s, width, height, workdir)
             off_light = mitsuba.max(axis=2) < 1.0
             means["mitsuba"].append(mitsuba[off_light].mean(axis=0))
             means["lucerna"].append(lucerna[off_light].mean(axis=0))
@@ -112,10 +125,12 @@ def main():
     parser.add_argument("--resolution", default="256x256", help="WxH")
     parser.add_argument("--json", help="also write the figures to this file")
     parser.add_argument("--seeds", type=int, help="compare the image means over this many seeds")
+    parser.add_argument("--hard-spots", action="store_true",
+                        help="make spot lights hard-edged in both renderers (see scene_file_of)")
     args = parser.parse_args()
     width, height = map(int, args.resolution.split("x"))
     if args.seeds:
-        r = mean_agreement(args.spp, width, height, args.seeds, args.scene)
+        r = mean_agreement(args.spp, width, height, args.seeds, args.scene, args.hard_spots)
         print(f"{args.scene} {width}x{height}, {args.spp} spp, {args.seeds} seeds: mean of the off-light pixels")
         print(f"  lucerna {np.round(r['mean_lucerna'], 5)} ± {np.round(r['se_lucerna'], 5)}")
         print(f"  Mitsuba {np.round(r['mean_mitsuba'], 5)} ± {np.round(r['se_mitsuba'], 5)}")
@@ -124,7 +139,7 @@ def main():
         if args.json:
             Path(args.json).write_text(json.dumps(r, indent=1) + "\n")
         return
-    r = compare(args.spp, width, height, args.scene)
+    r = compare(args.spp, width, height, args.scene, args.hard_spots)
     print(f"{args.scene} {width}x{height}, {args.spp} spp, box filter")
     print(f"  mean radiance   lucerna {np.round(r['mean_lucerna'], 5)}   Mitsuba {np.round(r['mean_mitsuba'], 5)}")
     print(f"  relMSE(lucerna, Mitsuba A)   = {r['relmse_lucerna_vs_mitsuba']:.6g}")

@@ -13,9 +13,15 @@ names the element (never a silent approximation):
   -> `dielectric` (smooth) or `roughdielectric` (GGX, alpha = roughness^2, visible-normal
   sampling), a thin wall -> `thindielectric` (smooth only); int_ior = ior, ext_ior = 1, the
   base colour as `specular_transmittance` (both tint each crossing).
+- media: the homogeneous medium inside a material's volume -> a `homogeneous` interior
+  medium (sigma_t = absorption + scattering, albedo = scattering / sigma_t, `hg` phase);
+  an interface (`model` interface) -> `null`; any medium makes the integrator `volpath`
+  (`volpathmis` where a medium's extinction differs by channel);
 - emission -> an `area` emitter (one-sided, on the front face, like lucerna);
 - meshes (with their shading normals if any) per instance, analytic spheres;
-- point and directional lights, a constant environment;
+- point and directional lights, hard-edged spot lights (inner cone = outer cone: Mitsuba's
+  spot falls off linearly in angle, lucerna's glTF ramp quadratically in cosine), a
+  constant environment;
 - a pinhole perspective camera, box pixel filter.
 
 One difference remains by construction: lucerna makes the back of a one-sided surface
@@ -79,8 +85,6 @@ def glass(material, element):
             or specular.get("color", [1, 1, 1]) != [1, 1, 1] or material.get("transmission_texture")):
         raise Unsupported(f"{element}: only pure glass (transmission 1, metallic 0, no other layer) is exported")
     volume = material.get("volume")
-    if volume and any(volume["absorption"]):
-        raise Unsupported(f"{element}: absorbing volumes are not exported")
     alpha = material["roughness"] ** 2
     tint = material.get("transmission_color") or material["base_color"][:3]
     common = {"int_ior": material["ior"], "ext_ior": 1.0,
@@ -94,7 +98,27 @@ def glass(material, element):
     return {"type": "roughdielectric", "distribution": "ggx", "alpha": alpha, "sample_visible": True, **common}
 
 
+def medium(material):
+    """Mitsuba's interior medium of a lucerna material's volume (None: no volume, or clear)."""
+    volume = material.get("volume")
+    if not volume:
+        return None
+    absorption = np.array(volume["absorption"], dtype=np.float64)
+    scattering = np.array(volume.get("scattering", [0.0, 0.0, 0.0]), dtype=np.float64)
+    sigma_t = absorption + scattering
+    if not sigma_t.any():
+        return None
+    albedo = np.divide(scattering, sigma_t, out=np.zeros(3), where=sigma_t > 0)
+    # Mitsuba reads an RGB sigma_t as a reflectance (at most 1): the peak goes to `scale`.
+    peak = float(sigma_t.max())
+    return {"type": "homogeneous", "scale": peak, "sigma_t": {"type": "rgb", "value": (sigma_t / peak).tolist()},
+            "albedo": {"type": "rgb", "value": albedo.tolist()},
+            "phase": {"type": "hg", "g": float(volume.get("anisotropy", 0.0))}}
+
+
 def bsdf(material, element):
+    if material["model"] == "interface":
+        return {"type": "null"}
     if any(material.get(k) for k in ("base_color_texture", "metallic_roughness_texture", "normal_texture",
                                      "emissive_texture", "transmission_texture", "clearcoat_texture")):
         raise Unsupported(f"{element}: textures are not exported")
@@ -164,9 +188,22 @@ def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=Non
     written as PLY files into `workdir`, which must outlive the loaded scene's creation."""
     import mitsuba as mi
     manifest, buffer = read_scene_file(scene_file)
-    scene = {"type": "scene", "integrator": {"type": "path", "max_depth": max_depth},
-             "sensor": camera(manifest, width, height, camera_name, sampler)}
     materials = manifest["materials"]
+    media = [m for m in map(medium, materials) if m]
+    # Mitsuba's volpath samples distances in one channel without MIS over the channels: in
+    # a medium whose extinction differs by channel its estimate is unbiased but so
+    # heavy-tailed that it reads several per cent dark at thousands of samples; volpathmis
+    # (spectral MIS, Miller et al. 2019) is the exact peer there, as lucerna's channel MIS.
+    chromatic = any(len(set(m["sigma_t"]["value"])) > 1 for m in media)
+    integrator = ("volpathmis" if chromatic else "volpath") if media else "path"
+    scene = {"type": "scene", "integrator": {"type": integrator, "max_depth": max_depth},
+             "sensor": camera(manifest, width, height, camera_name, sampler)}
+
+    def bounded(shape, material):
+        """The shape with the medium its material's volume holds, if any."""
+        if m := medium(material):
+            shape["interior"] = m
+        return shape
     plys = {}
     for i, inst in enumerate(manifest["instances"]):
         mesh = manifest["meshes"][inst["mesh"]]
@@ -183,14 +220,14 @@ def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=Non
                  "bsdf": bsdf(material, f"materials[{mesh['material']}] ({material['name']})")}
         if e := emitter(material):
             shape["emitter"] = e
-        scene[f"instance_{i}"] = shape
+        scene[f"instance_{i}"] = bounded(shape, material)
     for i, sphere in enumerate(manifest["spheres"]):
         material = materials[sphere["material"]]
         shape = {"type": "sphere", "center": sphere["centre"], "radius": sphere["radius"],
                  "bsdf": bsdf(material, f"materials[{sphere['material']}] ({material['name']})")}
         if e := emitter(material):
             shape["emitter"] = e
-        scene[f"sphere_{i}"] = shape
+        scene[f"sphere_{i}"] = bounded(shape, material)
     for key in ("disks", "cylinders"):
         if manifest.get(key):
             raise Unsupported(f"{key}: analytic disks and cylinders are not exported to Mitsuba")
@@ -199,6 +236,17 @@ def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=Non
         if kind == "point":
             scene[f"light_{i}"] = {"type": "point", "position": values["position"],
                                    "intensity": {"type": "rgb", "value": values["intensity"]}}
+        elif kind == "spot":
+            if values["inner_cone"] != values["outer_cone"]:
+                raise Unsupported(f"lights[{i}]: only hard-edged spots (inner = outer cone) fall off alike")
+            position = np.array(values["position"], dtype=np.float64)
+            direction = np.array(values["direction"], dtype=np.float64)
+            up = [0.0, 1.0, 0.0] if abs(direction[1]) < 0.9 * np.linalg.norm(direction) else [1.0, 0.0, 0.0]
+            angle = math.degrees(values["outer_cone"])
+            scene[f"light_{i}"] = {"type": "spot", "cutoff_angle": angle, "beam_width": angle,
+                                   "intensity": {"type": "rgb", "value": values["intensity"]},
+                                   "to_world": mi.ScalarTransform4f().look_at(
+                                       origin=position.tolist(), target=(position + direction).tolist(), up=up)}
         elif kind == "directional" and values.get("angle", 0.0) > 0.0:
             raise Unsupported(f"lights[{i}]: Mitsuba's directional light has no angular size")
         elif kind == "directional":

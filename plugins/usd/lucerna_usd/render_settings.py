@@ -47,6 +47,9 @@ AOV_NAMES = {
     "diffuse_direct": "diffuse_direct", "diffuse_indirect": "diffuse_indirect",
     "glossy_direct": "glossy_direct", "glossy_indirect": "glossy_indirect",
     "transmission_direct": "transmission_direct", "transmission_indirect": "transmission_indirect",
+    "volume_direct": "volume_direct", "volume_indirect": "volume_indirect",
+    "volumedirect": "volume_direct", "volumeindirect": "volume_indirect",
+    "volumedir": "volume_direct", "volumeind": "volume_indirect",
     "lpe:cdl": "diffuse_direct", "lpe:cd.+l": "diffuse_indirect", "lpe:c<rd>l": "diffuse_direct",
     "lpe:c<rd>.+l": "diffuse_indirect", "lpe:c<rs>l": "glossy_direct", "lpe:c<rs>.+l": "glossy_indirect",
     "lpe:c<t.>.*l": "transmission_direct",
@@ -62,6 +65,7 @@ LUCERNA_AOVS = {
     "indirect_nee", "indirect_bsdf", "direct_nee_unweighted", "direct_bsdf_unweighted", "albedo",
     "normal", "depth", "position", "spp", "variance", "diffuse_direct", "diffuse_indirect",
     "glossy_direct", "glossy_indirect", "transmission_direct", "transmission_indirect",
+    "volume_direct", "volume_indirect",
     "diffuse_color", "glossy_color", "transmission_color", "crypto", "lightgroups",
 }
 _DEPTH_AOV = re.compile(r"^(nee|bsdf)_d([1-9]|1[0-6])$")

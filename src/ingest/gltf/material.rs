@@ -6,7 +6,7 @@
 use super::Importer;
 use super::document::SUPPORTED_EXTENSIONS;
 use super::texture::transform_from_json;
-use super::{LucernaExtras, SpecularValue};
+use super::{LucernaExtras, MediumExtras, SpecularValue};
 use crate::error::Result;
 use crate::scene::{self, AlphaMode, BsdfModel, Material, TextureRef};
 use glam::{Vec3, Vec4};
@@ -141,7 +141,8 @@ impl<'a> Importer<'a> {
                 return Err(self.err(element, format!("{key} is outside its range (factors are in [0, 1], strengths and cutoffs not negative)")));
             }
         }
-        let (model, diffuse_roughness) = self.lucerna_extras(m, element)?;
+        let extras = self.lucerna_extras(m, element)?;
+        let (model, diffuse_roughness) = (extras.model, extras.diffuse_roughness);
         let base_color_texture = self.info_ref(pbr.base_color_texture())?;
         let metallic_roughness_texture = self.info_ref(pbr.metallic_roughness_texture())?;
         let normal = m.normal_texture();
@@ -205,6 +206,20 @@ impl<'a> Importer<'a> {
                 .unwrap_or_default(),
         };
         self.material_extensions(&extensions, &mut material)?;
+        if let Some(medium) = extras.medium {
+            // The extension's absorption stays where the medium gives none.
+            let absorption = material.volume.map_or(Vec3::ZERO, |v| v.absorption);
+            material.volume = Some(scene::Volume {
+                absorption: medium.absorption.map_or(absorption, |a| a.rgb()),
+                scattering: medium.scattering.map_or(Vec3::ZERO, |s| s.rgb()),
+                anisotropy: medium.anisotropy,
+            });
+        } else if model == BsdfModel::Interface && material.volume.is_none() {
+            self.warn(
+                element,
+                "an interface without extras.lucerna.medium bounds nothing and is invisible",
+            );
+        }
         for name in extensions.json.keys() {
             if !SUPPORTED_EXTENSIONS.contains(name) {
                 self.unsupported_material_extensions
@@ -265,9 +280,7 @@ impl<'a> Importer<'a> {
                 } else {
                     Vec3::ZERO
                 };
-                material.volume = Some(scene::Volume {
-                    absorption: absorption.max(Vec3::ZERO),
-                });
+                material.volume = Some(scene::Volume::absorbing(absorption.max(Vec3::ZERO)));
             }
         }
         if let Some(e) = ext.get("KHR_materials_specular") {
@@ -424,21 +437,22 @@ impl<'a> Importer<'a> {
         }
     }
 
-    /// The BSDF model and the diffuse roughness from `extras.lucerna` (default: the glTF
-    /// BRDF, a Lambertian base).
-    pub(super) fn lucerna_extras(
-        &self,
-        m: &gltf::Material,
-        element: &str,
-    ) -> Result<(BsdfModel, f32)> {
+    /// The BSDF model, the diffuse roughness and the medium from `extras.lucerna` (default:
+    /// the glTF BRDF, a Lambertian base, no medium).
+    pub(super) fn lucerna_extras(&self, m: &gltf::Material, element: &str) -> Result<Extras> {
+        let none = Extras {
+            model: BsdfModel::GltfPbr,
+            diffuse_roughness: 0.0,
+            medium: None,
+        };
         let Some(raw) = m.extras() else {
-            return Ok((BsdfModel::GltfPbr, 0.0));
+            return Ok(none);
         };
         let e = format!("{element}.extras.lucerna");
         let value: serde_json::Value =
             serde_json::from_str(raw.get()).map_err(|err| self.err(&e, err.to_string()))?;
         let Some(section) = value.get("lucerna") else {
-            return Ok((BsdfModel::GltfPbr, 0.0));
+            return Ok(none);
         };
         let extras: LucernaExtras =
             serde_json::from_value(section.clone()).map_err(|err| self.err(&e, err.to_string()))?;
@@ -449,7 +463,33 @@ impl<'a> Importer<'a> {
                 format!("diffuse_roughness {diffuse_roughness} must be in [0, 1]"),
             ));
         }
-        Ok((self.bsdf_of(&extras, &e)?, diffuse_roughness))
+        if let Some(medium) = &extras.medium {
+            let coefficient = |v: &Option<SpecularValue>| {
+                v.as_ref().is_none_or(|v| {
+                    let c = v.rgb();
+                    c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= MAX_COEFFICIENT
+                })
+            };
+            if !(coefficient(&medium.absorption) && coefficient(&medium.scattering)) {
+                return Err(self.err(
+                    format!("{e}.medium"),
+                    format!(
+                        "absorption and scattering must be in [0, {MAX_COEFFICIENT:e}] per metre"
+                    ),
+                ));
+            }
+            if !(medium.anisotropy.abs() < 1.0) {
+                return Err(self.err(
+                    format!("{e}.medium.anisotropy"),
+                    format!("{} must be in (-1, 1)", medium.anisotropy),
+                ));
+            }
+        }
+        Ok(Extras {
+            model: self.bsdf_of(&extras, &e)?,
+            diffuse_roughness,
+            medium: extras.medium,
+        })
     }
 
     /// The BSDF model `extras` name (`e`: their element, for messages).
@@ -457,6 +497,7 @@ impl<'a> Importer<'a> {
         match extras.bsdf.as_str() {
             "gltf" => Ok(BsdfModel::GltfPbr),
             "lambert" => Ok(BsdfModel::Lambert),
+            "interface" => Ok(BsdfModel::Interface),
             "phong" => {
                 let exponent = extras
                     .exponent
@@ -479,11 +520,22 @@ impl<'a> Importer<'a> {
             }
             other => Err(self.err(
                 e,
-                format!("unknown bsdf {other:?} (expected gltf, lambert or phong)"),
+                format!("unknown bsdf {other:?} (expected gltf, lambert, phong or interface)"),
             )),
         }
     }
 }
+
+/// What a material's `extras.lucerna` says.
+pub(super) struct Extras {
+    model: BsdfModel,
+    diffuse_roughness: f32,
+    medium: Option<MediumExtras>,
+}
+
+/// The largest absorption or scattering coefficient accepted (per metre): light crosses
+/// 10 nm of such a medium on average, denser than any real one.
+const MAX_COEFFICIENT: f32 = 1e8;
 
 /// A material's `extensions` object, for reading the extensions that the `gltf` crate does
 /// not type.

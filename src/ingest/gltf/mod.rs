@@ -167,6 +167,29 @@ pub(super) struct LucernaExtras {
     specular: Option<SpecularValue>,
     /// The diffuse base's roughness in [0, 1] (OpenPBR's EON), which glTF lacks.
     diffuse_roughness: Option<f32>,
+    /// The medium inside the material's closed surface (per metre), which glTF lacks.
+    medium: Option<MediumExtras>,
+}
+
+/// `extras.lucerna.medium`: a homogeneous medium's coefficients per metre (a grey number
+/// or an RGB triple each) and its Henyey-Greenstein anisotropy.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct MediumExtras {
+    absorption: Option<SpecularValue>,
+    #[serde(default)]
+    scattering: Option<SpecularValue>,
+    #[serde(default)]
+    anisotropy: f32,
+}
+
+impl SpecularValue {
+    pub(super) fn rgb(&self) -> glam::Vec3 {
+        match *self {
+            Self::Grey(g) => glam::Vec3::splat(g),
+            Self::Rgb(c) => glam::Vec3::from_array(c),
+        }
+    }
 }
 
 fn gltf_bsdf() -> String {

@@ -91,6 +91,7 @@ mod tests {
                 rr: 0.0,
                 bsdf: Vec2::new(rng.next_f32(), rng.next_f32()),
                 lobe: rng.next_f32(),
+                medium: 0.0,
             };
             if let Some(s) = guided_sample(&bsdf, wo, &frame, &guide, &vs) {
                 sum += s.weight;

@@ -8,7 +8,7 @@ use super::PacketTracer;
 use super::shading::{Dim, ScalarLightSamples, Vertices};
 use super::state::{PacketBuffers, PathLanes};
 use super::weights::mis_weights;
-use crate::geometry::ray::{Ray, RayLanes};
+use crate::geometry::ray::RayLanes;
 use crate::geometry::triangle::Lanes;
 use crate::sampling::sampler::{SamplerKind, SplitKind, first_split_sobol_lanes, sobol_4d_lanes};
 use crate::simd::{F8, LANES, M8, U8, V3};
@@ -242,14 +242,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         (out.wi[lane], out.radiance[lane]) = (ls.wi, ls.radiance);
         out.p_light[lane] = p_select * ls.pdf;
         let origin = v.origin.lane(lane);
-        out.shadow[lane] = match ls.target {
-            Some(target) => Ray {
-                origin,
-                dir: target - origin,
-                tmax: 1.0,
-            },
-            None => Ray::new(origin, ls.wi),
-        };
+        out.shadow[lane] = ls.shadow_ray(origin);
         if ls.delta {
             out.delta |= 1 << lane;
         }

@@ -215,6 +215,9 @@ impl PathLanes {
                 width: self.cone_width.lane(lane),
                 spread: self.cone_spread.lane(lane),
             },
+            // Lanes record their first hits; a path handed over at the camera's first
+            // surface has not yet.
+            first_hit_recorded: self.depth.lane(lane) > 0,
         }
     }
 }

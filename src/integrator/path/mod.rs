@@ -16,7 +16,11 @@
 //! (each from the side its shadow ray leaves, and only where the geometric and shading
 //! normals agree on the side, so that no light leaks through a surface); a path that
 //! refracts enters or leaves a volume (`media`), whose absorption weighs every segment it
-//! travels inside. Shadow rays stop at glass, except at filters: a smooth thin wall's
+//! travels inside; where the volume's medium scatters, the path may scatter inside it
+//! before it reaches the next surface (`medium`: free flights, light samples and phase
+//! sampling at medium vertices). Interfaces around media are filters that enter or leave
+//! their medium when crossed, and the camera sees through them (its first surface, for
+//! data layers and coverage, is the first that is not an interface). Shadow rays stop at glass, except at filters: a smooth thin wall's
 //! straight-through transmission (a window pane) does not bend light, so a shadow ray can
 //! cross it exactly, carrying its transmittance (`World::transmittance`). For the two
 //! estimators of light through a filter to agree, a path that crosses a filter by its
@@ -24,6 +28,8 @@
 //! vertex, its densities) carry on, and the light it then finds is weighed by MIS against
 //! the previous vertex's light samples, which crossed the same filter. It still takes new
 //! random numbers (`PathState::vertex`).
+
+mod medium;
 
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
 use super::estimator::{
@@ -43,8 +49,9 @@ use crate::geometry::Hit;
 use crate::geometry::cone::RayCone;
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
+use crate::medium::Homogeneous;
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
-use crate::scene::Material;
+use crate::scene::{BsdfModel, Material};
 use crate::world::{Interaction, World};
 use glam::{Vec2, Vec3};
 
@@ -117,6 +124,27 @@ impl Vertex<'_> {
             self.origin
         }
     }
+}
+
+/// A scattering event inside a medium: the medium, where, the direction the light travelled
+/// (unit) and how far from the ray's origin (render space).
+struct MediumVertex<'m> {
+    medium: &'m Homogeneous,
+    p: Vec3,
+    dir: Vec3,
+    arrived: f32,
+}
+
+/// What became of a path along a ray inside media.
+enum Segment {
+    /// The innermost medium does not scatter (its absorption is still to be applied).
+    Clear,
+    /// The light crossed the scattering medium to the ray's end (the weight applied).
+    Passed,
+    /// It scattered in the medium and goes on along this ray (the path state updated).
+    Scattered(Ray),
+    /// The path ended in the medium.
+    Ended,
 }
 
 /// How a path continues past a vertex.
@@ -333,6 +361,20 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 rays.closest += 1;
                 world.intersect(&ray)
             });
+            // The way to the hit through a medium that scatters: the light may interact
+            // before it (see `medium`). Only in scenes with participating media.
+            let mut flown = false;
+            if world.surfaces.participating && !path.media.is_empty() {
+                match self.through_medium(&ray, hit.as_ref(), &mut path, sampler, walk, rec, rays) {
+                    Segment::Clear => {}
+                    Segment::Passed => flown = true,
+                    Segment::Scattered(next) => {
+                        ray = next;
+                        continue;
+                    }
+                    Segment::Ended => return,
+                }
+            }
             let Some(hit) = hit else {
                 if EMITTERS {
                     emitters_at_infinity(world, ray.dir, |e| {
@@ -342,7 +384,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 return;
             };
             let arrived = hit.t * ray.dir.length();
-            if !path.media.is_empty() {
+            if !path.media.is_empty() && !flown {
                 path.beta *= path.media.transmittance(&world.surfaces, arrived);
             }
             // After a rough bounce, footprints are circles (one texture probe).
@@ -364,7 +406,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             let mut storage = BsdfStorage::default();
             let bsdf = material::bsdf_in(m, &surfaces.textures, &it.attrs, &ctx, &mut storage);
             let wo = it.frame.to_local(-ray.dir);
-            if path.vertex == 0 && path.branch == 0 {
+            // The camera's first surface; an interface around a medium is not one.
+            if !path.first_hit_recorded && path.branch == 0 && m.model != BsdfModel::Interface {
+                path.first_hit_recorded = true;
                 rec.first_hit(DATA.then(|| {
                     let lobe_albedo = bsdf.albedo_lobes(wo);
                     FirstHit {
@@ -601,6 +645,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 beta,
                 vertex: path.vertex + 1,
                 branch,
+                // Into or out of the medium an interface bounds.
+                media: path.media.beyond(it, v.material, crossing),
                 crossed: path.crossed + v.arrived,
                 cone: RayCone {
                     width: path.cone.width_at(v.arrived),
@@ -670,6 +716,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 bs.is_delta(),
                 self.world.footprints.lobe_scale,
             ),
+            first_hit_recorded: true,
         };
         Some((Ray::new(origin, wi), next))
     }
@@ -713,24 +760,20 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             return 0;
         }
         let origin = v.origin(below);
-        let shadow = match ls.target {
-            Some(target) => Ray {
-                origin,
-                dir: target - origin,
-                tmax: 1.0,
-            },
-            None => Ray::new(origin, ls.wi),
+        let shadow = ls.shadow_ray(origin);
+        let media = path.media.beyond(it, v.material, below);
+        let mut traced = 1;
+        let through = if world.surfaces.participating {
+            traced = 0;
+            media.shadow_transmittance(world, &shadow, &mut traced)
+        } else {
+            let length = ls.target.map_or(f32::INFINITY, |t| (t - origin).length());
+            world.transmittance(&shadow) * media.transmittance(&world.surfaces, length)
         };
-        let through = world.transmittance(&shadow);
         if through == Vec3::ZERO {
-            return 1;
+            return traced;
         }
         radiance *= through;
-        let media = path.media.beyond(it, v.material, below);
-        if !media.is_empty() {
-            let length = ls.target.map_or(f32::INFINITY, |t| (t - origin).length());
-            radiance *= media.transmittance(&world.surfaces, length);
-        }
         let p_light = p_select * ls.pdf;
         // BSDF sampling cannot reach a delta light (nor any light, in a kernel without
         // emitter lookups): its density there is 0, and the light sample's weight 1.
@@ -749,7 +792,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             p_light * n_nee as f32,
             p_bsdf * n_bsdf as f32,
         );
-        1
+        traced
     }
 }
 
