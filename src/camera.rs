@@ -198,6 +198,12 @@ impl Camera {
         self.height
     }
 
+    /// Where the camera is (render space): the pinhole, or the centre of the lens or of an
+    /// orthographic view.
+    pub fn origin(&self) -> Vec3 {
+        self.origin
+    }
+
     /// The primary ray through film position `film` (pixels, (0, 0) = top-left corner),
     /// with lens sample `lens` for depth of field, limited to the clipping range. The
     /// direction is unit length.

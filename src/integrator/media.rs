@@ -1,7 +1,7 @@
 //! The volumes a path is inside, for the medium that absorbs and scatters along its rays
 //! (`crate::medium`) and for the index of refraction on the far side of an interface.
 //!
-//! The rule (documented in the README): a path keeps the volumes it has entered, innermost
+//! The rule (docs/glass.md, docs/media.md): a path keeps the volumes it has entered, innermost
 //! last, up to [`MAX_NESTED`]. Refracting into the front of a volume's boundary enters it,
 //! as does crossing the front of an interface (a boundary that does not scatter);
 //! refracting or crossing out through the back of a boundary leaves that volume, wherever
@@ -9,9 +9,11 @@
 //! innermost volume's medium absorbs and scatters (shadow rays too, through interfaces:
 //! [`Media::shadow_transmittance`]). At a boundary, the index outside it is the innermost
 //! other refracting volume's (1, air, when there is none; an interface has no index), so
-//! that water inside a glass refracts by 1.33 / 1.5 where it meets the glass. A path that starts inside a volume (a camera in the water) knows
-//! nothing of it until it leaves through a back face: it then sees air outside, which is
-//! what such scenes usually mean. Reflection changes nothing; thin walls bound no volume.
+//! that water inside a glass refracts by 1.33 / 1.5 where it meets the glass. A path that
+//! starts inside a glass volume (a camera in the water) knows nothing of it until it leaves
+//! through a back face: it then sees air outside, which is what such scenes usually mean; a
+//! camera inside media behind interfaces starts in them ([`Media::around`]). Reflection
+//! changes nothing; thin walls bound no volume.
 
 use crate::geometry::ray::{Ray, offset_ray_origin};
 use crate::medium::{Flight, Homogeneous};
@@ -141,6 +143,45 @@ impl Media {
     #[inline]
     pub(crate) fn medium<'s>(&self, surfaces: &'s Surfaces) -> Option<&'s Homogeneous> {
         self.innermost().and_then(|m| surfaces.medium(m))
+    }
+
+    /// The media of interfaces that contain point `p`, innermost last: a ray from `p` to
+    /// infinity crosses each of their boundaries from the inside first (a back face met
+    /// before the front face it pairs with). Where a path starts, a camera inside fog.
+    /// Glass volumes keep their rule (a camera in water starts outside it).
+    pub(crate) fn around(world: &World, p: Vec3) -> Self {
+        // A direction unlikely to graze edges of axis-aligned boxes.
+        let dir = Vec3::new(0.5377, 0.6829, 0.4943).normalize();
+        let mut entered: Vec<u32> = Vec::new();
+        let mut inside: Vec<u32> = Vec::new();
+        let mut ray = Ray::new(p, dir);
+        for _ in 0..MAX_SHADOW_CROSSINGS {
+            let Some(hit) = world.intersect(&ray) else {
+                break;
+            };
+            let it = world.interaction(&ray, &hit);
+            let m = &world.surfaces.materials[it.material as usize];
+            if m.model == BsdfModel::Interface && m.volume.is_some() {
+                if it.front {
+                    entered.push(it.material);
+                } else if let Some(i) = entered.iter().rposition(|&e| e == it.material) {
+                    entered.remove(i);
+                } else {
+                    inside.push(it.material);
+                }
+            }
+            let beyond = if ray.dir.dot(it.ng) > 0.0 {
+                it.ng
+            } else {
+                -it.ng
+            };
+            ray = Ray::new(offset_ray_origin(it.p, beyond), dir);
+        }
+        // The first boundary left is the innermost volume.
+        inside
+            .iter()
+            .rev()
+            .fold(Self::EMPTY, |media, &m| media.crossed(m, true))
     }
 
     /// The index of refraction outside the boundary of `it`'s volume (1 where it bounds

@@ -408,8 +408,7 @@ fn lobe_layers_and_emission_make_the_beauty() {
         let mut medium_light = 0.0;
         for i in 0..beauty[0].len() {
             for c in 0..3 {
-                let direct_sum =
-                    lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i] + lobes[6][c][i];
+                let direct_sum = lobes[0][c][i] + lobes[2][c][i] + lobes[4][c][i] + lobes[6][c][i];
                 assert_close("direct lobes = direct", direct[c][i], direct_sum);
                 let indirect_sum =
                     lobes[1][c][i] + lobes[3][c][i] + lobes[5][c][i] + lobes[7][c][i];

@@ -422,6 +422,68 @@ fn absorbing_medium_behind_an_interface_transmits_beer_lambert() {
     }
 }
 
+/// A camera inside a medium is in it from the start (`Media::around`): inside an absorbing
+/// cube it sees the environment through the medium between it and the wall, Beer-Lambert's
+/// exactly; inside a cube of scattering medium that does not absorb, in a white furnace,
+/// it sees 1 everywhere.
+#[test]
+fn a_camera_inside_a_medium_starts_in_it() {
+    let sigma = (2.0f32).ln() / 1.5;
+    let cube = DMat4::from_scale(DVec3::splat(2.0));
+    // At z = 0.5 looking down -z: every ray crosses 1.5 of the medium to the wall at z = -1.
+    let camera = ortho_camera(DVec3::new(0.0, 0.0, 0.5), 0.5);
+    let s = scene(
+        vec![(lucerna_test_cube(), cube)],
+        medium(Vec3::new(sigma, 2.0 * sigma, 0.0), Vec3::ZERO, 0.0),
+        Vec3::ONE,
+        camera.clone(),
+    );
+    let (film, _) = render(s, (8, 8), 4, settings(), 2);
+    let beauty = film.planes(Aov::Beauty);
+    let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
+    for (i, ((&r, &g), &b)) in pixels.enumerate() {
+        for (value, expected) in [(r, 0.5), (g, 0.25), (b, 1.0)] {
+            assert!(
+                (value - expected).abs() < 1e-4,
+                "pixel {i} = {:?}",
+                [r, g, b]
+            );
+        }
+    }
+    let s = scene(
+        vec![(lucerna_test_cube(), cube)],
+        medium(Vec3::ZERO, Vec3::new(0.5, 1.0, 2.0), 0.3),
+        Vec3::ONE,
+        camera,
+    );
+    let (film, _) = render(s, (16, 16), 64, without_roulette(), 2);
+    for c in 0..3 {
+        let (m, se) = mean_and_error(&film, c, |_| true);
+        assert!(
+            (m - 1.0).abs() <= 4.5 * se + 1e-3,
+            "inside the medium: {m} ± {se}"
+        );
+        assert!(se > 0.0, "the medium scatters what the camera sees");
+    }
+}
+
+/// A medium too dense for floats to step through (scattering 1e30 per unit, albedo 1:
+/// every free flight ends where it starts) still ends its paths (the roulette's cap after
+/// a few bounces, whatever the throughput) and gives no NaN: no hang, no discarded sample.
+#[test]
+fn a_medium_too_dense_to_step_through_ends_its_paths() {
+    let s = scene(
+        vec![(icosphere(2), DMat4::IDENTITY)],
+        medium(Vec3::ZERO, Vec3::splat(1e30), 0.0),
+        Vec3::ONE,
+        ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
+    );
+    let (film, stats) = render(s, (16, 16), 16, settings(), 2);
+    assert_eq!(stats.discarded, 0);
+    let beauty = film.planes(Aov::Beauty);
+    assert!(beauty.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+}
+
 /// A closed unit cube centred on the origin (12 outward-facing triangles).
 fn lucerna_test_cube() -> lucerna::scene::Mesh {
     let v: Vec<Vec3> = (0..8)

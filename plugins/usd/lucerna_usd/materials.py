@@ -231,6 +231,9 @@ class MaterialConverter:
                 out["transmission_color"] = [min(max(float(c), 0.0), 1.0) for c in surface.transmission_color]
             if not surface.thin_walled and surface.absorption is not None:
                 out["volume"] = {"absorption": [max(float(c), 0.0) for c in surface.absorption]}
+                if surface.scattering is not None:
+                    out["volume"]["scattering"] = [max(float(c), 0.0) for c in surface.scattering]
+                    out["volume"]["anisotropy"] = float(surface.medium_anisotropy)
 
         # Metallic and roughness: G and B of one texture.
         mk, metallic = scalar(surface.metallic, "metallic", 0.0)

@@ -70,6 +70,8 @@ class Surface:
         self.transmission = ("value", 0.0)
         self.transmission_color = None    # None: the base colour tints (glTF's rule)
         self.absorption = None            # per unit length inside a volume
+        self.scattering = None            # per unit length inside a volume (a medium)
+        self.medium_anisotropy = 0.0      # its Henyey-Greenstein mean cosine
         self.thin_walled = False
         self.coat = 0.0
         self.coat_roughness = 0.0
@@ -140,8 +142,11 @@ class Reader:
             return NormalMap(value.affine(2.0, -1.0) or value, 1.0)
         return None
 
-    def _transmission(self, surface, weight, color, depth, thin, material):
-        """Transmission weight, colour and depth of the Standard Surface / OpenPBR kind."""
+    def _transmission(self, surface, weight, color, depth, thin, material, scatter=None, anisotropy=0.0):
+        """Transmission weight, colour, depth and interior scattering of the Standard Surface
+        / OpenPBR kind: OpenPBR's medium (extinction -ln(colour) / depth, scattering
+        scatter / depth, absorption the difference raised by grey until no channel is
+        negative, Henyey-Greenstein anisotropy), which Standard Surface shares."""
         surface.transmission = weight
         surface.thin_walled = bool(thin)
         kind, w = weight
@@ -154,7 +159,14 @@ class Reader:
             surface.absorption = None if thin else (0.0, 0.0, 0.0)
         else:
             surface.transmission_color = (1.0, 1.0, 1.0)
-            surface.absorption = tuple(-math.log(min(max(c, 1e-6), 1.0)) / depth for c in color)
+            extinction = [-math.log(min(max(c, 1e-6), 1.0)) / depth for c in color]
+            scattering = [max(float(c), 0.0) / depth for c in (scatter if scatter is not None else (0, 0, 0))]
+            absorption = [t - s for t, s in zip(extinction, scattering)]
+            lowest = min(absorption)
+            surface.absorption = tuple(a - min(lowest, 0.0) for a in absorption)
+            if max(scattering) > 0.0:
+                surface.scattering = tuple(scattering)
+                surface.medium_anisotropy = min(max(float(anisotropy), -0.99), 0.99)
 
     # ---- UsdPreviewSurface ------------------------------------------------------------
     def preview(self, shader, material):
@@ -243,10 +255,9 @@ class Reader:
         out.ior = number("specular_ior")
         self._transmission(out, source("transmission"), source("transmission_color"),
                            number("transmission_depth"),
-                           bool(self.net.value(shader, name("thin_walled"), False)), material)
-        if out.transmission != ("value", 0.0) and fit(color("transmission_scatter"), 3).max() > 0.0:
-            self.warn(material, f"{name('transmission_scatter')} (volume scattering) is not "
-                      "supported: the volume only absorbs")
+                           bool(self.net.value(shader, name("thin_walled"), False)), material,
+                           scatter=fit(color("transmission_scatter"), 3),
+                           anisotropy=number("transmission_scatter_anisotropy"))
         self._coat(out, source("coat"), source("coat_roughness"), source("coat_color"),
                    source("coat_ior"), material)
         sheen = number("sheen")
@@ -554,7 +565,8 @@ _STANDARD_SURFACE_ROLES = {
     "anisotropy": "specular_anisotropy", "rotation": "specular_rotation",
     "transmission": "transmission", "transmission_color": "transmission_color",
     "transmission_depth": "transmission_depth", "transmission_scatter": "transmission_scatter",
-    "thin_walled": "thin_walled", "subsurface": "subsurface", "subsurface_color": "subsurface_color",
+    "transmission_scatter_anisotropy": "transmission_scatter_anisotropy", "thin_walled": "thin_walled",
+    "subsurface": "subsurface", "subsurface_color": "subsurface_color",
     "coat": "coat", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
     "coat_ior": "coat_IOR", "sheen": "sheen", "sheen_color": "sheen_color",
     "sheen_roughness": "sheen_roughness", "emission": "emission", "emission_color": "emission_color",
@@ -567,7 +579,8 @@ _OPEN_PBR_ROLES = {
     "specular_roughness": "specular_roughness", "specular_ior": "specular_ior",
     "anisotropy": "specular_roughness_anisotropy", "transmission": "transmission_weight",
     "transmission_color": "transmission_color", "transmission_depth": "transmission_depth",
-    "transmission_scatter": "transmission_scatter", "thin_walled": "geometry_thin_walled",
+    "transmission_scatter": "transmission_scatter",
+    "transmission_scatter_anisotropy": "transmission_scatter_anisotropy", "thin_walled": "geometry_thin_walled",
     "subsurface": "subsurface_weight", "subsurface_color": "subsurface_color",
     "coat": "coat_weight", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
     "coat_ior": "coat_ior", "sheen": "fuzz_weight", "sheen_color": "fuzz_color",
@@ -588,6 +601,7 @@ _OMNI_SURFACE_NAMES = {
     "transmission": "specular_transmission_weight", "transmission_color": "specular_transmission_color",
     "transmission_depth": "specular_transmission_scatter_depth",
     "transmission_scatter": "specular_transmission_scatter",
+    "transmission_scatter_anisotropy": "specular_transmission_scatter_anisotropy",
     "subsurface": "subsurface_weight", "subsurface_color": "subsurface_color",
     "sheen": "sheen_weight", "sheen_color": "sheen_color", "sheen_roughness": "sheen_roughness",
     "coat": "coat_weight", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
@@ -602,7 +616,7 @@ _STANDARD_SURFACE_DEFAULTS = {
     "specular": 1.0, "specular_color": (1.0, 1.0, 1.0), "specular_roughness": 0.2,
     "specular_IOR": 1.5, "specular_anisotropy": 0.0, "specular_rotation": 0.0,
     "transmission": 0.0, "transmission_color": (1.0, 1.0, 1.0), "transmission_depth": 0.0,
-    "transmission_scatter": (0.0, 0.0, 0.0), "subsurface": 0.0,
+    "transmission_scatter": (0.0, 0.0, 0.0), "transmission_scatter_anisotropy": 0.0, "subsurface": 0.0,
     "subsurface_color": (1.0, 1.0, 1.0), "sheen": 0.0, "sheen_color": (1.0, 1.0, 1.0),
     "sheen_roughness": 0.3, "coat": 0.0, "coat_color": (1.0, 1.0, 1.0), "coat_roughness": 0.1,
     "coat_IOR": 1.5, "thin_film_thickness": 0.0, "thin_film_IOR": 1.5, "emission": 0.0,
@@ -613,7 +627,8 @@ _OPEN_PBR_DEFAULTS = {
     "base_metalness": 0.0, "specular_weight": 1.0, "specular_color": (1.0, 1.0, 1.0),
     "specular_roughness": 0.3, "specular_ior": 1.5, "specular_roughness_anisotropy": 0.0,
     "transmission_weight": 0.0, "transmission_color": (1.0, 1.0, 1.0), "transmission_depth": 0.0,
-    "transmission_scatter": (0.0, 0.0, 0.0), "subsurface_weight": 0.0,
+    "transmission_scatter": (0.0, 0.0, 0.0), "transmission_scatter_anisotropy": 0.0,
+    "subsurface_weight": 0.0,
     "subsurface_color": (0.8, 0.8, 0.8), "coat_weight": 0.0, "coat_color": (1.0, 1.0, 1.0),
     "coat_roughness": 0.0, "coat_ior": 1.6, "fuzz_weight": 0.0, "fuzz_color": (1.0, 1.0, 1.0),
     "fuzz_roughness": 0.5, "thin_film_weight": 0.0, "thin_film_thickness": 0.5,

@@ -217,6 +217,34 @@ def test_standard_surface_approximations_are_warned(stage_file, converted):
     assert m["transmission"] == pytest.approx(0.5)
 
 
+@pytest.mark.parametrize("node, weight", [("ND_standard_surface_surfaceshader", "transmission"),
+                                           ("ND_open_pbr_surface_surfaceshader", "transmission_weight")])
+def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, weight):
+    """OpenPBR's interior medium (Standard Surface's alike): extinction -ln(colour) / depth,
+    scattering scatter / depth, absorption the difference raised by grey until no channel
+    is negative, the anisotropy as the phase function's; no warning."""
+    s = converted(stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            float inputs:{weight} = 1
+            color3f inputs:transmission_color = (0.5, 0.5, 0.5)
+            float inputs:transmission_depth = 0.1
+            color3f inputs:transmission_scatter = (0.2, 0.4, 0.8)
+            float inputs:transmission_scatter_anisotropy = 0.3
+            token outputs:out
+        }}'''), name=f"scatter-{weight}.usda"))
+    volume = material(s)["volume"]
+    extinction = np.log(2) / 0.1
+    assert volume["scattering"] == pytest.approx([2, 4, 8], rel=1e-5)
+    # 6.93 - (2, 4, 8) = (4.93, 2.93, -1.07): raised by 1.07.
+    raised = 8 - extinction
+    assert volume["absorption"] == pytest.approx([extinction - 2 + raised, extinction - 4 + raised, 0],
+                                                 abs=1e-4)
+    assert volume["anisotropy"] == pytest.approx(0.3)
+    assert not s.warnings_about("scatter")
+
+
 @pytest.mark.parametrize("node, name", [("ND_standard_surface_surfaceshader", "diffuse_roughness"),
                                          ("ND_open_pbr_surface_surfaceshader", "base_diffuse_roughness")])
 def test_diffuse_roughness_is_the_rough_diffuse_lobe(stage_file, converted, node, name):

@@ -39,6 +39,7 @@ use super::guiding::mixture::guided_sample;
 use super::guiding::record::PathRecords;
 use super::guiding::sdtree::Cell;
 use super::guiding::{Distribution, GUIDE_PROBABILITY, Guide};
+use super::media::Media;
 use super::mis::{Mis, Technique};
 use super::roulette::RussianRoulette;
 use super::settings::Settings;
@@ -172,6 +173,8 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     split: FirstSplit,
     /// The learned distributions continuations are guided by, if any.
     guide: Option<Guide<'a>>,
+    /// The media around the camera, where camera paths start.
+    camera_media: Media,
 }
 
 impl PathState {
@@ -240,12 +243,19 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         ears: Option<&'a Ears>,
         split: FirstSplit,
     ) -> Self {
+        // Only interfaces' media are found around the camera (see `Media::around`).
+        let camera_media = if world.surfaces.participating {
+            Media::around(world, world.camera.origin())
+        } else {
+            Media::EMPTY
+        };
         Self {
             world,
             settings,
             ears,
             split,
             guide: None,
+            camera_media,
         }
     }
 
@@ -283,7 +293,10 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 .sample_points(sampler.pixel(), sampler.sample_index()),
             guiding,
         };
-        let camera = PathState::camera(ray.origin, self.world.footprints.camera);
+        let camera = PathState {
+            media: self.camera_media,
+            ..PathState::camera(ray.origin, self.world.footprints.camera)
+        };
         self.trace_from(ray, camera, None, &mut walk, sampler, rec, rays);
     }
 
@@ -402,6 +415,27 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             }
             let surfaces = &world.surfaces;
             let m = &surfaces.materials[it.material as usize];
+            if m.model == BsdfModel::Interface {
+                // Crossed as a clear filter is, without a scattering event (see the module
+                // notes), into or out of its medium; no BSDF to build or sample.
+                let beyond = if ray.dir.dot(it.ng) > 0.0 {
+                    it.ng
+                } else {
+                    -it.ng
+                };
+                path = PathState {
+                    vertex: path.vertex + 1,
+                    media: path.media.beyond(&it, m, true),
+                    crossed: path.crossed + arrived,
+                    cone: RayCone {
+                        width: path.cone.width_at(arrived),
+                        ..path.cone
+                    },
+                    ..path
+                };
+                ray = Ray::new(offset_ray_origin(it.p, beyond), ray.dir);
+                continue;
+            }
             let ctx = it.shading_context(path.media.outside_ior(surfaces, &it));
             let mut storage = BsdfStorage::default();
             let bsdf = material::bsdf_in(m, &surfaces.textures, &it.attrs, &ctx, &mut storage);
@@ -645,8 +679,6 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 beta,
                 vertex: path.vertex + 1,
                 branch,
-                // Into or out of the medium an interface bounds.
-                media: path.media.beyond(it, v.material, crossing),
                 crossed: path.crossed + v.arrived,
                 cone: RayCone {
                     width: path.cone.width_at(v.arrived),
