@@ -90,9 +90,9 @@ class Converter:
         # Purposes rendered besides "default" (UsdGeom's render, proxy, guide).
         self.purposes = set(purposes)
         self.writer = SceneWriter(source)
-        self.materials = MaterialConverter(self.writer, time, self.warn)
         self.to_lucerna = stage_to_lucerna(stage)
         self.meters_per_unit = UsdGeom.GetStageMetersPerUnit(stage)
+        self.materials = MaterialConverter(self.writer, time, self.warn, self.meters_per_unit)
         self._flat = {}
         self._warned = set()
         self._skel = None

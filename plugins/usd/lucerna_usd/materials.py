@@ -85,10 +85,12 @@ _MDL_READERS = {"OmniPBR": "omni_pbr", "OmniPBR_ClearCoat": "omni_pbr",
 class MaterialConverter:
     """Converts and caches materials; `warn(element, message)` reports problems."""
 
-    def __init__(self, writer, time, warn):
+    def __init__(self, writer, time, warn, meters_per_unit=1.0):
         self.writer = writer
         self.time = time
         self.warn = warn
+        # Media coefficients are per stage unit; the scene file's lengths are metres.
+        self.per_metre = 1.0 / meters_per_unit
         self._cache = {}
         self.net = Network(time, warn)
 
@@ -230,9 +232,10 @@ class MaterialConverter:
             if surface.transmission_color is not None:
                 out["transmission_color"] = [min(max(float(c), 0.0), 1.0) for c in surface.transmission_color]
             if not surface.thin_walled and surface.absorption is not None:
-                out["volume"] = {"absorption": [max(float(c), 0.0) for c in surface.absorption]}
+                per_metre = self.per_metre
+                out["volume"] = {"absorption": [max(float(c), 0.0) * per_metre for c in surface.absorption]}
                 if surface.scattering is not None:
-                    out["volume"]["scattering"] = [max(float(c), 0.0) for c in surface.scattering]
+                    out["volume"]["scattering"] = [max(float(c), 0.0) * per_metre for c in surface.scattering]
                     out["volume"]["anisotropy"] = float(surface.medium_anisotropy)
 
         # Metallic and roughness: G and B of one texture.

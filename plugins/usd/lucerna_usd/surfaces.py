@@ -25,9 +25,15 @@ Each reader maps one shading model onto it:
 Diffuse roughness (standard_surface, OpenPBR, OmniSurface, PxrSurface) becomes lucerna's
 EON diffuse (OpenPBR's energy-preserving Oren-Nayar).
 
-What does not map (subsurface scattering, coat colour and ior other
-than 1.5, a metal's edge tint, transmission scatter, ...) is approximated and warned about
-once per material, naming the parameter."""
+Subsurface scattering (standard_surface, OpenPBR, OmniSurface) is OpenPBR's subsurface
+slab: the dielectric over a dense medium (mean free path radius x scale, single-scattering
+albedo from the colour by van de Hulst's inversion) that paths random-walk through; with
+transmission or on a thin wall it stays approximated. Transmission scatter fills a
+transmissive volume with OpenPBR's medium.
+
+What does not map (subsurface with transmission, PxrSurface subsurface, coat colour and
+ior other than 1.5, a metal's edge tint, ...) is approximated and warned about once per
+material, naming the parameter."""
 
 import math
 
@@ -242,11 +248,6 @@ class Reader:
 
         out = Surface()
         base = self._product(source("base_color"), source("base"), name("base"), material)
-        subsurface = number("subsurface")
-        if subsurface > 0.0:
-            self.warn(material, "subsurface scattering is approximated by diffuse reflection of "
-                      f"{name('subsurface_color')}")
-            base = self._lerp_color(base, fit(color("subsurface_color"), 3), subsurface)
         out.base_color = base
         out.metallic = source("metalness")
         out.roughness = source("specular_roughness")
@@ -258,6 +259,22 @@ class Reader:
                            bool(self.net.value(shader, name("thin_walled"), False)), material,
                            scatter=fit(color("transmission_scatter"), 3),
                            anisotropy=number("transmission_scatter_anisotropy"))
+        subsurface = min(number("subsurface"), 1.0)
+        if subsurface > 0.0:
+            if out.transmission == ("value", 0.0) and not out.thin_walled:
+                # OpenPBR's subsurface slab: the dielectric over a dense medium, whose share
+                # of the dielectric base is the weight (a random walk, as Cycles and Arnold).
+                mfp = fit(color("subsurface_radius"), 3) * fit(color("subsurface_radius_scale"), 3)
+                out.transmission = ("value", subsurface)
+                out.transmission_color = (1.0, 1.0, 1.0)
+                out.absorption, out.scattering, out.medium_anisotropy = subsurface_medium(
+                    fit(color("subsurface_color"), 3), mfp, number("subsurface_anisotropy"))
+            else:
+                why = "a thin wall" if out.thin_walled else "transmission"
+                self.warn(material, "subsurface scattering is approximated by diffuse reflection "
+                          f"of {name('subsurface_color')} ({why} holds no subsurface medium)")
+                out.base_color = self._lerp_color(out.base_color, fit(color("subsurface_color"), 3),
+                                                  subsurface)
         self._coat(out, source("coat"), source("coat_roughness"), source("coat_color"),
                    source("coat_ior"), material)
         sheen = number("sheen")
@@ -557,6 +574,23 @@ class Reader:
                 out.alpha_mode = "blend"
 
 
+def subsurface_medium(colour, mfp, anisotropy):
+    """(absorption, scattering, g) per unit length of OpenPBR's subsurface medium: extinction
+    1 / mean free path per channel, single-scattering albedo from the subsurface colour by
+    van de Hulst's inversion (OpenPBR's subsurface section), so that a semi-infinite slab
+    of it reflects about that colour."""
+    g = min(max(float(anisotropy), -0.99), 0.99)
+    absorption, scattering = [], []
+    for c, r in zip(colour, mfp):
+        c = min(max(float(c), 0.0), 1.0)
+        s = 4.09712 + 4.20863 * c - math.sqrt(9.59217 + 41.6808 * c + 17.7126 * c * c)
+        albedo = min(max((1.0 - s * s) / (1.0 - g * s * s), 0.0), 1.0)
+        extinction = 1.0 / max(float(r), 1e-6)
+        scattering.append(albedo * extinction)
+        absorption.append((1.0 - albedo) * extinction)
+    return tuple(absorption), tuple(scattering), g
+
+
 #: The inputs of each part of the layered models (`_layered`).
 _STANDARD_SURFACE_ROLES = {
     "base": "base", "base_color": "base_color", "diffuse_roughness": "diffuse_roughness",
@@ -567,6 +601,8 @@ _STANDARD_SURFACE_ROLES = {
     "transmission_depth": "transmission_depth", "transmission_scatter": "transmission_scatter",
     "transmission_scatter_anisotropy": "transmission_scatter_anisotropy", "thin_walled": "thin_walled",
     "subsurface": "subsurface", "subsurface_color": "subsurface_color",
+    "subsurface_radius": "subsurface_radius", "subsurface_radius_scale": "subsurface_scale",
+    "subsurface_anisotropy": "subsurface_anisotropy",
     "coat": "coat", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
     "coat_ior": "coat_IOR", "sheen": "sheen", "sheen_color": "sheen_color",
     "sheen_roughness": "sheen_roughness", "emission": "emission", "emission_color": "emission_color",
@@ -582,6 +618,8 @@ _OPEN_PBR_ROLES = {
     "transmission_scatter": "transmission_scatter",
     "transmission_scatter_anisotropy": "transmission_scatter_anisotropy", "thin_walled": "geometry_thin_walled",
     "subsurface": "subsurface_weight", "subsurface_color": "subsurface_color",
+    "subsurface_radius": "subsurface_radius", "subsurface_radius_scale": "subsurface_radius_scale",
+    "subsurface_anisotropy": "subsurface_scatter_anisotropy",
     "coat": "coat_weight", "coat_color": "coat_color", "coat_roughness": "coat_roughness",
     "coat_ior": "coat_ior", "sheen": "fuzz_weight", "sheen_color": "fuzz_color",
     "sheen_roughness": "fuzz_roughness", "emission": "emission_luminance",
@@ -617,7 +655,8 @@ _STANDARD_SURFACE_DEFAULTS = {
     "specular_IOR": 1.5, "specular_anisotropy": 0.0, "specular_rotation": 0.0,
     "transmission": 0.0, "transmission_color": (1.0, 1.0, 1.0), "transmission_depth": 0.0,
     "transmission_scatter": (0.0, 0.0, 0.0), "transmission_scatter_anisotropy": 0.0, "subsurface": 0.0,
-    "subsurface_color": (1.0, 1.0, 1.0), "sheen": 0.0, "sheen_color": (1.0, 1.0, 1.0),
+    "subsurface_color": (1.0, 1.0, 1.0), "subsurface_radius": (1.0, 1.0, 1.0), "subsurface_scale": 1.0,
+    "subsurface_anisotropy": 0.0, "sheen": 0.0, "sheen_color": (1.0, 1.0, 1.0),
     "sheen_roughness": 0.3, "coat": 0.0, "coat_color": (1.0, 1.0, 1.0), "coat_roughness": 0.1,
     "coat_IOR": 1.5, "thin_film_thickness": 0.0, "thin_film_IOR": 1.5, "emission": 0.0,
     "emission_color": (1.0, 1.0, 1.0), "opacity": (1.0, 1.0, 1.0), "thin_walled": False,
@@ -629,7 +668,9 @@ _OPEN_PBR_DEFAULTS = {
     "transmission_weight": 0.0, "transmission_color": (1.0, 1.0, 1.0), "transmission_depth": 0.0,
     "transmission_scatter": (0.0, 0.0, 0.0), "transmission_scatter_anisotropy": 0.0,
     "subsurface_weight": 0.0,
-    "subsurface_color": (0.8, 0.8, 0.8), "coat_weight": 0.0, "coat_color": (1.0, 1.0, 1.0),
+    "subsurface_color": (0.8, 0.8, 0.8), "subsurface_radius": 1.0,
+    "subsurface_radius_scale": (1.0, 0.5, 0.25), "subsurface_scatter_anisotropy": 0.0,
+    "coat_weight": 0.0, "coat_color": (1.0, 1.0, 1.0),
     "coat_roughness": 0.0, "coat_ior": 1.6, "fuzz_weight": 0.0, "fuzz_color": (1.0, 1.0, 1.0),
     "fuzz_roughness": 0.5, "thin_film_weight": 0.0, "thin_film_thickness": 0.5,
     "thin_film_ior": 1.4, "emission_luminance": 0.0, "emission_color": (1.0, 1.0, 1.0),

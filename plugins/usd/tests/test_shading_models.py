@@ -217,6 +217,45 @@ def test_standard_surface_approximations_are_warned(stage_file, converted):
     assert m["transmission"] == pytest.approx(0.5)
 
 
+def van_de_hulst_albedo(c, g):
+    s = 4.09712 + 4.20863 * c - np.sqrt(9.59217 + 41.6808 * c + 17.7126 * c * c)
+    return (1 - s * s) / (1 - g * s * s)
+
+
+@pytest.mark.parametrize("node, inputs", [
+    ("ND_standard_surface_surfaceshader", """float inputs:subsurface = 1
+            color3f inputs:subsurface_radius = (0.1, 0.05, 0.02)
+            float inputs:subsurface_scale = 2
+            float inputs:subsurface_anisotropy = 0.3"""),
+    ("ND_open_pbr_surface_surfaceshader", """float inputs:subsurface_weight = 1
+            float inputs:subsurface_radius = 0.2
+            color3f inputs:subsurface_radius_scale = (1, 0.5, 0.2)
+            float inputs:subsurface_scatter_anisotropy = 0.3""")])
+def test_subsurface_is_a_random_walk_in_openpbrs_medium(stage_file, converted, node, inputs):
+    """Subsurface becomes OpenPBR's subsurface slab: the dielectric (transmission of the
+    subsurface weight, untinted) over a medium of extinction 1 / (radius x scale) whose
+    single-scattering albedo inverts van de Hulst's formula for the colour; no warning."""
+    s = converted(stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            {inputs}
+            color3f inputs:subsurface_color = (0.8, 0.5, 0.2)
+            token outputs:out
+        }}'''), name=f"sss-{node}.usda"))
+    m = material(s)
+    assert m["transmission"] == pytest.approx(1.0)
+    assert m["transmission_color"] == pytest.approx([1, 1, 1])
+    extinction = 1 / np.array([0.2, 0.1, 0.04])
+    albedo = van_de_hulst_albedo(np.array([0.8, 0.5, 0.2]), 0.3)
+    assert m["volume"]["scattering"] == pytest.approx(albedo * extinction, rel=1e-5)
+    assert m["volume"]["absorption"] == pytest.approx((1 - albedo) * extinction, rel=1e-5)
+    assert m["volume"]["anisotropy"] == pytest.approx(0.3)
+    assert not s.warnings_about("subsurface")
+    # A white colour scatters without absorbing: the furnace's case.
+    assert van_de_hulst_albedo(1.0, 0.3) == pytest.approx(1.0, abs=1e-5)
+
+
 @pytest.mark.parametrize("node, weight", [("ND_standard_surface_surfaceshader", "transmission"),
                                            ("ND_open_pbr_surface_surfaceshader", "transmission_weight")])
 def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, weight):
@@ -243,6 +282,19 @@ def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, 
                                                  abs=1e-4)
     assert volume["anisotropy"] == pytest.approx(0.3)
     assert not s.warnings_about("scatter")
+    # In a centimetre stage the depth is centimetres: the coefficients per metre are 100x.
+    centimetres = stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            float inputs:{weight} = 1
+            color3f inputs:transmission_color = (0.5, 0.5, 0.5)
+            float inputs:transmission_depth = 0.1
+            color3f inputs:transmission_scatter = (0.2, 0.4, 0.8)
+            token outputs:out
+        }}'''), name=f"scatter-cm-{weight}.usda")
+    centimetres.write_text(centimetres.read_text().replace("metersPerUnit = 1", "metersPerUnit = 0.01"))
+    assert material(converted(centimetres))["volume"]["scattering"] == pytest.approx([200, 400, 800], rel=1e-5)
 
 
 @pytest.mark.parametrize("node, name", [("ND_standard_surface_surfaceshader", "diffuse_roughness"),
