@@ -268,7 +268,8 @@ class Reader:
                 out.transmission = ("value", subsurface)
                 out.transmission_color = (1.0, 1.0, 1.0)
                 out.absorption, out.scattering, out.medium_anisotropy = subsurface_medium(
-                    fit(color("subsurface_color"), 3), mfp, number("subsurface_anisotropy"))
+                    fit(color("subsurface_color"), 3), mfp, number("subsurface_anisotropy"),
+                    number("specular_ior"))
             else:
                 why = "a thin wall" if out.thin_walled else "transmission"
                 self.warn(material, "subsurface scattering is approximated by diffuse reflection "
@@ -574,17 +575,54 @@ class Reader:
                 out.alpha_mode = "blend"
 
 
-def subsurface_medium(colour, mfp, anisotropy):
-    """(absorption, scattering, g) per unit length of OpenPBR's subsurface medium: extinction
-    1 / mean free path per channel, single-scattering albedo from the subsurface colour by
-    van de Hulst's inversion (OpenPBR's subsurface section), so that a semi-infinite slab
-    of it reflects about that colour."""
+def _diffuse_fresnel(eta):
+    """The hemispherical average of the Fresnel reflectance seen from inside a medium of
+    relative index eta (Egan and Hilgeman's fit, as Jensen et al. 2001 use it)."""
+    return -1.440 / (eta * eta) + 0.710 / eta + 0.668 + 0.0636 * eta
+
+
+def _dipole_reflectance(reduced_albedo, eta):
+    """The diffuse reflectance of a semi-infinite medium under a boundary of index eta by
+    the dipole approximation (Jensen et al. 2001)."""
+    fdr = _diffuse_fresnel(eta)
+    a = (1.0 + fdr) / (1.0 - fdr)
+    x = math.sqrt(3.0 * max(1.0 - reduced_albedo, 0.0))
+    return 0.5 * reduced_albedo * (1.0 + math.exp(-4.0 / 3.0 * a * x)) * math.exp(-x)
+
+
+def _multiple_scattering_albedo(albedo, g, eta):
+    """The fraction of the light entering a semi-infinite medium of single-scattering
+    albedo `albedo` that leaves it again: van de Hulst's index-matched formula (OpenPBR's
+    subsurface section), times the dipole's ratio of what a boundary of index eta lets
+    out against what an index-matched one does (light reflected back in at the boundary
+    scatters further and is partly absorbed)."""
+    s = math.sqrt((1.0 - albedo) / (1.0 - albedo * g))
+    matched = (1.0 - s) * (1.0 - 0.139 * s) / (1.0 + 1.17 * s)
+    reduced = albedo * (1.0 - g) / (1.0 - albedo * g)
+    if reduced <= 0.0:
+        return 0.0
+    return matched * _dipole_reflectance(reduced, eta) / _dipole_reflectance(reduced, 1.0)
+
+
+def subsurface_medium(colour, mfp, anisotropy, ior=1.0):
+    """(absorption, scattering, g) per unit length of OpenPBR's subsurface medium:
+    extinction 1 / mean free path per channel, and the single-scattering albedo whose
+    light transmitted back out through the dielectric boundary of index `ior` is the
+    subsurface colour (OpenPBR's definition of it), found by bisection on
+    [`_multiple_scattering_albedo`]; with `ior` 1 that is van de Hulst's inversion."""
     g = min(max(float(anisotropy), -0.99), 0.99)
+    eta = max(float(ior), 1.0)
     absorption, scattering = [], []
     for c, r in zip(colour, mfp):
         c = min(max(float(c), 0.0), 1.0)
-        s = 4.09712 + 4.20863 * c - math.sqrt(9.59217 + 41.6808 * c + 17.7126 * c * c)
-        albedo = min(max((1.0 - s * s) / (1.0 - g * s * s), 0.0), 1.0)
+        lo, hi = 0.0, 1.0
+        for _ in range(48):
+            mid = 0.5 * (lo + hi)
+            if _multiple_scattering_albedo(mid, g, eta) < c:
+                lo = mid
+            else:
+                hi = mid
+        albedo = 1.0 if c >= 1.0 else 0.5 * (lo + hi)
         extinction = 1.0 / max(float(r), 1e-6)
         scattering.append(albedo * extinction)
         absorption.append((1.0 - albedo) * extinction)

@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from conftest import texels, write_image
+from lucerna_usd import surfaces
 
 QUAD = '''
     def Mesh "Quad" (prepend apiSchemas = ["MaterialBindingAPI"]) {
@@ -247,13 +248,32 @@ def test_subsurface_is_a_random_walk_in_openpbrs_medium(stage_file, converted, n
     assert m["transmission"] == pytest.approx(1.0)
     assert m["transmission_color"] == pytest.approx([1, 1, 1])
     extinction = 1 / np.array([0.2, 0.1, 0.04])
-    albedo = van_de_hulst_albedo(np.array([0.8, 0.5, 0.2]), 0.3)
-    assert m["volume"]["scattering"] == pytest.approx(albedo * extinction, rel=1e-5)
-    assert m["volume"]["absorption"] == pytest.approx((1 - albedo) * extinction, rel=1e-5)
-    assert m["volume"]["anisotropy"] == pytest.approx(0.3)
+    volume = m["volume"]
+    assert np.array(volume["scattering"]) + volume["absorption"] == pytest.approx(extinction, rel=1e-5)
+    albedo = np.array(volume["scattering"]) / extinction
+    # Both families' default specular ior is 1.5.
+    _, expected, _ = surfaces.subsurface_medium((0.8, 0.5, 0.2), (1, 1, 1), 0.3, 1.5)
+    assert albedo == pytest.approx(expected, rel=1e-5)
+    assert volume["anisotropy"] == pytest.approx(0.3)
     assert not s.warnings_about("subsurface")
-    # A white colour scatters without absorbing: the furnace's case.
-    assert van_de_hulst_albedo(1.0, 0.3) == pytest.approx(1.0, abs=1e-5)
+
+
+def test_subsurface_albedo_inverts_the_colour_through_the_boundary():
+    """The single-scattering albedo is found so that the medium gives back the colour:
+    index-matched (ior 1) that is van de Hulst's closed-form inversion (OpenPBR's formula);
+    behind a denser boundary light reflected back in is partly absorbed, so the albedo must
+    be higher for the same colour; the forward model at the albedo found is the colour; a
+    white colour scatters without absorbing (the furnace's case)."""
+    for g in (0.0, 0.3, -0.3):
+        for c in (0.1, 0.3, 0.5, 0.8, 0.95):
+            _, matched, _ = surfaces.subsurface_medium((c,) * 3, (1, 1, 1), g, 1.0)
+            # (OpenPBR's closed form is a fitted inverse of the forward formula: 1e-5 apart.)
+            assert matched[0] == pytest.approx(van_de_hulst_albedo(c, g), abs=1e-4)
+            _, bounded, _ = surfaces.subsurface_medium((c,) * 3, (1, 1, 1), g, 1.5)
+            assert bounded[0] > matched[0]
+            assert surfaces._multiple_scattering_albedo(bounded[0], g, 1.5) == pytest.approx(c, abs=1e-6)
+        _, white, _ = surfaces.subsurface_medium((1.0,) * 3, (1, 1, 1), g, 1.5)
+        assert white == pytest.approx((1.0, 1.0, 1.0))
 
 
 @pytest.mark.parametrize("node, weight", [("ND_standard_surface_surfaceshader", "transmission"),
