@@ -20,8 +20,7 @@ use crate::geometry::Hit;
 use crate::geometry::ray::Ray;
 use crate::material::PerLobe;
 use crate::medium::Flight;
-use crate::sampling::sampler::Sampler;
-use crate::sampling::sampler::VertexSample;
+use crate::sampling::sampler::{Sampler, VertexSample};
 use glam::Vec3;
 
 /// The lobe shares of light first scattered in a medium: none of a surface's, which the

@@ -440,8 +440,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             let mut storage = BsdfStorage::default();
             let bsdf = material::bsdf_in(m, &surfaces.textures, &it.attrs, &ctx, &mut storage);
             let wo = it.frame.to_local(-ray.dir);
-            // The camera's first surface; an interface around a medium is not one.
-            if !path.first_hit_recorded && path.branch == 0 && m.model != BsdfModel::Interface {
+            // The camera's first surface (interfaces, crossed above, are not surfaces).
+            if !path.first_hit_recorded && path.branch == 0 {
                 path.first_hit_recorded = true;
                 rec.first_hit(DATA.then(|| {
                     let lobe_albedo = bsdf.albedo_lobes(wo);
