@@ -221,8 +221,9 @@ impl fmt::Display for RenderPlan {
         if s.participating_media > 0 {
             writeln!(
                 f,
-                "  participating media: {} materials bound one (scalar kernel)",
-                s.participating_media
+                "  participating media: inside {} material{} (rendered by the scalar kernel)",
+                s.participating_media,
+                if s.participating_media == 1 { "" } else { "s" }
             )?;
         }
         writeln!(
