@@ -76,6 +76,31 @@ impl Ray {
     pub fn at(&self, t: f32) -> Vec3 {
         self.origin + t * self.dir
     }
+
+    /// The ray continued through the surface it met at `p` (geometric normal `ng`): from
+    /// just beyond it towards the same end, the point at `tmax` of a bounded ray (then with
+    /// `tmax` 1) or infinity.
+    #[inline]
+    pub fn continued_past(&self, p: Vec3, ng: Vec3) -> Self {
+        let origin = offset_past(p, ng, self.dir);
+        if self.tmax.is_finite() {
+            let end = self.at(self.tmax);
+            Self {
+                origin,
+                dir: end - origin,
+                tmax: 1.0,
+            }
+        } else {
+            Self::new(origin, self.dir)
+        }
+    }
+}
+
+/// Where a ray of direction `dir` that crosses the surface at `p` (geometric normal `ng`)
+/// goes on from: [`offset_ray_origin`] to the far side.
+#[inline]
+pub fn offset_past(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
+    offset_ray_origin(p, if dir.dot(ng) > 0.0 { ng } else { -ng })
 }
 
 /// [`offset_ray_origin`]'s constants: coordinates below `ORIGIN` move by `FLOAT_SCALE`

@@ -96,6 +96,23 @@ impl PathState {
         }
     }
 
+    /// The state past a filter crossed (a smooth thin wall, an interface) after a ray of
+    /// length `arrived`: no scattering event, so depth, lobe shares and the MIS state carry
+    /// on; the next random numbers, the way travelled added to the light densities' distance,
+    /// the ray cone widened to the crossing.
+    #[inline]
+    pub(crate) fn past_filter(&self, arrived: f32) -> Self {
+        Self {
+            vertex: self.vertex + 1,
+            crossed: self.crossed + arrived,
+            cone: RayCone {
+                width: self.cone.width_at(arrived),
+                ..self.cone
+            },
+            ..*self
+        }
+    }
+
     /// Density with which light sampling at the previous vertex (its shadow rays
     /// together) produces the direction towards emitter `e`, which BSDF sampling found: the
     /// other technique's density in its MIS weight (0 after a delta lobe, which light

@@ -15,7 +15,7 @@
 //! camera inside media behind interfaces starts in them ([`Media::around`]). Reflection
 //! changes nothing; thin walls bound no volume.
 
-use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::geometry::ray::Ray;
 use crate::medium::{Flight, Homogeneous};
 use crate::scene::{BsdfModel, Material};
 use crate::world::{Interaction, Surfaces, World};
@@ -170,12 +170,7 @@ impl Media {
                     inside.push(it.material);
                 }
             }
-            let beyond = if ray.dir.dot(it.ng) > 0.0 {
-                it.ng
-            } else {
-                -it.ng
-            };
-            ray = Ray::new(offset_ray_origin(it.p, beyond), dir);
+            ray = ray.continued_past(it.p, it.ng);
         }
         // The first boundary left is the innermost volume.
         inside
@@ -247,36 +242,20 @@ impl Media {
                 return through;
             };
             let it = world.interaction(&ray, &hit);
-            let m = &surfaces.materials[it.material as usize];
-            let Some(straight) = surfaces.straight_transmission(&it, &ray) else {
-                return Vec3::ZERO;
-            };
-            through *= straight;
-            if !(through.max_element() > 0.0) {
-                return Vec3::ZERO;
-            }
-            if m.model == BsdfModel::Interface {
+            if surfaces.materials[it.material as usize].model == BsdfModel::Interface {
+                // Clear: into or out of its medium.
                 media = media.crossed(it.material, it.front);
+            } else {
+                let Some(straight) = surfaces.straight_transmission(&it, &ray) else {
+                    return Vec3::ZERO;
+                };
+                through *= straight;
+                if !(through.max_element() > 0.0) {
+                    return Vec3::ZERO;
+                }
             }
             // On from the far side, towards the same end (a target point or infinity).
-            let origin = offset_ray_origin(
-                it.p,
-                if ray.dir.dot(it.ng) > 0.0 {
-                    it.ng
-                } else {
-                    -it.ng
-                },
-            );
-            ray = if ray.tmax.is_finite() {
-                let end = ray.origin + ray.dir * ray.tmax;
-                Ray {
-                    origin,
-                    dir: end - origin,
-                    tmax: 1.0,
-                }
-            } else {
-                Ray::new(origin, ray.dir)
-            };
+            ray = ray.continued_past(it.p, it.ng);
         }
         Vec3::ZERO
     }

@@ -304,17 +304,21 @@ fn absorbing_slab_transmits_beer_lambert() {
             ortho_camera(DVec3::new(0.0, 0.0, 5.0 * scale), (0.5 * scale) as f32),
         );
         let (film, _) = render(s, (8, 8), 4, settings(), 2);
-        let beauty = film.planes(Aov::Beauty);
-        let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
-        for (i, ((&r, &g), &b)) in pixels.enumerate() {
-            let rgb = [r, g, b];
-            let expected = [0.5, 0.25, 1.0];
-            for c in 0..3 {
-                assert!(
-                    (rgb[c] - expected[c]).abs() < 1e-4,
-                    "scale {scale}: pixel {i} = {rgb:?}, expected {expected:?}"
-                );
-            }
+        assert_every_pixel(&format!("scale {scale}"), &film, [0.5, 0.25, 1.0]);
+    }
+}
+
+/// Every pixel of `film`'s beauty is `expected` within 1e-4 (exact renders: no sampling).
+fn assert_every_pixel(name: &str, film: &Film, expected: [f32; 3]) {
+    let beauty = film.planes(Aov::Beauty);
+    let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
+    for (i, ((&r, &g), &b)) in pixels.enumerate() {
+        let rgb = [r, g, b];
+        for c in 0..3 {
+            assert!(
+                (rgb[c] - expected[c]).abs() < 1e-4,
+                "{name}: pixel {i} = {rgb:?}, expected {expected:?}"
+            );
         }
     }
 }
@@ -409,17 +413,7 @@ fn absorbing_medium_behind_an_interface_transmits_beer_lambert() {
         ortho_camera(DVec3::new(0.0, 0.0, 5.0), 0.5),
     );
     let (film, _) = render(s, (8, 8), 4, settings(), 2);
-    let beauty = film.planes(Aov::Beauty);
-    let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
-    for (i, ((&r, &g), &b)) in pixels.enumerate() {
-        for (value, expected) in [(r, 0.5), (g, 0.25), (b, 1.0)] {
-            assert!(
-                (value - expected).abs() < 1e-4,
-                "pixel {i} = {:?}",
-                [r, g, b]
-            );
-        }
-    }
+    assert_every_pixel("behind an interface", &film, [0.5, 0.25, 1.0]);
 }
 
 /// A camera inside a medium is in it from the start (`Media::around`): inside an absorbing
@@ -439,17 +433,7 @@ fn a_camera_inside_a_medium_starts_in_it() {
         camera.clone(),
     );
     let (film, _) = render(s, (8, 8), 4, settings(), 2);
-    let beauty = film.planes(Aov::Beauty);
-    let pixels = beauty[0].iter().zip(&beauty[1]).zip(&beauty[2]);
-    for (i, ((&r, &g), &b)) in pixels.enumerate() {
-        for (value, expected) in [(r, 0.5), (g, 0.25), (b, 1.0)] {
-            assert!(
-                (value - expected).abs() < 1e-4,
-                "pixel {i} = {:?}",
-                [r, g, b]
-            );
-        }
-    }
+    assert_every_pixel("inside an absorbing cube", &film, [0.5, 0.25, 1.0]);
     let s = scene(
         vec![(lucerna_test_cube(), cube)],
         medium(Vec3::ZERO, Vec3::new(0.5, 1.0, 2.0), 0.3),

@@ -282,7 +282,7 @@ def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, 
     """OpenPBR's interior medium (Standard Surface's alike): extinction -ln(colour) / depth,
     scattering scatter / depth, absorption the difference raised by grey until no channel
     is negative, the anisotropy as the phase function's; no warning."""
-    s = converted(stage_file(stage(f'''
+    text = stage(f'''
         token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
         def Shader "S" {{
             uniform token info:id = "{node}"
@@ -292,7 +292,8 @@ def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, 
             color3f inputs:transmission_scatter = (0.2, 0.4, 0.8)
             float inputs:transmission_scatter_anisotropy = 0.3
             token outputs:out
-        }}'''), name=f"scatter-{weight}.usda"))
+        }}''')
+    s = converted(stage_file(text, name=f"scatter-{weight}.usda"))
     volume = material(s)["volume"]
     extinction = np.log(2) / 0.1
     assert volume["scattering"] == pytest.approx([2, 4, 8], rel=1e-5)
@@ -303,19 +304,9 @@ def test_transmission_scatter_is_the_medium_inside(stage_file, converted, node, 
     assert volume["anisotropy"] == pytest.approx(0.3)
     assert not s.warnings_about("scatter")
     # In a centimetre stage the depth is centimetres: the coefficients per metre are 100x.
-    centimetres = stage_file(stage(f'''
-        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
-        def Shader "S" {{
-            uniform token info:id = "{node}"
-            float inputs:{weight} = 1
-            color3f inputs:transmission_color = (0.5, 0.5, 0.5)
-            float inputs:transmission_depth = 0.1
-            color3f inputs:transmission_scatter = (0.2, 0.4, 0.8)
-            token outputs:out
-        }}'''), name=f"scatter-cm-{weight}.usda")
+    centimetres = stage_file(text, name=f"scatter-cm-{weight}.usda")
     centimetres.write_text(centimetres.read_text().replace("metersPerUnit = 1", "metersPerUnit = 0.01"))
     assert material(converted(centimetres))["volume"]["scattering"] == pytest.approx([200, 400, 800], rel=1e-5)
-
 
 @pytest.mark.parametrize("node, name", [("ND_standard_surface_surfaceshader", "diffuse_roughness"),
                                          ("ND_open_pbr_surface_surfaceshader", "base_diffuse_roughness")])

@@ -74,7 +74,7 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
             Flight::Pass { weight } => {
                 path.beta *= weight;
                 if path.beta.max_element() > 0.0 {
-                    Segment::Passed
+                    Segment::Passed(vs)
                 } else {
                     Segment::Ended
                 }

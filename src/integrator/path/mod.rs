@@ -47,8 +47,7 @@ use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
 use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
-use crate::geometry::cone::RayCone;
-use crate::geometry::ray::{Ray, offset_ray_origin};
+use crate::geometry::ray::{Ray, offset_past, offset_ray_origin};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::medium::Homogeneous;
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
@@ -140,8 +139,9 @@ struct MediumVertex<'m> {
 enum Segment {
     /// The innermost medium does not scatter (its absorption is still to be applied).
     Clear,
-    /// The light crossed the scattering medium to the ray's end (the weight applied).
-    Passed,
+    /// The light crossed the scattering medium to the ray's end (the weight applied); the
+    /// numbers drawn for the vertex there, which its surface takes.
+    Passed(VertexSample),
     /// It scattered in the medium and goes on along this ray (the path state updated).
     Scattered(Ray),
     /// The path ended in the medium.
@@ -376,11 +376,12 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             });
             // The way to the hit through a medium that scatters: the light may interact
             // before it (see `medium`). Only in scenes with participating media.
-            let mut flown = false;
+            // The numbers of the vertex reached, where a flight through a medium drew them.
+            let mut drawn = None;
             if world.surfaces.participating && !path.media.is_empty() {
                 match self.through_medium(&ray, hit.as_ref(), &mut path, sampler, walk, rec, rays) {
                     Segment::Clear => {}
-                    Segment::Passed => flown = true,
+                    Segment::Passed(vs) => drawn = Some(vs),
                     Segment::Scattered(next) => {
                         ray = next;
                         continue;
@@ -397,7 +398,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 return;
             };
             let arrived = hit.t * ray.dir.length();
-            if !path.media.is_empty() && !flown {
+            if !path.media.is_empty() && drawn.is_none() {
                 path.beta *= path.media.transmittance(&world.surfaces, arrived);
             }
             // After a rough bounce, footprints are circles (one texture probe).
@@ -418,22 +419,11 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             if m.model == BsdfModel::Interface {
                 // Crossed as a clear filter is, without a scattering event (see the module
                 // notes), into or out of its medium; no BSDF to build or sample.
-                let beyond = if ray.dir.dot(it.ng) > 0.0 {
-                    it.ng
-                } else {
-                    -it.ng
-                };
                 path = PathState {
-                    vertex: path.vertex + 1,
                     media: path.media.beyond(&it, m, true),
-                    crossed: path.crossed + arrived,
-                    cone: RayCone {
-                        width: path.cone.width_at(arrived),
-                        ..path.cone
-                    },
-                    ..path
+                    ..path.past_filter(arrived)
                 };
-                ray = Ray::new(offset_ray_origin(it.p, beyond), ray.dir);
+                ray = Ray::new(offset_past(it.p, it.ng, ray.dir), ray.dir);
                 continue;
             }
             let ctx = it.shading_context(path.media.outside_ior(surfaces, &it));
@@ -498,7 +488,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 guide: guide_cell.and_then(|c| self.guide.and_then(|g| g.at(c))),
                 cell: guide_cell,
             };
-            let vs = sampler.vertex(path.vertex, path.branch);
+            let vs = drawn.unwrap_or_else(|| sampler.vertex(path.vertex, path.branch));
             let first = path.vertex == 0;
             let n_nee = self.split.at(path.vertex).nee;
             let continuation = self.continuation(&path, walk, cell, vs.rr);
@@ -677,14 +667,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             }
             let next = PathState {
                 beta,
-                vertex: path.vertex + 1,
                 branch,
-                crossed: path.crossed + v.arrived,
-                cone: RayCone {
-                    width: path.cone.width_at(v.arrived),
-                    ..path.cone
-                },
-                ..*path
+                ..path.past_filter(v.arrived)
             };
             return Some((Ray::new(origin, wi), next));
         }
