@@ -16,7 +16,7 @@
 //! changes nothing; thin walls bound no volume.
 
 use crate::geometry::ray::Ray;
-use crate::medium::{Flight, Homogeneous};
+use crate::medium::{Flight, Medium};
 use crate::scene::{BsdfModel, Material};
 use crate::world::{Interaction, Surfaces, World};
 use glam::Vec3;
@@ -67,8 +67,16 @@ impl Media {
     /// the throughput times it divided by the mean of the relative densities, with the
     /// densities rescaled to a mean of one, so that the throughput needs no other
     /// correction wherever it is recorded.
+    /// The ray starts at `origin` and goes along unit `dir`.
     #[inline]
-    pub(crate) fn fly(&mut self, medium: &Homogeneous, u: f32, length: f32) -> Flight {
+    pub(crate) fn fly(
+        &mut self,
+        medium: &Medium,
+        origin: Vec3,
+        dir: Vec3,
+        u: f32,
+        length: f32,
+    ) -> Flight {
         let u = if self.channel == UNCHOSEN {
             let channel = ((u * 3.0) as u8).min(2);
             self.channel = channel;
@@ -76,7 +84,7 @@ impl Media {
         } else {
             u
         };
-        let (flight, ratios) = medium.sample_flight(u, length, self.channel as usize);
+        let (flight, ratios) = medium.sample_flight(origin, dir, u, length, self.channel as usize);
         let ratios = self.ratios * ratios;
         let scale = 3.0 / ratios.element_sum();
         if !(scale.is_finite() && scale > 0.0) {
@@ -141,7 +149,7 @@ impl Media {
 
     /// The medium of the innermost volume, where it absorbs or scatters.
     #[inline]
-    pub(crate) fn medium<'s>(&self, surfaces: &'s Surfaces) -> Option<&'s Homogeneous> {
+    pub(crate) fn medium<'s>(&self, surfaces: &'s Surfaces) -> Option<&'s Medium> {
         self.innermost().and_then(|m| surfaces.medium(m))
     }
 
@@ -210,11 +218,12 @@ impl Media {
     }
 
     /// The fraction of light that crosses `length` render-space units of the innermost
-    /// volume (one outside every volume and in clear ones).
+    /// volume along `ray` (one outside every volume and in clear ones).
     #[inline]
-    pub(crate) fn transmittance(&self, surfaces: &Surfaces, length: f32) -> Vec3 {
-        self.medium(surfaces)
-            .map_or(Vec3::ONE, |m| m.transmittance(length))
+    pub(crate) fn transmittance(&self, surfaces: &Surfaces, ray: &Ray, length: f32) -> Vec3 {
+        self.medium(surfaces).map_or(Vec3::ONE, |m| {
+            m.transmittance(ray.origin, ray.dir.normalize(), length)
+        })
     }
 
     /// What arrives at `shadow`'s origin, inside these media, of light leaving its end: the
@@ -237,7 +246,7 @@ impl Media {
             *traced += 1;
             let hit = world.intersect(&ray);
             let t = hit.map_or(ray.tmax, |h| h.t);
-            through *= media.transmittance(surfaces, t * ray.dir.length());
+            through *= media.transmittance(surfaces, &ray, t * ray.dir.length());
             let Some(hit) = hit else {
                 return through;
             };
@@ -302,7 +311,8 @@ mod tests {
     fn flights_through_a_chromatic_slab_converge_in_every_channel() {
         use crate::sampling::pcg::Pcg32;
         let sigma = Vec3::new(12.0, 4.0, 1.0);
-        let medium = Homogeneous::new(Vec3::ZERO, sigma, 0.0).unwrap();
+        let medium =
+            Medium::Homogeneous(crate::medium::Homogeneous::new(Vec3::ZERO, sigma, 0.0).unwrap());
         let mut rng = Pcg32::new(5, 3);
         let n = 100_000;
         let (mut sum, mut squares) = (Vec3::ZERO, Vec3::ZERO);
@@ -311,7 +321,7 @@ mod tests {
             let mut media = Media::EMPTY;
             loop {
                 let length = if forward { 1.0 - x } else { x };
-                match media.fly(&medium, rng.next_f32(), length) {
+                match media.fly(&medium, Vec3::ZERO, Vec3::X, rng.next_f32(), length) {
                     Flight::Scatter { t, weight } => {
                         beta *= weight;
                         x += if forward { t } else { -t };

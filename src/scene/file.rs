@@ -63,6 +63,19 @@ struct Manifest {
     render_settings: Option<RenderSettings>,
     #[serde(default)]
     subdivision_surfaces: Vec<SubdivisionEntry>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    grids: Vec<GridEntry>,
+}
+
+/// A density grid: its resolution, its unit cube to world (a column-major 4x4 matrix) and
+/// its values (f32, x fastest).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GridEntry {
+    source: String,
+    resolution: [u32; 3],
+    to_world: [f64; 16],
+    values: View,
 }
 
 /// A subdivision surface: its cage (points f32×3, face counts and indices u32), creases
@@ -255,6 +268,16 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
             }),
         })
         .collect();
+    let grids = scene
+        .grids
+        .iter()
+        .map(|g| GridEntry {
+            source: g.source.clone(),
+            resolution: g.resolution,
+            to_world: g.to_world.to_cols_array(),
+            values: buffer.floats(&g.values.iter().map(|&v| [v]).collect::<Vec<_>>()),
+        })
+        .collect();
     let manifest = Manifest {
         format: FORMAT.into(),
         version: VERSION,
@@ -275,6 +298,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         warnings: scene.warnings.clone(),
         render_settings: scene.render_settings.clone(),
         subdivision_surfaces,
+        grids,
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
@@ -558,8 +582,23 @@ pub fn parse(
         render_settings: manifest.render_settings,
         subdivision_surfaces: Vec::new(),
         subdivision_level: None,
+        grids: Vec::new(),
     };
     let mut scene = scene;
+    for (i, entry) in manifest.grids.iter().enumerate() {
+        let element = format!("grids[{i}]");
+        let values: Vec<[f32; 1]> = buffer.floats(entry.values, &format!("{element}.values"))?;
+        let grid = super::DensityGrid {
+            source: entry.source.clone(),
+            resolution: entry.resolution,
+            to_world: glam::DMat4::from_cols_array(&entry.to_world),
+            values: values.into_iter().map(|[v]| v).collect(),
+        };
+        if let Some(reason) = grid.defect() {
+            return Err(bad(&element, reason));
+        }
+        scene.grids.push(grid);
+    }
     for (i, entry) in manifest.subdivision_surfaces.iter().enumerate() {
         let surface = read_subdivision(&buffer, entry, &format!("subdivision_surfaces[{i}]"))
             .map_err(|(element, reason)| bad(&element, reason))?;
@@ -965,7 +1004,10 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && m.transmission_color.is_none_or(colour)
             && m.clearcoat_normal_scale.is_finite()
             && m.volume.is_none_or(|v| {
-                colour(v.absorption) && colour(v.scattering) && v.anisotropy.abs() < 1.0
+                colour(v.absorption)
+                    && colour(v.scattering)
+                    && v.anisotropy.abs() < 1.0
+                    && v.density.is_none_or(|g| (g as usize) < scene.grids.len())
             })
             && unit(m.specular.weight)
             && colour(m.specular.color)

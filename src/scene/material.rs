@@ -118,6 +118,11 @@ pub struct Volume {
     /// Henyey-Greenstein mean cosine of scattering, in (−1, 1).
     #[serde(default)]
     pub anisotropy: f32,
+    /// The density grid (an index into `Scene::grids`) that scales absorption and
+    /// scattering point by point: they are then the coefficients at density 1, and the
+    /// medium is empty outside the grid. `None`: the same everywhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density: Option<u32>,
 }
 
 impl Volume {
@@ -127,6 +132,7 @@ impl Volume {
             absorption,
             scattering: Vec3::ZERO,
             anisotropy: 0.0,
+            density: None,
         }
     }
 
@@ -311,11 +317,13 @@ impl Material {
                     || self.anisotropy.is_some()))
     }
 
-    /// True if the material bounds a participating medium: its volume scatters, or it is
-    /// an interface around a medium (which shadow rays cross into).
+    /// True if the material bounds a participating medium: its volume scatters or has a
+    /// density grid, or it is an interface around a medium (which shadow rays cross into).
     pub fn bounds_participating_medium(&self) -> bool {
         self.volume.is_some_and(|v| {
-            v.scatters() || (self.model == BsdfModel::Interface && v.absorption != Vec3::ZERO)
+            v.scatters()
+                || v.density.is_some()
+                || (self.model == BsdfModel::Interface && v.absorption != Vec3::ZERO)
         })
     }
 

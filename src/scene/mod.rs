@@ -4,12 +4,14 @@
 
 pub mod features;
 pub mod file;
+pub mod grid;
 pub mod material;
 pub mod texture;
 pub mod texture_cache;
 pub mod udim;
 
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
+pub use grid::DensityGrid;
 pub use material::{
     AlphaMode, Anisotropy, BsdfModel, Iridescence, Material, Reduced, Sheen, Specular, TextureRef,
     UvTransform, Volume,
@@ -33,6 +35,8 @@ pub struct Scene {
     pub cylinders: Vec<Cylinder>,
     pub materials: Vec<Material>,
     pub textures: Vec<Texture>,
+    /// Density grids of heterogeneous media (`Volume::density`).
+    pub grids: Vec<DensityGrid>,
     pub lights: Vec<Light>,
     pub cameras: Vec<Camera>,
     pub environment: Option<Environment>,
@@ -391,6 +395,12 @@ impl Scene {
         use std::mem::size_of;
         self.meshes.iter().map(Mesh::data_bytes).sum::<u64>()
             + self.texel_bytes()
+            // Density grids and their majorants (a float per 8³ voxels).
+            + self
+                .grids
+                .iter()
+                .map(|g| g.values.len() as u64 * 4 * 513 / 512)
+                .sum::<u64>()
             + self.texture_cache().map_or(0, |c| {
                 c.capacity() + c.bytes_per_thread() * rayon::current_num_threads() as u64
             })

@@ -20,7 +20,7 @@ use crate::light::{
     DirectionalLight, DistantCone, Light, LightSet, PointLight, QuadricLight, SphereLight,
     SpotLight, TriangleLight,
 };
-use crate::medium::Homogeneous;
+use crate::medium::Medium;
 use crate::memory::MemoryEstimate;
 use crate::scene::features::SceneFeatures;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
@@ -862,7 +862,7 @@ impl World {
                 media: scene
                     .materials
                     .iter()
-                    .map(|m| Homogeneous::inside(m, space.scale))
+                    .map(|m| Medium::inside(m, &scene.grids, &space))
                     .collect(),
                 participating: scene
                     .materials

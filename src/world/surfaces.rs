@@ -9,7 +9,7 @@ use crate::geometry::ray::Ray;
 use crate::geometry::triangle::geometric_normal;
 use crate::geometry::{Hit, NOT_PLACED, PrimitiveHit, sphere};
 use crate::material::{self, SurfaceAttributes};
-use crate::medium::Homogeneous;
+use crate::medium::Medium;
 use crate::sampling::pcg::hash_u32;
 use crate::scene::{AlphaMode, Material, Mesh, Texture};
 use glam::{Affine3A, Mat3A, Vec2, Vec3, Vec4};
@@ -68,7 +68,7 @@ pub struct Surfaces {
     pub prim_light: Vec<u32>,
     /// By material, the medium inside its volume in render-space units (`None` for no
     /// volume, or a clear one).
-    pub media: Vec<Option<Homogeneous>>,
+    pub media: Vec<Option<Medium>>,
     /// True if some material bounds a participating medium
     /// ([`Material::bounds_participating_medium`]): paths sample free flights and shadow
     /// rays cross media only then.
@@ -334,7 +334,7 @@ impl Surfaces {
     /// The medium (in render-space units) inside the volume of material `material`, where
     /// it absorbs or scatters.
     #[inline]
-    pub fn medium(&self, material: u32) -> Option<&Homogeneous> {
+    pub fn medium(&self, material: u32) -> Option<&Medium> {
         self.media.get(material as usize).and_then(Option::as_ref)
     }
 

@@ -197,6 +197,15 @@ fn every_configuration_converges_to_the_same_image() {
             ingest::load(&root.join("media/chromatic-cube.gltf"), &Default::default()).unwrap(),
             256,
         ),
+        (
+            "chromatic-smoke",
+            ingest::load(
+                &root.join("media/chromatic-smoke.gltf"),
+                &Default::default(),
+            )
+            .unwrap(),
+            256,
+        ),
     ];
     let blocks = (RESOLUTION.0 / BLOCK * RESOLUTION.1 / BLOCK * 3) as usize;
     let comparisons = scenes.len() * CONFIGURATIONS.len() * blocks;

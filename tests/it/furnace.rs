@@ -331,8 +331,35 @@ fn medium(absorption: Vec3, scattering: Vec3, g: f32) -> lucerna::scene::Materia
             absorption,
             scattering,
             anisotropy: g,
+            density: None,
         }),
         ..material(BsdfModel::Interface, Vec3::ONE, 0.0, 0.0)
+    }
+}
+
+/// A density grid over the box [-1, 1]³: lumps of density up to 4 and an empty slab.
+fn smoke_grid() -> lucerna::scene::DensityGrid {
+    let n = 20u32;
+    let mut values = Vec::new();
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let p = Vec3::new(x as f32, y as f32, z as f32) / n as f32 * 6.0;
+                let lump = 2.0 + p.x.sin() * p.y.cos() + (1.3 * p.z).sin();
+                values.push(if (8..11).contains(&y) {
+                    0.0
+                } else {
+                    lump.max(0.0)
+                });
+            }
+        }
+    }
+    lucerna::scene::DensityGrid {
+        source: "smoke".into(),
+        resolution: [n; 3],
+        to_world: DMat4::from_translation(DVec3::splat(-1.0))
+            * DMat4::from_scale(DVec3::splat(2.0)),
+        values: values.into(),
     }
 }
 
@@ -358,24 +385,38 @@ fn scattering_media_disappear() {
             medium(Vec3::ZERO, Vec3::new(0.5, 2.0, 6.0), -0.3),
         ),
         (
+            "chromatic smoke ball (density grid)",
+            lucerna::scene::Material {
+                volume: Some(lucerna::scene::Volume {
+                    density: Some(0),
+                    ..medium(Vec3::ZERO, Vec3::new(0.3, 1.0, 2.5), 0.4)
+                        .volume
+                        .unwrap()
+                }),
+                ..medium(Vec3::ZERO, Vec3::ZERO, 0.0)
+            },
+        ),
+        (
             "glass ball of scattering medium",
             lucerna::scene::Material {
                 volume: Some(lucerna::scene::Volume {
                     absorption: Vec3::ZERO,
                     scattering: Vec3::splat(3.0),
                     anisotropy: 0.5,
+                    density: None,
                 }),
                 ..glass(Some(Vec3::ZERO), 1.5)
             },
         ),
     ];
     for (name, m) in cases {
-        let s = scene(
+        let mut s = scene(
             vec![(icosphere(3), DMat4::IDENTITY)],
             m,
             Vec3::ONE,
             ortho_camera(DVec3::new(0.0, 0.0, 5.0), 1.1),
         );
+        s.grids.push(smoke_grid());
         let (film, stats) = render(s, (32, 32), 128, without_roulette(), 2);
         assert_eq!(stats.discarded, 0, "{name}");
         // The image and the ball's pixels within noise (a medium's paths are heavy-tailed

@@ -185,6 +185,23 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna.medium.anisotropy", "1 must be in (-1, 1)")
+    yield ("medium-grid-missing.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface",
+                                                  "medium": {"scattering": 1.0, "density": "missing.vol"}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium.density", "missing.vol: cannot read")
+    # A grid header that asks for 2^31 voxels a side, in a file of 48 bytes.
+    huge = b"VOL\x03" + struct.pack("<5i", 1, 2**31 - 1, 2**31 - 1, 2**31 - 1, 1) + struct.pack("<6f", 0, 0, 0, 1, 1, 1)
+    yield ("medium-grid-truncated.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface", "medium": {
+                   "scattering": 1.0,
+                   "density": "data:application/octet-stream;base64," + base64.b64encode(huge).decode()}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium.density", "bytes, the file has 48")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

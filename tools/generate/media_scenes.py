@@ -17,11 +17,19 @@ interfaces as `null` BSDFs with a `homogeneous` interior medium and an HG phase 
 - scattering-glass.gltf: the Cornell box with a smooth glass sphere (ior 1.5, an analytic
   sphere) filled with a milky, faintly absorbing, forward-scattering medium: media behind a
   refracting boundary.
+- smoke-plume.gltf: the empty Cornell box with a plume of smoke rising from its floor, a
+  heterogeneous medium: a density grid (smoke-plume.vol, 40 x 40 x 40 voxels, Mitsuba's
+  volume format) of a turbulent column widening upwards, with empty space around it, scaling
+  a grey extinction (peak 90 per metre) of warm albedo inside an interface box.
+- chromatic-smoke.gltf: the same plume (the same grid file) with an extinction that differs
+  by channel (50, 100 and 180 per metre at density 1): delta tracking with spectral MIS.
 
-    python3 tools/generate/media_scenes.py [DIR]   (default scenes/media)
+    .venv/bin/python tools/generate/media_scenes.py [DIR]   (default scenes/media)
 """
 import sys
 from pathlib import Path
+
+import numpy as np
 
 from glass_box import cornell, cornell_camera
 from lucerna_tools.gltf_writer import GltfWriter, box, look_rotation, unit
@@ -86,14 +94,80 @@ def scattering_glass():
     return w
 
 
-SCENES = {"fog-spot": fog_spot, "chromatic-cube": chromatic_cube, "scattering-glass": scattering_glass}
+# The box stays well below the light: Mitsuba 3.9.1's volpath loses light where a null
+# interface lies between lit surfaces and a nearby area light (a clear box whose top is 7 cm
+# below the Cornell light renders 5.6 % darker in volpath than in path; docs/media.md).
+PLUME_BOX = ((0.10, 0.0, 0.12), (0.46, 0.36, 0.48))
+PLUME_RESOLUTION = (40, 40, 40)
+
+
+def plume_density():
+    """The plume's densities, shape (z, y, x), peak 1: a column that sways and widens as it
+    rises, broken up by turbulence (random sinusoids, fixed seed), fading out at the top."""
+    nx, ny, nz = PLUME_RESOLUTION
+    z, y, x = np.meshgrid(*[(np.arange(n) + 0.5) / n for n in (nz, ny, nx)], indexing="ij")
+    cx = 0.5 + 0.10 * np.sin(5.0 * y)
+    cz = 0.5 + 0.07 * np.cos(4.0 * y + 1.0)
+    radius = 0.10 + 0.28 * y
+    profile = np.exp(-2.0 * ((x - cx) ** 2 + (z - cz) ** 2) / radius ** 2)
+    rng = np.random.default_rng(7)
+    noise = np.zeros_like(x)
+    for octave in range(4):
+        for _ in range(6):
+            direction = rng.normal(size=3)
+            direction /= np.linalg.norm(direction)
+            frequency = 6.0 * 2.0 ** octave
+            phase = rng.uniform(0.0, 2.0 * np.pi)
+            noise += np.sin(frequency * (direction[0] * x + direction[1] * y + direction[2] * z) + phase) \
+                / 2.0 ** octave / 6.0
+    turbulence = np.clip(0.55 + 0.9 * noise, 0.0, None)
+    fade = np.clip(y / 0.06, 0.0, 1.0) * np.clip((0.92 - y) / 0.25, 0.0, 1.0)
+    density = profile * turbulence * fade
+    density[density < 0.02] = 0.0
+    return density / density.max()
+
+
+def write_vol(path, density, lo, hi):
+    nz, ny, nx = density.shape
+    header = b"VOL" + bytes([3]) + np.array([1, nx, ny, nz, 1], dtype="<i4").tobytes()
+    box = np.array([*lo, *hi], dtype="<f4").tobytes()
+    path.write_bytes(header + box + np.ascontiguousarray(density, dtype="<f4").tobytes())
+
+
+def smoke(out, extinction, albedo):
+    """The Cornell box with the plume of `extinction` (RGB, per metre at density 1) and
+    `albedo`; writes the grid file into `out`."""
+    w = GltfWriter("lucerna tools/generate/media_scenes.py")
+    cornell(w)
+    cornell_camera(w)
+    lo, hi = PLUME_BOX
+    write_vol(out / "smoke-plume.vol", plume_density(), lo, hi)
+    medium = {"scattering": [e * a for e, a in zip(extinction, albedo)],
+              "absorption": [e * (1 - a) for e, a in zip(extinction, albedo)], "anisotropy": 0.3,
+              "density": "smoke-plume.vol"}
+    # The interface box around the grid's box, above the floor.
+    positions, triangles = box((lo[0] - 0.005, 0.001, lo[2] - 0.005), (hi[0] + 0.005, hi[1] + 0.005, hi[2] + 0.005))
+    w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, interface(w, "smoke", medium)))
+    return w
+
+
+def smoke_plume(out):
+    return smoke(out, [90.0] * 3, [0.9, 0.8, 0.65])
+
+
+def chromatic_smoke(out):
+    return smoke(out, [50.0, 100.0, 180.0], [0.95, 0.85, 0.7])
+
+
+SCENES = {"fog-spot": fog_spot, "chromatic-cube": chromatic_cube, "scattering-glass": scattering_glass,
+          "smoke-plume": smoke_plume, "chromatic-smoke": chromatic_smoke}
 
 
 def main():
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "scenes" / "media"
     for name, build in SCENES.items():
         path = out / f"{name}.gltf"
-        build().write_gltf(path)
+        (build(out) if "smoke" in name else build()).write_gltf(path)
         print(f"wrote {path}")
 
 

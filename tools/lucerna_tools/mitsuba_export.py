@@ -15,6 +15,9 @@ names the element (never a silent approximation):
   base colour as `specular_transmittance` (both tint each crossing).
 - media: the homogeneous medium inside a material's volume -> a `homogeneous` interior
   medium (sigma_t = absorption + scattering, albedo = scattering / sigma_t, `hg` phase);
+  a medium with a density grid -> `heterogeneous` with `sigma_t` a `gridvolume` of the
+  density times the extinction (one channel, or three where it differs by channel, `raw`),
+  placed by the grid's own transform of the unit cube, as lucerna places it;
   an interface (`model` interface) -> `null`; any medium makes the integrator `volpath`
   (`volpathmis` where a medium's extinction differs by channel);
 - emission -> an `area` emitter (one-sided, on the front face, like lucerna);
@@ -98,22 +101,44 @@ def glass(material, element):
     return {"type": "roughdielectric", "distribution": "ggx", "alpha": alpha, "sample_visible": True, **common}
 
 
-def medium(material):
-    """Mitsuba's interior medium of a lucerna material's volume (None: no volume, or clear)."""
+def extinction(material):
+    """The extinction (absorption + scattering, at density 1 for a grid) of a lucerna
+    material's volume, None without one."""
     volume = material.get("volume")
     if not volume:
         return None
-    absorption = np.array(volume["absorption"], dtype=np.float64)
-    scattering = np.array(volume.get("scattering", [0.0, 0.0, 0.0]), dtype=np.float64)
-    sigma_t = absorption + scattering
-    if not sigma_t.any():
+    return (np.array(volume["absorption"], dtype=np.float64)
+            + np.array(volume.get("scattering", [0.0, 0.0, 0.0]), dtype=np.float64))
+
+
+def medium(material, grid_volume=None):
+    """Mitsuba's interior medium of a lucerna material's volume (None: no volume, or clear).
+    `grid_volume(index, sigma_t)` gives the `gridvolume` of the scene's density grid `index`
+    times the RGB extinction `sigma_t` (scaled to a peak of 1)."""
+    volume = material.get("volume")
+    sigma_t = extinction(material)
+    if sigma_t is None or not sigma_t.any():
         return None
+    scattering = np.array(volume.get("scattering", [0.0, 0.0, 0.0]), dtype=np.float64)
     albedo = np.divide(scattering, sigma_t, out=np.zeros(3), where=sigma_t > 0)
     # Mitsuba reads an RGB sigma_t as a reflectance (at most 1): the peak goes to `scale`.
     peak = float(sigma_t.max())
-    return {"type": "homogeneous", "scale": peak, "sigma_t": {"type": "rgb", "value": (sigma_t / peak).tolist()},
-            "albedo": {"type": "rgb", "value": albedo.tolist()},
-            "phase": {"type": "hg", "g": float(volume.get("anisotropy", 0.0))}}
+    common = {"scale": peak, "albedo": {"type": "rgb", "value": albedo.tolist()},
+              "phase": {"type": "hg", "g": float(volume.get("anisotropy", 0.0))}}
+    if volume.get("density") is not None:
+        if grid_volume is None:
+            raise Unsupported("a density grid needs the scene's grids")
+        return {"type": "heterogeneous", "sigma_t": grid_volume(volume["density"], sigma_t / peak), **common}
+    return {"type": "homogeneous", "sigma_t": {"type": "rgb", "value": (sigma_t / peak).tolist()}, **common}
+
+
+def write_vol(path, values, channels):
+    """A Mitsuba `.vol` file (version 3, float32) of `values` shaped (z, y, x, channels),
+    in the unit box."""
+    nz, ny, nx = values.shape[:3]
+    header = b"VOL" + bytes([3]) + np.array([1, nx, ny, nz, channels], dtype="<i4").tobytes()
+    box = np.array([0, 0, 0, 1, 1, 1], dtype="<f4").tobytes()
+    Path(path).write_bytes(header + box + np.ascontiguousarray(values, dtype="<f4").tobytes())
 
 
 def bsdf(material, element):
@@ -189,19 +214,38 @@ def scene_dict(scene_file, width, height, workdir, max_depth=-1, camera_name=Non
     import mitsuba as mi
     manifest, buffer = read_scene_file(scene_file)
     materials = manifest["materials"]
-    media = [m for m in map(medium, materials) if m]
+    grids = manifest.get("grids", [])
+    written = {}
+
+    def grid_volume(index, sigma_t):
+        """The gridvolume of density grid `index` times `sigma_t` (written once per pair)."""
+        key = (index, tuple(sigma_t))
+        if key not in written:
+            g = grids[index]
+            nx, ny, nz = g["resolution"]
+            density = view(buffer, g["values"], "<f4", 1).reshape(nz, ny, nx, 1).astype(np.float64)
+            channels = 1 if len(set(sigma_t)) == 1 else 3
+            path = Path(workdir) / f"grid{index}_{len(written)}.vol"
+            write_vol(path, density * sigma_t[:channels], channels)
+            written[key] = {"type": "gridvolume", "filename": str(path), "raw": True,
+                            "to_world": mi.ScalarTransform4f(matrix(g["to_world"]).tolist())}
+        return dict(written[key])
+
+    def medium_of(material):
+        return medium(material, grid_volume)
+    media = [m for m in map(medium_of, materials) if m]
     # Mitsuba's volpath samples distances in one channel without MIS over the channels: in
     # a medium whose extinction differs by channel its estimate is unbiased but so
     # heavy-tailed that it reads several per cent dark at thousands of samples; volpathmis
     # (spectral MIS, Miller et al. 2019) is the exact peer there, as lucerna's channel MIS.
-    chromatic = any(len(set(m["sigma_t"]["value"])) > 1 for m in media)
+    chromatic = any(len(set(e)) > 1 for e in map(extinction, materials) if e is not None and e.any())
     integrator = ("volpathmis" if chromatic else "volpath") if media else "path"
     scene = {"type": "scene", "integrator": {"type": integrator, "max_depth": max_depth},
              "sensor": camera(manifest, width, height, camera_name, sampler)}
 
     def bounded(shape, material):
         """The shape with the medium its material's volume holds, if any."""
-        if m := medium(material):
+        if m := medium_of(material):
             shape["interior"] = m
         return shape
     plys = {}

@@ -209,10 +209,15 @@ impl<'a> Importer<'a> {
         if let Some(medium) = extras.medium {
             // The extension's absorption stays where the medium gives none.
             let absorption = material.volume.map_or(Vec3::ZERO, |v| v.absorption);
+            let density = match &medium.density {
+                Some(uri) => Some(self.density_grid(uri, element)?),
+                None => None,
+            };
             material.volume = Some(scene::Volume {
                 absorption: medium.absorption.map_or(absorption, |a| a.rgb()),
                 scattering: medium.scattering.map_or(Vec3::ZERO, |s| s.rgb()),
                 anisotropy: medium.anisotropy,
+                density,
             });
         } else if model == BsdfModel::Interface && material.volume.is_none() {
             self.warn(
@@ -435,6 +440,22 @@ impl<'a> Importer<'a> {
                 format!("extension {ext} is not supported and is ignored{detail}{users}"),
             );
         }
+    }
+
+    /// The scene grid of the density file at `uri` (read once however many materials use
+    /// it); `element` is the material's, for messages.
+    fn density_grid(&mut self, uri: &str, element: &str) -> Result<u32> {
+        if let Some(&g) = self.grids.get(uri) {
+            return Ok(g);
+        }
+        let e = format!("{element}.extras.lucerna.medium.density");
+        let bytes = crate::ingest::uri::read(uri, self.base).map_err(|r| self.err(&e, r))?;
+        let grid = crate::ingest::vol::parse(&bytes, uri)
+            .map_err(|r| self.err(&e, format!("{uri}: {r}")))?;
+        let g = self.scene.grids.len() as u32;
+        self.scene.grids.push(grid);
+        self.grids.insert(uri.to_string(), g);
+        Ok(g)
     }
 
     /// The BSDF model, the diffuse roughness and the medium from `extras.lucerna` (default:

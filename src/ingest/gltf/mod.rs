@@ -97,6 +97,7 @@ pub fn import_with(
         },
         images: HashMap::new(),
         textures: HashMap::new(),
+        grids: HashMap::new(),
         materials: HashMap::new(),
         meshes: HashMap::new(),
         pose: HashMap::new(),
@@ -125,6 +126,8 @@ pub(crate) struct Importer<'a> {
     images: HashMap<usize, (u32, u32, Arc<scene::Texels>)>,
     /// glTF texture index → scene texture.
     textures: HashMap<usize, u32>,
+    /// Density grid URI → scene grid.
+    grids: HashMap<String, u32>,
     /// glTF material index (`None`: the default material) → scene material.
     materials: HashMap<Option<usize>, u32>,
     /// (glTF mesh, primitive) → scene mesh, or `None` for a skipped primitive.
@@ -181,6 +184,9 @@ pub(super) struct MediumExtras {
     scattering: Option<SpecularValue>,
     #[serde(default)]
     anisotropy: f32,
+    /// A density grid (a Mitsuba `.vol` file beside the glTF) that scales absorption and
+    /// scattering point by point: they are then the coefficients at density 1.
+    density: Option<String>,
 }
 
 impl SpecularValue {

@@ -47,16 +47,16 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
         let Some(medium) = path
             .media
             .medium(&self.world.surfaces)
-            .filter(|m| m.scatters())
+            .filter(|m| m.needs_flight())
         else {
             return Segment::Clear;
         };
         let length = hit.map_or(f32::INFINITY, |h| h.t * ray.dir.length());
         let vs = sampler.vertex(path.vertex, path.branch);
-        match path.media.fly(medium, vs.medium, length) {
+        let dir = ray.dir.normalize();
+        match path.media.fly(medium, ray.origin, dir, vs.medium, length) {
             Flight::Scatter { t, weight } => {
                 path.beta *= weight;
-                let dir = ray.dir.normalize();
                 let scattered = MediumVertex {
                     medium,
                     p: ray.origin + dir * t,

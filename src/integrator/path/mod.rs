@@ -49,7 +49,7 @@ use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, offset_past, offset_ray_origin};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
-use crate::medium::Homogeneous;
+use crate::medium::Medium;
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
 use crate::scene::{BsdfModel, Material};
 use crate::world::{Interaction, World};
@@ -129,7 +129,7 @@ impl Vertex<'_> {
 /// A scattering event inside a medium: the medium, where, the direction the light travelled
 /// (unit) and how far from the ray's origin (render space).
 struct MediumVertex<'m> {
-    medium: &'m Homogeneous,
+    medium: &'m Medium,
     p: Vec3,
     dir: Vec3,
     arrived: f32,
@@ -399,7 +399,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             };
             let arrived = hit.t * ray.dir.length();
             if !path.media.is_empty() && drawn.is_none() {
-                path.beta *= path.media.transmittance(&world.surfaces, arrived);
+                path.beta *= path.media.transmittance(&world.surfaces, &ray, arrived);
             }
             // After a rough bounce, footprints are circles (one texture probe).
             let it = world.interaction_in_cone(
@@ -784,7 +784,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             media.shadow_transmittance(world, &shadow, &mut traced)
         } else {
             let length = ls.target.map_or(f32::INFINITY, |t| (t - origin).length());
-            world.transmittance(&shadow) * media.transmittance(&world.surfaces, length)
+            world.transmittance(&shadow) * media.transmittance(&world.surfaces, &shadow, length)
         };
         if through == Vec3::ZERO {
             return traced;

@@ -6,7 +6,7 @@ Mitsuba seed B against seed A (the noise floor), and the luminance ratio of the 
 Mitsuba renders the scene lucerna renders (tools/lucerna_tools/mitsuba_export.py: `volpath`,
 `volpathmis` for chromatic media), spot lights hard-edged in both.
 
-    .venv/bin/python tools/compare/media/compare.py [--spp 512] [--resolution 192x192] [--out DIR]
+    .venv/bin/python tools/compare/media/compare.py [--spp 512] [--resolution 192x192] [--scenes NAME ...] [--out DIR]
 
 writes DIR/<scene>.png and DIR/figures.json (default tools/compare/media/results).
 """
@@ -21,7 +21,7 @@ import lucerna_tools as lt
 from lucerna_tools import mitsuba_compare as mc
 from lucerna_tools import mitsuba_export
 
-SCENES = ["fog-spot", "chromatic-cube", "scattering-glass"]
+SCENES = ["fog-spot", "chromatic-cube", "scattering-glass", "smoke-plume", "chromatic-smoke"]
 
 
 def tonemap(x):
@@ -39,13 +39,14 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--spp", type=int, default=512)
     parser.add_argument("--resolution", default="192x192")
+    parser.add_argument("--scenes", nargs="+", default=SCENES, choices=SCENES)
     parser.add_argument("--out", default=str(lt.ROOT / "tools" / "compare" / "media" / "results"))
     args = parser.parse_args()
     width, height = map(int, args.resolution.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     figures = {}
-    for name in SCENES:
+    for name in args.scenes:
         with tempfile.TemporaryDirectory() as workdir:
             scene_file = mc.scene_file_of(lt.ROOT / "scenes" / "media" / f"{name}.gltf", workdir, hard_spots=True)
             exported = mi.load_dict(mitsuba_export.scene_dict(scene_file, width, height, workdir))
