@@ -29,6 +29,11 @@ pub const CELL: usize = 8;
 /// Below this transmittance (largest channel) ratio tracking plays Russian roulette.
 const ROULETTE_BELOW: f32 = 0.05;
 
+/// The most tentative collisions of one walk: a grid whose majorant far exceeds its
+/// densities along a ray (one voxel of 1e30 among thin ones) would otherwise step for
+/// hours; a walk that reaches it counts as blocked.
+const MAX_COLLISIONS: u32 = 1 << 20;
+
 /// A heterogeneous medium in render space.
 #[derive(Clone, Debug)]
 pub struct Heterogeneous {
@@ -267,6 +272,7 @@ impl Heterogeneous {
         // The weight (f over the channel's density) and relative densities so far; both are
         // rescaled alike when they drift, which the balance heuristic does not see.
         let (mut weight, mut ratios) = (Vec3::ONE, Vec3::ONE);
+        let mut collisions = 0u32;
         for (enter, leave, max) in cells {
             let majorant = max * self.sigma_max;
             if !(majorant > 0.0) {
@@ -274,6 +280,10 @@ impl Heterogeneous {
             }
             let mut t = enter;
             loop {
+                collisions += 1;
+                if collisions > MAX_COLLISIONS {
+                    return (Flight::Pass { weight: Vec3::ZERO }, Vec3::ONE);
+                }
                 t -= (1.0 - rng.next_f32()).ln() / majorant;
                 if t >= leave {
                     break;
@@ -323,6 +333,7 @@ impl Heterogeneous {
             return Vec3::ONE;
         };
         let mut through = Vec3::ONE;
+        let mut collisions = 0u32;
         for (enter, leave, max) in cells {
             let majorant = max * self.sigma_max;
             if !(majorant > 0.0) {
@@ -330,6 +341,10 @@ impl Heterogeneous {
             }
             let mut t = enter;
             loop {
+                collisions += 1;
+                if collisions > MAX_COLLISIONS {
+                    return Vec3::ZERO;
+                }
                 t -= (1.0 - rng.next_f32()).ln() / majorant;
                 if t >= leave {
                     break;
@@ -519,6 +534,25 @@ mod tests {
                 "interaction {interact} against {}",
                 glam::DVec3::ONE - exact
             );
+        }
+    }
+
+    /// A grid whose majorant dwarfs its densities (one voxel of 1e30) ends its walks.
+    #[test]
+    fn an_extreme_majorant_ends_its_walks() {
+        let mut values = vec![1.0f32; 64];
+        values[0] = 1e30;
+        let g = DensityGrid {
+            values: values.into(),
+            resolution: [64, 1, 1],
+            ..grid()
+        };
+        let m = Heterogeneous::new(&g, Vec3::ZERO, Vec3::ONE, 0.0, DMat4::IDENTITY).unwrap();
+        let (origin, dir) = (Vec3::new(-0.5, 0.5, 0.5), Vec3::X);
+        assert_eq!(m.transmittance(origin, dir, f32::INFINITY), Vec3::ZERO);
+        match m.sample_flight(origin, dir, 0.5, f32::INFINITY, 0).0 {
+            Flight::Scatter { t, .. } => assert!(t < 1.0 / 64.0 + 0.5),
+            Flight::Pass { weight } => assert_eq!(weight, Vec3::ZERO),
         }
     }
 
