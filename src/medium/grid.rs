@@ -199,10 +199,10 @@ impl Heterogeneous {
         lerp(plane(z0), plane(z1), fz)
     }
 
-    /// The majorant cells along the ray from `origin` in unit direction `dir` up to
-    /// `length`, and the ray in voxel space; `None` where it misses the grid.
+    /// The tentative collisions along the ray from `origin` in unit direction `dir` up to
+    /// `length`; `None` where it misses the grid.
     #[inline]
-    fn cells(&self, origin: Vec3, dir: Vec3, length: f32) -> Option<(Cells<'_>, Vec3, Vec3)> {
+    fn walk(&self, origin: Vec3, dir: Vec3, length: f32) -> Option<Walk<'_>> {
         let o = self.to_voxel.transform_point3(origin);
         let d = self.to_voxel.transform_vector3(dir);
         let hi = Vec3::from(self.resolution.map(|n| n as f32));
@@ -241,7 +241,16 @@ impl Heterogeneous {
             t: t0,
             t_end: t1,
         };
-        Some((cells, o, d))
+        Some(Walk {
+            medium: self,
+            cells,
+            o,
+            d,
+            t: t0,
+            leave: t0,
+            majorant: 0.0,
+            collisions: 0,
+        })
     }
 
     /// Where light that enters the ray from `origin` along unit `dir`, over a segment of
@@ -266,56 +275,48 @@ impl Heterogeneous {
                 Vec3::ONE,
             );
         }
-        let Some((cells, o, d)) = self.cells(origin, dir, length) else {
+        let Some(mut walk) = self.walk(origin, dir, length) else {
             return (Flight::Pass { weight: Vec3::ONE }, Vec3::ONE);
         };
+        let blocked = (Flight::Pass { weight: Vec3::ZERO }, Vec3::ONE);
         // The weight (f over the channel's density) and relative densities so far; both are
         // rescaled alike when they drift, which the balance heuristic does not see.
         let (mut weight, mut ratios) = (Vec3::ONE, Vec3::ONE);
-        let mut collisions = 0u32;
-        for (enter, leave, max) in cells {
-            let majorant = max * self.sigma_max;
-            if !(majorant > 0.0) {
-                continue;
+        while let Some(collision) = walk.next(&mut rng) {
+            let Collision::At {
+                t,
+                density,
+                majorant,
+            } = collision
+            else {
+                return blocked;
+            };
+            let sigma_t = self.sigma_t * density;
+            let own = sigma_t[channel];
+            if rng.next_f32() * majorant < own {
+                return (
+                    Flight::Scatter {
+                        t,
+                        weight: weight * self.sigma_s * density / own,
+                    },
+                    ratios * sigma_t / own,
+                );
             }
-            let mut t = enter;
-            loop {
-                collisions += 1;
-                if collisions > MAX_COLLISIONS {
-                    return (Flight::Pass { weight: Vec3::ZERO }, Vec3::ONE);
-                }
-                t -= (1.0 - rng.next_f32()).ln() / majorant;
-                if t >= leave {
-                    break;
-                }
-                let density = self.density(o + d * t);
-                let sigma_t = self.sigma_t * density;
-                let own = sigma_t[channel];
-                if rng.next_f32() * majorant < own {
-                    return (
-                        Flight::Scatter {
-                            t,
-                            weight: weight * self.sigma_s * density / own,
-                        },
-                        ratios * sigma_t / own,
-                    );
-                }
-                let null = (Vec3::splat(majorant) - sigma_t).max(Vec3::ZERO);
-                let own_null = majorant - own;
-                if !(own_null > 0.0) {
-                    return (Flight::Pass { weight: Vec3::ZERO }, Vec3::ONE);
-                }
-                let r = null / own_null;
-                weight *= r;
-                ratios *= r;
-                let sum = ratios.element_sum();
-                if !(sum > 0.0) {
-                    return (Flight::Pass { weight: Vec3::ZERO }, Vec3::ONE);
-                }
-                if !(1e-6..1e6).contains(&sum) {
-                    weight *= 3.0 / sum;
-                    ratios *= 3.0 / sum;
-                }
+            let null = (Vec3::splat(majorant) - sigma_t).max(Vec3::ZERO);
+            let own_null = majorant - own;
+            if !(own_null > 0.0) {
+                return blocked;
+            }
+            let r = null / own_null;
+            weight *= r;
+            ratios *= r;
+            let sum = ratios.element_sum();
+            if !(sum > 0.0) {
+                return blocked;
+            }
+            if !(1e-6..1e6).contains(&sum) {
+                weight *= 3.0 / sum;
+                ratios *= 3.0 / sum;
             }
         }
         (Flight::Pass { weight }, ratios)
@@ -329,39 +330,79 @@ impl Heterogeneous {
     }
 
     fn transmittance_with(&self, origin: Vec3, dir: Vec3, length: f32, rng: &mut Pcg32) -> Vec3 {
-        let Some((cells, o, d)) = self.cells(origin, dir, length) else {
+        let Some(mut walk) = self.walk(origin, dir, length) else {
             return Vec3::ONE;
         };
         let mut through = Vec3::ONE;
-        let mut collisions = 0u32;
-        for (enter, leave, max) in cells {
-            let majorant = max * self.sigma_max;
-            if !(majorant > 0.0) {
-                continue;
-            }
-            let mut t = enter;
-            loop {
-                collisions += 1;
-                if collisions > MAX_COLLISIONS {
+        while let Some(collision) = walk.next(rng) {
+            let Collision::At {
+                density, majorant, ..
+            } = collision
+            else {
+                return Vec3::ZERO;
+            };
+            through *= (Vec3::ONE - self.sigma_t * density / majorant).max(Vec3::ZERO);
+            let largest = through.max_element();
+            if largest < ROULETTE_BELOW {
+                // Survives with probability `largest` (at most 1 / 20).
+                if !(rng.next_f32() < largest) {
                     return Vec3::ZERO;
                 }
-                t -= (1.0 - rng.next_f32()).ln() / majorant;
-                if t >= leave {
-                    break;
-                }
-                let sigma_t = self.sigma_t * self.density(o + d * t);
-                through *= (Vec3::ONE - sigma_t / majorant).max(Vec3::ZERO);
-                let largest = through.max_element();
-                if largest < ROULETTE_BELOW {
-                    // Survives with probability `largest` (at most 1 / 20).
-                    if !(rng.next_f32() < largest) {
-                        return Vec3::ZERO;
-                    }
-                    through /= largest;
-                }
+                through /= largest;
             }
         }
         through
+    }
+}
+
+/// A tentative collision of a walk.
+enum Collision {
+    /// At distance `t`, where the density is `density` under majorant extinction `majorant`.
+    At { t: f32, density: f32, majorant: f32 },
+    /// The walk reached [`MAX_COLLISIONS`]: it counts as blocked.
+    Capped,
+}
+
+/// The tentative collisions along a ray in voxel space: exponential steps under each
+/// majorant cell's extinction in turn (memoryless, so a step cut at a cell's far side starts
+/// afresh in the next cell).
+struct Walk<'m> {
+    medium: &'m Heterogeneous,
+    cells: Cells<'m>,
+    o: Vec3,
+    d: Vec3,
+    t: f32,
+    /// The far side of the current cell, and its majorant extinction.
+    leave: f32,
+    majorant: f32,
+    collisions: u32,
+}
+
+impl Walk<'_> {
+    /// The next tentative collision, from `rng`; `None` past the end of the ray.
+    #[inline]
+    fn next(&mut self, rng: &mut Pcg32) -> Option<Collision> {
+        loop {
+            if self.majorant > 0.0 {
+                self.collisions += 1;
+                if self.collisions > MAX_COLLISIONS {
+                    return Some(Collision::Capped);
+                }
+                self.t -= (1.0 - rng.next_f32()).ln() / self.majorant;
+                if self.t < self.leave {
+                    let m = self.medium;
+                    return Some(Collision::At {
+                        t: self.t,
+                        density: m.density(self.o + self.d * self.t),
+                        majorant: self.majorant,
+                    });
+                }
+            }
+            let (enter, leave, max) = self.cells.next()?;
+            self.t = enter;
+            self.leave = leave;
+            self.majorant = max * self.medium.sigma_max;
+        }
     }
 }
 
@@ -410,7 +451,7 @@ mod tests {
 
     /// The optical depth along the ray at density 1, by the midpoint rule.
     fn depth(m: &Heterogeneous, origin: Vec3, dir: Vec3, length: f32) -> f64 {
-        let Some((cells, o, d)) = m.cells(origin, dir, length) else {
+        let Some(Walk { cells, o, d, .. }) = m.walk(origin, dir, length) else {
             return 0.0;
         };
         let (t0, t1) = (cells.t, cells.t_end);
@@ -444,7 +485,7 @@ mod tests {
             } else {
                 rng.next_f32()
             };
-            let Some((cells, o, d)) = m.cells(origin, dir, length) else {
+            let Some(Walk { cells, o, d, .. }) = m.walk(origin, dir, length) else {
                 continue;
             };
             let (mut t, end) = (cells.t, cells.t_end);
