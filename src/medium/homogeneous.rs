@@ -11,6 +11,8 @@ pub struct Homogeneous {
     sigma_a: Vec3,
     sigma_s: Vec3,
     sigma_t: Vec3,
+    /// Emitted radiance per render-space unit of length.
+    emission: Vec3,
     phase: HenyeyGreenstein,
 }
 
@@ -19,13 +21,44 @@ impl Homogeneous {
     /// (non-negative, finite) and anisotropy `g`; `None` where it neither absorbs nor
     /// scatters (clear glass).
     pub fn new(sigma_a: Vec3, sigma_s: Vec3, g: f32) -> Option<Self> {
+        Self::emitting(sigma_a, sigma_s, g, Vec3::ZERO)
+    }
+
+    /// The same, emitting `emission` (radiance per render-space unit of length); `None`
+    /// where it neither absorbs, scatters nor emits.
+    pub fn emitting(sigma_a: Vec3, sigma_s: Vec3, g: f32, emission: Vec3) -> Option<Self> {
         let sigma_t = sigma_a + sigma_s;
-        (sigma_t.max_element() > 0.0).then_some(Self {
+        (sigma_t.max_element() > 0.0 || emission.max_element() > 0.0).then_some(Self {
             sigma_a,
             sigma_s,
             sigma_t,
+            emission,
             phase: HenyeyGreenstein::new(g),
         })
+    }
+
+    /// True where it emits light.
+    #[inline]
+    pub fn emits(&self) -> bool {
+        self.emission.max_element() > 0.0
+    }
+
+    /// The radiance its emission along `length` of it sends to the segment's start: per
+    /// channel ∫ exp(−σt s) σe ds = σe (1 − exp(−σt length)) / σt, σe length where nothing
+    /// attenuates (nothing along an infinite length, which no closed volume has).
+    #[inline]
+    pub fn emitted(&self, length: f32) -> Vec3 {
+        let along = |s: f32| {
+            if s > 0.0 {
+                // exp_m1 keeps the thin limit (σt length ≪ 1) exact.
+                -(-s * length).exp_m1() / s
+            } else if length.is_finite() {
+                length
+            } else {
+                0.0
+            }
+        };
+        self.emission * Vec3::from(self.sigma_t.to_array().map(along))
     }
 
     /// True where light scatters inside (not only absorbed).

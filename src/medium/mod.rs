@@ -1,14 +1,19 @@
 //! Participating media: the space inside a closed surface that absorbs and scatters light
 //! along the way, not only at its boundary (fog, smoke, murky water, milk).
 //!
-//! A medium has absorption σa and scattering σs per unit length, per colour channel, and a
-//! Henyey-Greenstein phase function ([`phase`]): the same everywhere ([`homogeneous`]:
-//! closed-form flights), or scaled point by point by a density grid ([`grid`]: delta and
-//! ratio tracking against majorants). It fills the inside of a
-//! closed surface whose material bounds it (`scene::Volume`): a glass or other dielectric
-//! that refracts light into it, or an interface that does not scatter at all (Mitsuba's
-//! `null` BSDF: fog in a box that is not there). The path tracer keeps the media a path is
-//! inside (`integrator::media`) and asks the innermost one here how far light gets.
+//! A medium has absorption σa and scattering σs per unit length, per colour channel, a
+//! Henyey-Greenstein phase function ([`phase`]), and may emit radiance σe per unit length
+//! (flames, glowing gas: Cycles' and Karma's volume emission; pbrt-v4's σa Le). These are
+//! the same everywhere ([`homogeneous`]: closed-form flights), or scaled point by point by a
+//! density grid ([`grid`]: delta and ratio tracking against majorants). It fills the inside
+//! of a closed surface whose material bounds it (`scene::Volume`): a glass or other
+//! dielectric that refracts light into it, or an interface that does not scatter at all
+//! (Mitsuba's `null` BSDF: fog in a box that is not there). The path tracer keeps the media
+//! a path is inside (`integrator::media`) and asks the innermost one here how far light
+//! gets, and what the medium itself emits along each segment ([`Medium::emitted`]: exact
+//! for a homogeneous medium, ratio-tracked over a grid), which it adds before sampling the
+//! segment's flight: emission is then gathered along every segment whatever the flight
+//! does, independently of the channel the path samples in.
 //!
 //! Free-flight distances are sampled in one colour channel, the path's (chosen once per
 //! path, uniformly): [`Homogeneous::sample_flight`] gives the weight of the sample in every
@@ -49,13 +54,14 @@ impl Medium {
     pub fn inside(m: &Material, grids: &[DensityGrid], space: &RenderSpace) -> Option<Self> {
         let v = m.volume?;
         let per_unit = (1.0 / space.scale) as f32;
-        let (sigma_a, sigma_s) = (v.absorption * per_unit, v.scattering * per_unit);
+        let [sigma_a, sigma_s, emission] =
+            [v.absorption, v.scattering, v.emission].map(|c| c * per_unit);
         match v.density {
-            None => Homogeneous::new(sigma_a, sigma_s, v.anisotropy).map(Self::Homogeneous),
+            None => Homogeneous::emitting(sigma_a, sigma_s, v.anisotropy, emission)
+                .map(Self::Homogeneous),
             Some(g) => Heterogeneous::new(
                 grids.get(g as usize)?,
-                sigma_a,
-                sigma_s,
+                [sigma_a, sigma_s, emission],
                 v.anisotropy,
                 space.matrix(),
             )
@@ -70,6 +76,25 @@ impl Medium {
         match self {
             Self::Homogeneous(h) => h.scatters(),
             Self::Heterogeneous(_) => true,
+        }
+    }
+
+    /// True where it emits light.
+    #[inline]
+    pub fn emits(&self) -> bool {
+        match self {
+            Self::Homogeneous(h) => h.emits(),
+            Self::Heterogeneous(h) => h.emits(),
+        }
+    }
+
+    /// The radiance its emission along `length` of the ray from `origin` in unit direction
+    /// `dir` sends to `origin` (exact, or an unbiased estimate for a grid).
+    #[inline]
+    pub fn emitted(&self, origin: Vec3, dir: Vec3, length: f32) -> Vec3 {
+        match self {
+            Self::Homogeneous(h) => h.emitted(length),
+            Self::Heterogeneous(h) => h.emitted(origin, dir, length),
         }
     }
 

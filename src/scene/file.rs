@@ -1006,6 +1006,7 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && m.volume.is_none_or(|v| {
                 colour(v.absorption)
                     && colour(v.scattering)
+                    && colour(v.emission)
                     && v.anisotropy.abs() < 1.0
                     && v.density.is_none_or(|g| (g as usize) < scene.grids.len())
             })

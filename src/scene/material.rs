@@ -123,6 +123,14 @@ pub struct Volume {
     /// medium is empty outside the grid. `None`: the same everywhere.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub density: Option<u32>,
+    /// Radiance emitted per world unit of length, per channel (scaled by the density
+    /// grid): a flame's or glowing gas's light, which needs no absorption to exist.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub emission: Vec3,
+}
+
+fn is_zero(v: &Vec3) -> bool {
+    *v == Vec3::ZERO
 }
 
 impl Volume {
@@ -133,12 +141,18 @@ impl Volume {
             scattering: Vec3::ZERO,
             anisotropy: 0.0,
             density: None,
+            emission: Vec3::ZERO,
         }
     }
 
     /// True where light scatters inside.
     pub fn scatters(&self) -> bool {
         self.scattering.max_element() > 0.0
+    }
+
+    /// True where it emits light.
+    pub fn emits(&self) -> bool {
+        self.emission.max_element() > 0.0
     }
 }
 
@@ -317,11 +331,13 @@ impl Material {
                     || self.anisotropy.is_some()))
     }
 
-    /// True if the material bounds a participating medium: its volume scatters or has a
-    /// density grid, or it is an interface around a medium (which shadow rays cross into).
+    /// True if the material bounds a participating medium: its volume scatters, emits or
+    /// has a density grid, or it is an interface around a medium (which shadow rays cross
+    /// into).
     pub fn bounds_participating_medium(&self) -> bool {
         self.volume.is_some_and(|v| {
             v.scatters()
+                || v.emits()
                 || v.density.is_some()
                 || (self.model == BsdfModel::Interface && v.absorption != Vec3::ZERO)
         })

@@ -141,12 +141,12 @@ pub struct LightGroup {
 
 impl Scene {
     /// Whether anything lights the scene: a light, an environment, or an emissive surface
-    /// some geometry uses.
+    /// or emitting medium some geometry uses.
     pub fn has_light(&self) -> bool {
         let emissive = |m: u32| {
             self.materials
                 .get(m as usize)
-                .is_some_and(|m| m.is_emissive())
+                .is_some_and(|m| m.is_emissive() || m.volume.is_some_and(|v| v.emits()))
         };
         !self.lights.is_empty()
             || self.environment.is_some()

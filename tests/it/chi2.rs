@@ -1284,8 +1284,13 @@ fn delta_tracking_through_a_density_grid() {
         values: values.clone().into(),
     };
     let sigma = 1.5f32;
-    let medium =
-        Heterogeneous::new(&grid, Vec3::ZERO, Vec3::splat(sigma), 0.0, DMat4::IDENTITY).unwrap();
+    let medium = Heterogeneous::new(
+        &grid,
+        [Vec3::ZERO, Vec3::splat(sigma), Vec3::ZERO],
+        0.0,
+        DMat4::IDENTITY,
+    )
+    .unwrap();
     // The density along the ray, at voxel coordinate x in [0, n].
     let v: Vec<f64> = values.iter().map(|&x| x as f64).collect();
     let rho = move |x: f64| {

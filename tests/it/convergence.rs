@@ -206,6 +206,13 @@ fn every_configuration_converges_to_the_same_image() {
             .unwrap(),
             256,
         ),
+        // Lit only by what a grid emits: emission gathered along segments, whatever the
+        // roulette, splitting, guiding or learned technique does with the path.
+        (
+            "glowing-smoke",
+            ingest::load(&root.join("media/glowing-smoke.gltf"), &Default::default()).unwrap(),
+            256,
+        ),
     ];
     let blocks = (RESOLUTION.0 / BLOCK * RESOLUTION.1 / BLOCK * 3) as usize;
     let comparisons = scenes.len() * CONFIGURATIONS.len() * blocks;

@@ -94,8 +94,9 @@ fn round_trip_renders_identically() {
         shipped("cornell-box/cornell-box.gltf"),
         shipped("mis-plates/mis-plates.glb"),
         shipped("indirect-room/indirect-room.glb"),
-        // A density grid travels in the buffer.
+        // A density grid travels in the buffer; a medium's emission in the manifest.
         shipped("media/chromatic-smoke.gltf"),
+        shipped("media/glowing-smoke.gltf"),
         textured_scene(&dir),
     ];
     for source in &sources {

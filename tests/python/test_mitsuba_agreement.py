@@ -59,3 +59,13 @@ def test_media_agree_with_mitsuba_volpath():
         scene = ROOT / "scenes" / "media" / f"{name}.gltf"
         r = mitsuba_compare.compare(spp=256, width=48, height=48, scene=scene, hard_spots=True)
         assert r["ratio"] <= 2.0, (name, r)
+
+
+def test_emitting_media_are_not_exported():
+    """Mitsuba 3's media do not emit: the export refuses a glowing medium, naming its
+    material, instead of rendering it dark."""
+    import pytest
+    from lucerna_tools import mitsuba_export
+    with pytest.raises(mitsuba_export.Unsupported, match="'smoke': Mitsuba 3's media do not emit"):
+        mitsuba_export.medium({"name": "smoke", "volume": {"absorption": [1.0, 1.0, 1.0],
+                                                           "emission": [2.0, 1.0, 0.0]}})

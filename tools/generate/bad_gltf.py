@@ -171,13 +171,20 @@ def cases():
                                                   "medium": {"scattering": [1.0, -2.0, 1.0]}}}}],
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
-           "materials[0].extras.lucerna.medium", "absorption and scattering must be in [0, 1e8] per metre")
+           "materials[0].extras.lucerna.medium", "absorption, scattering and emission must be in [0, 1e8] per metre")
     yield ("medium-density-1e30.gltf",
            variant(lambda d: d.update(
                materials=[{"extras": {"lucerna": {"bsdf": "interface", "medium": {"absorption": 1e30}}}}],
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
-           "materials[0].extras.lucerna.medium", "absorption and scattering must be in [0, 1e8] per metre")
+           "materials[0].extras.lucerna.medium", "absorption, scattering and emission must be in [0, 1e8] per metre")
+    yield ("medium-negative-emission.gltf",
+           variant(lambda d: d.update(
+               materials=[{"extras": {"lucerna": {"bsdf": "interface",
+                                                  "medium": {"absorption": 1.0, "emission": [2.0, -1.0, 0.0]}}}}],
+               meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
+                                        "material": 0}]}])),
+           "materials[0].extras.lucerna.medium", "absorption, scattering and emission must be in [0, 1e8] per metre")
     yield ("medium-anisotropy-one.gltf",
            variant(lambda d: d.update(
                materials=[{"extras": {"lucerna": {"bsdf": "interface",

@@ -23,6 +23,10 @@ interfaces as `null` BSDFs with a `homogeneous` interior medium and an HG phase 
   a grey extinction (peak 90 per metre) of warm albedo inside an interface box.
 - chromatic-smoke.gltf: the same plume (the same grid file) with an extinction that differs
   by channel (50, 100 and 180 per metre at density 1): delta tracking with spectral MIS.
+- glowing-smoke.gltf: the same plume glowing orange (emitting 60, 22 and 6 per metre at
+  density 1, absorbing and scattering), the only light in the dark Cornell box: emission
+  gathered along segments through a grid. Mitsuba 3's media do not emit, so this one has
+  no Mitsuba counterpart.
 
     .venv/bin/python tools/generate/media_scenes.py [DIR]   (default scenes/media)
 """
@@ -134,17 +138,20 @@ def write_vol(path, density, lo, hi):
     path.write_bytes(header + box + np.ascontiguousarray(density, dtype="<f4").tobytes())
 
 
-def smoke(out, extinction, albedo):
-    """The Cornell box with the plume of `extinction` (RGB, per metre at density 1) and
-    `albedo`; writes the grid file into `out`."""
+def smoke(out, extinction, albedo, emission=None, light=True):
+    """The Cornell box with the plume of `extinction` (RGB, per metre at density 1),
+    `albedo` and `emission` (radiance per metre at density 1); writes the grid file into
+    `out`. Without `light` the box's ceiling light is left out."""
     w = GltfWriter("lucerna tools/generate/media_scenes.py")
-    cornell(w)
+    cornell(w, skip=("short_block", "tall_block") + (() if light else ("light",)))
     cornell_camera(w)
     lo, hi = PLUME_BOX
     write_vol(out / "smoke-plume.vol", plume_density(), lo, hi)
     medium = {"scattering": [e * a for e, a in zip(extinction, albedo)],
               "absorption": [e * (1 - a) for e, a in zip(extinction, albedo)], "anisotropy": 0.3,
               "density": "smoke-plume.vol"}
+    if emission:
+        medium["emission"] = emission
     # The interface box around the grid's box, above the floor.
     positions, triangles = box((lo[0] - 0.005, 0.001, lo[2] - 0.005), (hi[0] + 0.005, hi[1] + 0.005, hi[2] + 0.005))
     w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, interface(w, "smoke", medium)))
@@ -159,8 +166,12 @@ def chromatic_smoke(out):
     return smoke(out, [50.0, 100.0, 180.0], [0.95, 0.85, 0.7])
 
 
+def glowing_smoke(out):
+    return smoke(out, [30.0, 40.0, 60.0], [0.6, 0.5, 0.4], emission=[60.0, 22.0, 6.0], light=False)
+
+
 SCENES = {"fog-spot": fog_spot, "chromatic-cube": chromatic_cube, "scattering-glass": scattering_glass,
-          "smoke-plume": smoke_plume, "chromatic-smoke": chromatic_smoke}
+          "smoke-plume": smoke_plume, "chromatic-smoke": chromatic_smoke, "glowing-smoke": glowing_smoke}
 
 
 def main():

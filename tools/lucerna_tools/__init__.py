@@ -11,6 +11,7 @@ and test imports it as `lucerna_tools`, and its modules as `lucerna_tools.gltf_w
 import copy
 import hashlib
 import json
+import math
 import os
 import subprocess
 import tempfile
@@ -252,6 +253,28 @@ def tonemap(image):
     x = np.clip(image, 0.0, 1.0)
     srgb = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return (srgb * 255 + 0.5).astype(np.uint8)
+
+
+def pinhole_directions(width, height, vfov):
+    """The (unnormalised) directions of the pixel centres' rays of a pinhole camera looking
+    down -Z with +Y up and vertical field of view `vfov` (radians): shape (height, width, 3),
+    row 0 at the top."""
+    ys, xs = np.mgrid[0:height, 0:width]
+    t = math.tan(vfov / 2)
+    u = ((xs + 0.5) / width * 2 - 1) * t * width / height
+    v = (1 - (ys + 0.5) / height * 2) * t
+    return np.stack([u, v, -np.ones_like(u)], -1)
+
+
+def difference_sheet(ours, theirs, path):
+    """A PNG of three panels side by side: `ours` and `theirs` (linear RGB, Reinhard
+    x / (1 + x) and gamma 2.2, so bright emitters keep their shape) and 4 x |ours - theirs|."""
+    import OpenImageIO as oiio
+    tone = lambda x: np.clip((np.maximum(x, 0) / (1 + np.maximum(x, 0))) ** (1 / 2.2), 0, 1)  # noqa: E731
+    sheet = np.concatenate([tone(ours), tone(theirs), np.clip(4 * np.abs(ours - theirs), 0, 1)], axis=1)
+    image = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
+    image.set_pixels(oiio.ROI(), sheet.astype(np.float32))
+    image.write(str(path))
 
 
 def grid_png(images, labels, path, columns=3, title=None):

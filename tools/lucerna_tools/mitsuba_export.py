@@ -116,6 +116,8 @@ def medium(material, grid_volume=None):
     `grid_volume(index, sigma_t)` gives the `gridvolume` of the scene's density grid `index`
     times the RGB extinction `sigma_t` (scaled to a peak of 1)."""
     volume = material.get("volume")
+    if volume and any(volume.get("emission", [0.0, 0.0, 0.0])):
+        raise Unsupported(f"material {material.get('name')!r}: Mitsuba 3's media do not emit")
     sigma_t = extinction(material)
     if sigma_t is None or not sigma_t.any():
         return None

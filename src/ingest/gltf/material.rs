@@ -218,6 +218,7 @@ impl<'a> Importer<'a> {
                 scattering: medium.scattering.map_or(Vec3::ZERO, |s| s.rgb()),
                 anisotropy: medium.anisotropy,
                 density,
+                emission: medium.emission.map_or(Vec3::ZERO, |e| e.rgb()),
             });
         } else if model == BsdfModel::Interface && material.volume.is_none() {
             self.warn(
@@ -491,11 +492,14 @@ impl<'a> Importer<'a> {
                     c.is_finite() && c.min_element() >= 0.0 && c.max_element() <= MAX_COEFFICIENT
                 })
             };
-            if !(coefficient(&medium.absorption) && coefficient(&medium.scattering)) {
+            if !(coefficient(&medium.absorption)
+                && coefficient(&medium.scattering)
+                && coefficient(&medium.emission))
+            {
                 return Err(self.err(
                     format!("{e}.medium"),
                     format!(
-                        "absorption and scattering must be in [0, {MAX_COEFFICIENT:e}] per metre"
+                        "absorption, scattering and emission must be in [0, {MAX_COEFFICIENT:e}] per metre"
                     ),
                 ));
             }

@@ -174,8 +174,8 @@ pub(super) struct LucernaExtras {
     medium: Option<MediumExtras>,
 }
 
-/// `extras.lucerna.medium`: a homogeneous medium's coefficients per metre (a grey number
-/// or an RGB triple each) and its Henyey-Greenstein anisotropy.
+/// `extras.lucerna.medium`: a medium's coefficients per metre (a grey number or an RGB
+/// triple each), its Henyey-Greenstein anisotropy and the radiance it emits per metre.
 #[derive(serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(super) struct MediumExtras {
@@ -187,6 +187,8 @@ pub(super) struct MediumExtras {
     /// A density grid (a Mitsuba `.vol` file beside the glTF) that scales absorption and
     /// scattering point by point: they are then the coefficients at density 1.
     density: Option<String>,
+    /// Radiance emitted per metre (scaled by the density grid, if any).
+    emission: Option<SpecularValue>,
 }
 
 impl SpecularValue {

@@ -9,6 +9,8 @@
 //! transmittance over density). Splitting, efficiency-aware roulette and path guiding act at
 //! surface vertices only; a medium vertex sends one light sample and one continuation.
 //! Light first scattered in a medium goes to the volume layers, not to a surface lobe's.
+//! What a medium emits along a segment is added as the path enters the segment, whatever
+//! its flight then does (`crate::medium`).
 
 use super::super::estimator::{PathState, RayCounts, sample_chosen_light};
 use super::super::mis::Technique;
@@ -44,16 +46,19 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
         rec: &mut R,
         rays: &mut RayCounts,
     ) -> Segment {
-        let Some(medium) = path
-            .media
-            .medium(&self.world.surfaces)
-            .filter(|m| m.needs_flight())
-        else {
+        let Some(medium) = path.media.medium(&self.world.surfaces) else {
             return Segment::Clear;
         };
         let length = hit.map_or(f32::INFINITY, |h| h.t * ray.dir.length());
-        let vs = sampler.vertex(path.vertex, path.branch);
         let dir = ray.dir.normalize();
+        if medium.emits() {
+            let emitted = medium.emitted(ray.origin, dir, length);
+            path.reached_medium_emission(walk, rec, emitted);
+        }
+        if !medium.needs_flight() {
+            return Segment::Clear;
+        }
+        let vs = sampler.vertex(path.vertex, path.branch);
         match path.media.fly(medium, ray.origin, dir, vs.medium, length) {
             Flight::Scatter { t, weight } => {
                 path.beta *= weight;

@@ -195,6 +195,39 @@ impl PathState {
         });
     }
 
+    /// The path's throughput brings `emitted`, the light a medium emits along the segment
+    /// it enters, to the pixel: seen directly at depth 0 (the emission layers), otherwise
+    /// found by path sampling alone (light sampling does not sample media: no MIS weight),
+    /// of no light (no light group takes it).
+    fn reached_medium_emission<R: Recorder>(&self, walk: &mut Walk, rec: &mut R, emitted: Vec3) {
+        let value = self.beta * emitted;
+        if !(value.max_element() > 0.0) {
+            return;
+        }
+        if let Some(parts) = walk.parts.as_deref_mut() {
+            parts.add(value, self.depth, false);
+        }
+        if let Some(learning) = walk.learning.as_deref_mut() {
+            learning.gathered(value, self.depth);
+        }
+        if let Some(guiding) = walk.guiding.as_deref_mut() {
+            guiding.gathered(value, self.depth, Technique::Bsdf);
+        }
+        let direct = self.depth == 0;
+        rec.contribution(Contribution {
+            value,
+            depth: self.depth,
+            source: if direct {
+                Source::Emission
+            } else {
+                Source::Bsdf
+            },
+            single_technique: (walk.single && self.depth == 1).then_some([value, value]),
+            lobes: (walk.lobes && !direct).then_some(self.lobes),
+            light: None,
+        });
+    }
+
     /// The path reached emitter `e`: seen directly by the camera, or found by BSDF
     /// sampling and weighted against light sampling's density there (unless a delta lobe
     /// led here, which light sampling cannot follow).

@@ -174,11 +174,7 @@ def render_cycles(work, width, height, spp, seed, scale):
 
 def sphere_mask(width, height):
     """Pixels whose centre ray hits the sphere."""
-    ys, xs = np.mgrid[0:height, 0:width]
-    t = math.tan(VFOV / 2)
-    u = ((xs + 0.5) / width * 2 - 1) * t * width / height
-    v = (1 - (ys + 0.5) / height * 2) * t
-    d = np.stack([u, v, -np.ones_like(u)], -1)
+    d = lt.pinhole_directions(width, height, VFOV)
     d /= np.linalg.norm(d, axis=-1, keepdims=True)
     oc = np.array([0.0, 0.0, CAMERA_DISTANCE])  # camera minus centre (centre at camera height)
     b = (d * oc).sum(-1)
@@ -217,12 +213,7 @@ def main():
                "seconds_lucerna": header["lucerna/render_seconds"]}
     (out / "figures.json").write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps(figures, indent=1))
-    tone = lambda x: np.clip((np.maximum(x, 0) / (1 + np.maximum(x, 0))) ** (1 / 2.2), 0, 1)  # noqa: E731
-    sheet = np.concatenate([tone(ours), tone(cycles_a), np.clip(4 * np.abs(ours - cycles_a), 0, 1)], axis=1)
-    import OpenImageIO as oiio
-    image = oiio.ImageBuf(oiio.ImageSpec(sheet.shape[1], sheet.shape[0], 3, oiio.UINT8))
-    image.set_pixels(oiio.ROI(), sheet.astype(np.float32))
-    image.write(str(out / "sphere.png"))
+    lt.difference_sheet(ours, cycles_a, out / "sphere.png")
 
 
 if __name__ == "__main__":
