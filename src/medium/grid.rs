@@ -274,6 +274,11 @@ impl Heterogeneous {
     fn walk(&self, origin: Vec3, dir: Vec3, length: f32, rate: f32) -> Option<Walk<'_>> {
         let o = self.to_voxel.transform_point3(origin);
         let d = self.to_voxel.transform_vector3(dir);
+        // A ray with a NaN or infinite component (corrupt geometry upstream) crosses nothing,
+        // as it hits nothing (`geometry::bvh`).
+        if !(o.is_finite() && d.is_finite()) {
+            return None;
+        }
         let hi = Vec3::from(self.resolution.map(|n| n as f32));
         let inv = d.recip();
         let (a, b) = ((Vec3::ZERO - o) * inv, (hi - o) * inv);

@@ -1,6 +1,7 @@
 //! Inputs the fuzz targets (tools/fuzz) found crashing, each kept under
 //! tests/fuzz-regressions/<target>/ after its bug was fixed. Every file goes through what its
-//! target does (load, prepare, render 4x4 at 1 spp; `image_decode` decodes) and must give the outcome that
+//! target does (load, prepare, render 4x4 at 1 spp; `image_decode` decodes; `density_grid`
+//! walks rays through the grid's medium) and must give the outcome that
 //! tests/fuzz-regressions/expected.json records: an error containing a fragment, or a render
 //! with finite pixels (and no NaN contribution discarded, unless `discards` says so). Never
 //! a panic.
@@ -10,6 +11,9 @@ use lucerna::integrator::LightSelect;
 use lucerna::render::{self, RenderOptions};
 use lucerna::world::World;
 use std::path::Path;
+
+#[path = "../../tools/fuzz/fuzz_targets/grid_walks.rs"]
+mod grid_walks;
 
 /// Loads `bytes` as `target` does: a glTF file, or a scene file's manifest, a zero byte
 /// and its buffer.
@@ -30,6 +34,9 @@ fn load(target: &str, bytes: &[u8]) -> lucerna::Result<lucerna::scene::Scene> {
 /// What the fuzz targets do with an input: `Err(message)` if it is refused, else the
 /// rendered pixels are checked finite (an image is only decoded).
 fn run(target: &str, bytes: &[u8], discards: bool) -> Result<(), String> {
+    if target == "density_grid" {
+        return grid_walks::walk_the_grid(bytes);
+    }
     if target == "image_decode" {
         // Measuring from the header alone (the texture memory's decision) must not panic.
         let _ = lucerna::ingest::image::decoded_bytes(bytes);
@@ -65,7 +72,7 @@ fn fuzz_findings_stay_fixed() {
         serde_json::from_slice(&std::fs::read(dir.join("expected.json")).unwrap()).unwrap();
     let expected = expected.as_object().unwrap();
     let mut checked = 0;
-    for target in ["gltf_ingest", "scene_file", "image_decode"] {
+    for target in ["gltf_ingest", "scene_file", "image_decode", "density_grid"] {
         let Ok(entries) = std::fs::read_dir(dir.join(target)) else {
             continue;
         };

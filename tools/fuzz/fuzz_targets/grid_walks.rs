@@ -1,0 +1,72 @@
+//! What the `density_grid` fuzz target does with its bytes, shared with the regression test
+//! (tests/it/fuzz_regressions.rs): parse them as a Mitsuba `.vol` density grid, build the
+//! heterogeneous medium over it, and walk rays through it (delta-tracked flights,
+//! ratio-tracked transmittance, gathered emission), panicking (a finding) where a walk
+//! returns a value that is not finite or is negative.
+
+use glam::{DMat4, Vec3};
+use lucerna::medium::{Flight, Heterogeneous};
+
+/// `Err` with the reader's message where the bytes are refused.
+pub fn walk_the_grid(data: &[u8]) -> Result<(), String> {
+    let grid = lucerna::ingest::vol::parse(data, "fuzz.vol")?;
+    // Coefficients as a glTF medium gives them: absorbing, scattering, chromatic, emitting.
+    let coefficients = [
+        Vec3::new(0.5, 1.0, 2.0),
+        Vec3::new(3.0, 1.0, 0.2),
+        Vec3::new(1.0, 0.5, 0.1),
+    ];
+    let Some(medium) = Heterogeneous::new(&grid, coefficients, 0.3, DMat4::IDENTITY) else {
+        return Ok(());
+    };
+    // Rays from outside the grid's box through its centre, and one starting inside it.
+    let (lo, hi) = (
+        grid.to_world.transform_point3(glam::DVec3::ZERO).as_vec3(),
+        grid.to_world.transform_point3(glam::DVec3::ONE).as_vec3(),
+    );
+    let centre = lo * 0.5 + hi * 0.5;
+    // The box's diagonal in f64 (it may overflow f32), kept finite.
+    let reach = ((hi - lo).as_dvec3().length() as f32).clamp(1e-3, 1e30);
+    for (k, dir) in [
+        Vec3::X,
+        Vec3::new(1.0, 0.7, 0.3),
+        Vec3::new(-0.2, 1.0, -0.9),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let dir = dir.normalize();
+        let origin = if k == 2 { centre } else { centre - dir * reach };
+        for length in [f32::INFINITY, reach] {
+            let through = medium.transmittance(origin, dir, length);
+            assert!(
+                through.is_finite() && through.min_element() >= 0.0,
+                "{through}"
+            );
+            let emitted = medium.emitted(origin, dir, length);
+            assert!(
+                emitted.is_finite() && emitted.min_element() >= 0.0,
+                "{emitted}"
+            );
+            for channel in 0..3 {
+                let (flight, ratios) = medium.sample_flight(origin, dir, 0.37, length, channel);
+                assert!(
+                    ratios.is_finite() && ratios.min_element() >= 0.0,
+                    "{ratios}"
+                );
+                let weight = match flight {
+                    Flight::Scatter { t, weight } => {
+                        assert!(t >= 0.0 && t <= length, "{t}");
+                        weight
+                    }
+                    Flight::Pass { weight } => weight,
+                };
+                assert!(
+                    weight.is_finite() && weight.min_element() >= 0.0,
+                    "{weight}"
+                );
+            }
+        }
+    }
+    Ok(())
+}
