@@ -53,6 +53,10 @@ impl HeaderFacts<'_> {
                     Attribute::Double(stats.seconds),
                 ),
                 (
+                    "lucerna/rays".into(),
+                    Attribute::Double((stats.rays.closest + stats.rays.shadow) as f64),
+                ),
+                (
                     "lucerna/nan_inf_discarded".into(),
                     Attribute::Double(stats.discarded as f64),
                 ),
@@ -62,6 +66,9 @@ impl HeaderFacts<'_> {
                 ),
             ],
         };
+        if let Some(host) = host_name() {
+            header.set("lucerna/host", Attribute::Text(host));
+        }
         if let Some((canonical, fingerprint)) = self.identity {
             header.set("lucerna/scene_path", Attribute::Text(canonical.clone()));
             header.set(
@@ -89,4 +96,15 @@ impl HeaderFacts<'_> {
         }
         header
     }
+}
+
+/// The name of the machine that renders (V-Ray's `computername`, Arnold's `host`), for the
+/// render farm's bookkeeping: the kernel's on Linux, else the environment's.
+fn host_name() -> Option<String> {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .ok()
+        .or_else(|| std::env::var("HOSTNAME").ok())
+        .or_else(|| std::env::var("COMPUTERNAME").ok())
+        .map(|h| h.trim().to_string())
+        .filter(|h| !h.is_empty())
 }

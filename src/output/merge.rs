@@ -347,6 +347,22 @@ fn merged_header(parts: &[Part], planes: &Planes) -> Result<Header> {
             .sum::<f64>()
     };
     header.set("lucerna/samples", Attribute::Double(sum("lucerna/samples")));
+    if parts
+        .iter()
+        .any(|p| p.header.number("lucerna/rays").is_some())
+    {
+        header.set("lucerna/rays", Attribute::Double(sum("lucerna/rays")));
+    }
+    // The machines that rendered the parts, each once, in part order.
+    let mut hosts: Vec<&str> = Vec::new();
+    for host in parts.iter().filter_map(|p| p.header.text("lucerna/host")) {
+        if !hosts.contains(&host) {
+            hosts.push(host);
+        }
+    }
+    if !hosts.is_empty() {
+        header.set("lucerna/host", Attribute::Text(hosts.join(", ")));
+    }
     header.set(
         "lucerna/render_seconds",
         Attribute::Double(sum("lucerna/render_seconds")),

@@ -81,6 +81,19 @@ fn merge_of_four_passes_equals_the_single_render() {
     assert_eq!(header.number("lucerna/spp"), Some(16.0));
     assert_eq!(header.number("lucerna/samples"), Some(40.0 * 36.0 * 16.0));
     assert!(!header.text("lucerna/settings").unwrap().contains("pass"));
+    // The rays of the passes add up; the summary line says the image was merged.
+    let rays = |p: &str| {
+        exr::read(Path::new(p))
+            .unwrap()
+            .1
+            .number("lucerna/rays")
+            .unwrap()
+    };
+    let passes: f64 = parts.iter().map(|p| rays(p)).sum();
+    assert_eq!(header.number("lucerna/rays"), Some(passes));
+    let summary = exr::summary(&header).unwrap();
+    assert!(summary.contains("16 spp, 23040 samples"), "{summary}");
+    assert!(summary.ends_with("merged from 4 parts"), "{summary}");
 }
 
 /// Four crop windows, on boundaries that cut the 16-pixel tiles, assemble bit for bit into

@@ -1,6 +1,7 @@
 """The renderer's EXR as a compositor sees it, read with OpenImageIO (not with the Rust
 `exr` crate that wrote it)."""
 import os
+import re
 import subprocess
 import tomllib
 from pathlib import Path
@@ -121,7 +122,8 @@ def test_storage_options_and_colour_space(tmp_path):
     """--exr-half stores light layers as half floats and keeps data layers and Cryptomatte
     float; --exr-compression sets the compression (lossy ones refused with data layers);
     every file states its colour space (Rec.709 primaries, D65; colorInteropID) and carries
-    owner, capDate and, for a frame, framesPerSecond."""
+    owner, capDate, a one-line summary in comments, the rays traced and the host, and, for a
+    frame, framesPerSecond."""
     out = tmp_path / "half.exr"
     env = dict(os.environ, USER="artist")
     subprocess.run([BIN, "render", "-o", str(out), "--spp", "2", "--resolution", "64x64",
@@ -140,6 +142,11 @@ def test_storage_options_and_colour_space(tmp_path):
     assert spec.getattribute("colorInteropID") == "lin_rec709_scene"
     assert spec.getattribute("Copyright") == "artist"  # OpenEXR owner, as OpenImageIO names it
     assert len(spec.getattribute("DateTime")) == 19  # capDate "YYYY:MM:DD hh:mm:ss"
+    # OpenEXR comments, as OpenImageIO names it.
+    assert re.fullmatch(r"lucerna [\d.]+: <default: cornell-box>, 2 spp, 8192 samples, [\d.]+e\d+ rays "
+                        r"in [\d.]+ s( on .+)?", spec.getattribute("ImageDescription")), \
+        spec.getattribute("ImageDescription")
+    assert spec.getattribute("lucerna/rays") > 8192
     assert tuple(spec.getattribute("framesPerSecond")) == (25000, 1000)
     # Half and float agree to half's precision.
     full = tmp_path / "full.exr"
