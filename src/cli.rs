@@ -220,6 +220,11 @@ struct RenderArgs {
     /// dwaa[:LEVEL], dwab[:LEVEL] (refused with data or Cryptomatte layers). [default: zip]
     #[arg(long, value_name = "NAME", help_heading = "Output")]
     exr_compression: Option<String>,
+    /// EXR parts: single (every channel in one part), layer (a part per layer, `rgba` for
+    /// the beauty) or group (parts `light`, `data` and `cryptomatte`); channel names are the
+    /// same in every split. [default: single]
+    #[arg(long, value_name = "SPLIT", help_heading = "Output")]
+    exr_parts: Option<String>,
     /// Add a `denoised` layer: Open Image Denoise on the beauty, guided by the albedo and
     /// normal layers (prefiltered), which are written too. Every noisy layer is kept.
     #[arg(long, help_heading = "Output")]

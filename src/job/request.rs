@@ -97,7 +97,7 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 40] = [
+pub const JOB_SETTINGS: [&str; 41] = [
     "output",
     "frames",
     "frame",
@@ -122,6 +122,7 @@ pub const JOB_SETTINGS: [&str; 40] = [
     "no-default-light",
     "exr-half",
     "exr-compression",
+    "exr-parts",
     "preview",
     "exposure",
     "view-transform",
@@ -265,6 +266,7 @@ impl RenderJob {
             "no-default-light" => self.default_light = !parse_bool(value)?,
             "exr-half" => self.storage.half_light_layers = parse_bool(value)?,
             "exr-compression" => self.storage.compression = exr::parse_compression(value)?,
+            "exr-parts" => self.storage.parts = exr::parse_parts(value)?,
             "preview" => self.preview = Some(value.into()),
             "exposure" => {
                 self.view.exposure = value

@@ -32,6 +32,48 @@ pub struct Storage {
     pub compression: Compression,
     /// Light layers as 16-bit half floats (values beyond half's range clamp to ±65504).
     pub half_light_layers: bool,
+    /// How the channels are split into the file's parts.
+    pub parts: Parts,
+}
+
+/// How a file's channels are split into OpenEXR parts (`--exr-parts`). Every channel keeps
+/// its name (`layer.C`, the beauty `R G B A`) whatever the split, so that a reader that
+/// ignores parts sees the same channels; each part is named after what it holds and carries
+/// the whole header.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Parts {
+    /// One part: every channel (the default; what every reader reads).
+    #[default]
+    Single,
+    /// A part per layer: `rgba` for the beauty, the layer's name for every other (Karma's
+    /// and RenderMan's multi-part output; Nuke reads only the parts a node asks for).
+    Layer,
+    /// A part per kind of layer: `light` (the beauty and every light layer), `data` (data
+    /// layers, sample counts, variance), `cryptomatte`.
+    Group,
+}
+
+/// The splits `--exr-parts` names: single, layer, group.
+pub fn parse_parts(text: &str) -> std::result::Result<Parts, String> {
+    match text {
+        "single" => Ok(Parts::Single),
+        "layer" => Ok(Parts::Layer),
+        "group" => Ok(Parts::Group),
+        other => Err(format!("unknown split {other:?} (single, layer, group)")),
+    }
+}
+
+/// The part channel `name` goes to under `parts`.
+fn part_of(name: &str, parts: Parts) -> &str {
+    let layer = name.rsplit_once('.').map(|(layer, _)| layer);
+    match (parts, layer) {
+        (Parts::Single, _) => "rgba",
+        (Parts::Layer, None) => "rgba",
+        (Parts::Layer, Some(layer)) => layer,
+        (Parts::Group, _) if layer.is_some_and(|l| l.starts_with("Crypto")) => "cryptomatte",
+        (Parts::Group, _) if is_data_channel(name) => "data",
+        (Parts::Group, _) => "light",
+    }
 }
 
 impl Default for Storage {
@@ -39,6 +81,7 @@ impl Default for Storage {
         Self {
             compression: Compression::ZIP16,
             half_light_layers: false,
+            parts: Parts::Single,
         }
     }
 }
@@ -247,24 +290,27 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         compression = Compression::ZIP16;
     }
     let half = header.storage.half_light_layers;
-    let channels: SmallVec<[AnyChannel<FlatSamples>; 4]> = planes
-        .channels
-        .into_iter()
-        .map(|(name, plane)| {
-            let samples = if half && !is_data_channel(&name) {
-                let max = exr::prelude::f16::MAX.to_f32();
-                FlatSamples::F16(
-                    plane
-                        .iter()
-                        .map(|v| exr::prelude::f16::from_f32(v.clamp(-max, max)))
-                        .collect(),
-                )
-            } else {
-                FlatSamples::F32(plane)
-            };
-            AnyChannel::new(text(&name), samples)
-        })
-        .collect();
+    // The channels of each part, parts in the order their first channel comes.
+    let mut parts: Vec<(String, SmallVec<[AnyChannel<FlatSamples>; 4]>)> = Vec::new();
+    for (name, plane) in planes.channels {
+        let samples = if half && !is_data_channel(&name) {
+            let max = exr::prelude::f16::MAX.to_f32();
+            FlatSamples::F16(
+                plane
+                    .iter()
+                    .map(|v| exr::prelude::f16::from_f32(v.clamp(-max, max)))
+                    .collect(),
+            )
+        } else {
+            FlatSamples::F32(plane)
+        };
+        let part = part_of(&name, header.storage.parts).to_string();
+        let channel = AnyChannel::new(text(&name), samples);
+        match parts.iter_mut().find(|(p, _)| *p == part) {
+            Some((_, channels)) => channels.push(channel),
+            None => parts.push((part, SmallVec::from_elem(channel, 1))),
+        }
+    }
     let mut layer_attributes = LayerAttributes {
         software_name: Some(text(crate::RENDERER)),
         world_to_camera: header.world_to_camera,
@@ -294,16 +340,27 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         compression,
         ..Encoding::SMALL_LOSSLESS
     };
-    let layer = Layer::new(
-        (window.width as usize, window.height as usize),
-        layer_attributes,
-        encoding,
-        AnyChannels::sort(channels),
-    );
+    let single = parts.len() == 1;
+    let layers: Layers<AnyChannels<FlatSamples>> = parts
+        .into_iter()
+        .map(|(part, channels)| {
+            let attributes = LayerAttributes {
+                // A single-part file keeps no part name, as before.
+                layer_name: (!single).then(|| text(&part)),
+                ..layer_attributes.clone()
+            };
+            Layer::new(
+                (window.width as usize, window.height as usize),
+                attributes,
+                encoding,
+                AnyChannels::sort(channels),
+            )
+        })
+        .collect();
     let display = IntegerBounds::new((0, 0), (display.0 as usize, display.1 as usize));
     let mut image_attributes = ImageAttributes::new(display);
     image_attributes.chromaticities = Some(REC709_D65);
-    let image = Image::new(image_attributes, layer);
+    let image = Image::from_layers(image_attributes, layers);
     crate::files::write_atomically(path, |file| {
         image
             .write()
@@ -457,7 +514,7 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
         .no_deep_data()
         .largest_resolution_level()
         .all_channels()
-        .first_valid_layer()
+        .all_layers()
         .all_attributes()
         .from_file(path)
         .map_err(|e| bad("EXR", e.to_string()))?;
@@ -471,16 +528,38 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
             ),
         ));
     }
-    let layer = image.layer_data;
-    let (x, y) = (
-        layer.attributes.layer_position.x(),
-        layer.attributes.layer_position.y(),
-    );
+    // The parts of a multi-part file (`Parts`) hold the same window: their channels are
+    // read as one image, the header from the first.
+    let mut layers = image.layer_data.into_iter();
+    let layer = layers
+        .next()
+        .ok_or_else(|| bad("EXR", "no image part".into()))?;
+    let (position, size) = (layer.attributes.layer_position, layer.size);
+    let mut channels: Vec<(String, Vec<f32>)> = planes_of(layer.channel_data);
+    for other in layers {
+        if other.attributes.layer_position != position || other.size != size {
+            return Err(bad(
+                "dataWindow",
+                "the file's parts cover different windows; lucerna reads parts of one window"
+                    .into(),
+            ));
+        }
+        for channel in planes_of(other.channel_data) {
+            if channels.iter().any(|(n, _)| *n == channel.0) {
+                return Err(bad(
+                    "channels",
+                    format!("channel {} is in more than one part", channel.0),
+                ));
+            }
+            channels.push(channel);
+        }
+    }
+    let (x, y) = (position.x(), position.y());
     let window = Window {
         x: u32::try_from(x).map_err(|_| bad("dataWindow", format!("negative origin {x}")))?,
         y: u32::try_from(y).map_err(|_| bad("dataWindow", format!("negative origin {y}")))?,
-        width: layer.size.width() as u32,
-        height: layer.size.height() as u32,
+        width: size.width() as u32,
+        height: size.height() as u32,
     };
     let display = (
         display_window.size.width() as u32,
@@ -492,19 +571,6 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
             format!("{} lies outside the display window", window.describe()),
         ));
     }
-    let channels = layer
-        .channel_data
-        .list
-        .iter()
-        .map(|c| {
-            let plane = match &c.sample_data {
-                FlatSamples::F32(v) => v.clone(),
-                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
-                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
-            };
-            (c.name.to_string(), plane)
-        })
-        .collect();
     let header = header_of(&layer.attributes);
     Ok((
         Planes {
@@ -514,6 +580,22 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
         },
         header,
     ))
+}
+
+/// A part's channels as f32 planes.
+fn planes_of(channels: AnyChannels<FlatSamples>) -> Vec<(String, Vec<f32>)> {
+    channels
+        .list
+        .into_iter()
+        .map(|c| {
+            let plane = match c.sample_data {
+                FlatSamples::F32(v) => v,
+                FlatSamples::F16(v) => v.iter().map(|h| h.to_f32()).collect(),
+                FlatSamples::U32(v) => v.iter().map(|&u| u as f32).collect(),
+            };
+            (c.name.to_string(), plane)
+        })
+        .collect()
 }
 
 #[cfg(test)]
