@@ -16,7 +16,7 @@ upwards, glTF's v downwards).
 import math
 
 import numpy as np
-from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel
+from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, UsdVol
 
 from . import curves, lights
 from .materials import MaterialConverter
@@ -25,6 +25,21 @@ from .skel import Skinning
 from .scene_file import SceneWriter, matrix, mean_scale
 
 # Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
+def _fields(volume):
+    """The fields of UsdVol.Volume `volume` as `name: file[field]` for a message."""
+    described = []
+    for name, target in sorted(UsdVol.Volume(volume).GetFieldPaths().items()):
+        field = volume.GetStage().GetPrimAtPath(target)
+        asset = UsdVol.OpenVDBAsset(field) if field and field.IsA(UsdVol.OpenVDBAsset) else None
+        if asset:
+            path = asset.GetFilePathAttr().Get()
+            grid = asset.GetFieldNameAttr().Get()
+            described.append(f"{name}: {path.path if path else '?'}[{grid or name}]")
+        else:
+            described.append(f"{name}: {target}")
+    return "fields " + ", ".join(described) if described else "no fields"
+
+
 _SKIPPED_GPRIMS = (UsdGeom.NurbsCurves, UsdGeom.NurbsPatch, UsdGeom.HermiteCurves, UsdGeom.TetMesh)
 #: Implicit gprims tessellated into meshes (Sphere stays analytic, Points become spheres).
 _TESSELLATED = (UsdGeom.Cube, UsdGeom.Cylinder, UsdGeom.Cone, UsdGeom.Capsule, UsdGeom.Plane)
@@ -212,6 +227,9 @@ class Converter:
             groups.append(Group("light", prim))
         elif prim.IsA(UsdGeom.BasisCurves):
             groups += self._curves(prim, inherited)
+        elif prim.IsA(UsdVol.Volume):
+            self.warn(path, f"Volume is not rendered yet ({_fields(prim)}): skipped; lucerna reads "
+                            "density grids from glTF extras.lucerna.medium.density (docs/media.md)")
         elif any(prim.IsA(t) for t in _SKIPPED_GPRIMS):
             self.warn(path, f"{prim.GetTypeName()} is not supported: skipped")
         if prim.IsInstance():

@@ -482,3 +482,29 @@ def test_subdivision_mesh_with_a_nan_point_still_renders(stage_file):
     result = subprocess.run([lucerna_bin(), "inspect", str(stage)], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "NaN or infinite" in result.stderr + result.stdout
+
+
+def test_a_volume_is_skipped_with_its_fields_named(stage_file, converted):
+    """A UsdVol.Volume is not rendered yet: the conversion says so on the prim, naming each
+    field's OpenVDB file and grid, and renders the rest of the stage."""
+    s = converted(stage_file('''
+def Xform "World" {
+    def Volume "Smoke" {
+        rel field:density = </World/Smoke/density>
+        rel field:temperature = </World/Smoke/heat>
+        def OpenVDBAsset "density" {
+            asset filePath = @./smoke.vdb@
+            token fieldName = "density"
+        }
+        def OpenVDBAsset "heat" {
+            asset filePath = @./smoke.vdb@
+            token fieldName = "temperature"
+        }
+    }
+    def Sphere "Ball" {
+    }
+}
+'''), no_validate=True)
+    assert s.warnings_about("/World/Smoke: Volume is not rendered yet (fields density: ./smoke.vdb[density], "
+                            "temperature: ./smoke.vdb[temperature]): skipped")
+    assert len(s.manifest["spheres"]) == 1
