@@ -221,9 +221,14 @@ impl fmt::Display for RenderPlan {
         if s.participating_media > 0 {
             writeln!(
                 f,
-                "  participating media: inside {} material{} (rendered by the scalar kernel)",
+                "  participating media: inside {} material{}{} (rendered by the scalar kernel)",
                 s.participating_media,
-                if s.participating_media == 1 { "" } else { "s" }
+                if s.participating_media == 1 { "" } else { "s" },
+                if s.emitting_media > 0 {
+                    format!(", {} emitting", s.emitting_media)
+                } else {
+                    String::new()
+                }
             )?;
         }
         writeln!(

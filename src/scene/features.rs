@@ -119,11 +119,13 @@ pub struct SceneFeatures {
     /// Materials in use whose BSDF has a GGX lobe (a rough glTF surface): work the packet
     /// kernel's lanes speed up.
     pub microfacet_materials: usize,
-    /// Materials in use that bound a participating medium: one that scatters, or any
-    /// medium behind an interface (`BsdfModel::Interface`), which shadow rays cross. Media
-    /// work (free-flight sampling, light samples in media, shadow rays through media) is
-    /// done only where this is non-zero.
+    /// Materials in use that bound a participating medium: one that scatters or emits, or
+    /// any medium behind an interface (`BsdfModel::Interface`), which shadow rays cross.
+    /// Media work (free-flight sampling, light samples in media, shadow rays through media)
+    /// is done only where this is non-zero.
     pub participating_media: usize,
+    /// Of those, the ones whose medium emits light (gathered along every segment).
+    pub emitting_media: usize,
     /// Meshes placed once whose material is the same at every point and does not emit (no
     /// texture, no vertex colours): the packet kernel's lanes compute their shading points
     /// (`world::lanes`).
@@ -227,6 +229,7 @@ impl SceneFeatures {
             reduced_to_conductor: count(&|m| m.reduced() == Some(Reduced::Conductor)),
             microfacet_materials: count(&|m| m.model == BsdfModel::GltfPbr && Lobes::of(m).glossy),
             participating_media: count(&Material::bounds_participating_medium),
+            emitting_media: count(&|m| m.volume.is_some_and(|v| v.emits())),
             uniform_meshes: scene
                 .meshes
                 .iter()

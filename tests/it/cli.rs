@@ -141,6 +141,28 @@ fn preview_png_and_inspect() {
         text.contains("first-hit data off, AOV routing off"),
         "beauty only:\n{text}"
     );
+    // A scene lit by a glowing medium says so, and is not given the default light.
+    let glow = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/media/glowing-smoke.gltf");
+    let run = lucerna(&["inspect", glow.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&run.stdout);
+    assert!(
+        text.contains("participating media: inside 1 material, 1 emitting"),
+        "{text}"
+    );
+    let out = dir.join("glow.exr");
+    let run = lucerna(&[
+        "render",
+        glow.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--spp",
+        "1",
+        "--resolution",
+        "8x8",
+    ]);
+    let errors = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{errors}");
+    assert!(!errors.contains("has no light"), "{errors}");
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
