@@ -308,7 +308,9 @@ class Network:
         texture = self._image(node, "file", channels, color_space, wraps, "texcoord", element,
                               fallback4)
         if texture is None:
-            return "value", default if fallback is None else fallback
+            # MaterialX: an image whose file is missing or unreadable gives its `default`,
+            # zero where none is authored (not the default of the input it feeds).
+            return "value", as_value(fallback4[channels])
         return "texture", texture
 
     def _node_tiledimage(self, node, output, element, default, node_id):

@@ -131,6 +131,35 @@ def test_missing_texture_is_a_validation_finding_and_the_fallback_renders(stage_
     assert material["base_color"] == [0.5, 0.25, 0.125, 1.0] and material["base_color_texture"] is None
 
 
+def test_a_materialx_image_without_its_file_gives_its_default(stage_file, converted):
+    """MaterialX: an image whose file is missing gives its `default` input, zero in every
+    channel where none is authored (not the default of the input it feeds)."""
+    def material(name, default):
+        return f'''
+    def Material "{name}" {{
+        token outputs:mtlx:surface.connect = </World/{name}/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "ND_standard_surface_surfaceshader"
+            color3f inputs:base_color.connect = </World/{name}/I.outputs:out>
+            token outputs:out
+        }}
+        def Shader "I" {{
+            uniform token info:id = "ND_image_color3"
+            asset inputs:file = @missing.exr@
+            {default}
+            color3f outputs:out
+        }}
+    }}'''
+    quads = (QUAD.format(extra="rel material:binding = </World/Plain>")
+             + QUAD.replace('"Quad"', '"Other"').format(extra="rel material:binding = </World/Given>"))
+    s = converted(stage_file(world(quads + material("Plain", "") + material("Given",
+                                                                   "color3f inputs:default = (0.5, 0.25, 0.125)"))),
+                  no_validate=True)
+    colour = {name: s["materials"][s.mesh(f"/World/{name}")["material"]]["base_color"][:3]
+              for name in ("Quad", "Other")}
+    assert colour == {"Quad": [0.0, 0.0, 0.0], "Other": [0.5, 0.25, 0.125]}, colour
+
+
 def test_vertex_primvars_keep_one_vertex_per_point(stage_file, converted):
     s = converted(stage_file(world(QUAD.format(extra='''
         normal3f[] normals = [(0,0,1), (0,0,1), (0,0,1), (0,0,1)] (interpolation = "vertex")
