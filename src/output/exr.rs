@@ -1,5 +1,6 @@
-//! Writes a film as ONE single-part, multi-layer OpenEXR file (channels `layer.C`, the
-//! beauty unprefixed), with lucerna's metadata and Nuke's camera matrices. Pixels are
+//! Writes a film as one multi-layer OpenEXR file (channels `layer.C`, the beauty
+//! unprefixed), single-part unless [`Parts`] splits it, with lucerna's metadata and Nuke's
+//! camera matrices; reads such files back, all parts as one image. Pixels are
 //! 32-bit floats, ZIP-compressed, unless [`Storage`] says otherwise: light layers may be
 //! half floats (data layers, Cryptomatte, sample counts and variance stay float, as their
 //! values must survive exactly), and any OpenEXR compression may be chosen, lossy ones only
