@@ -548,6 +548,19 @@ mod tests {
             .sum()
     }
 
+    /// The mean of `n` draws of `draw` per channel and its standard error.
+    fn mean_and_error(n: u32, mut draw: impl FnMut() -> Vec3) -> (glam::DVec3, glam::DVec3) {
+        let (mut sum, mut squares) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
+        for _ in 0..n {
+            let x = draw().as_dvec3();
+            sum += x;
+            squares += x * x;
+        }
+        let mean = sum / f64::from(n);
+        let se = ((squares / f64::from(n) - mean * mean) / f64::from(n)).powf(0.5);
+        (mean, se)
+    }
+
     fn ray() -> (Vec3, Vec3) {
         (
             Vec3::new(-0.1, 0.2, 0.4),
@@ -602,17 +615,9 @@ mod tests {
         let (origin, dir) = ray();
         let exact = (-sigma.as_dvec3() * depth(&m, origin, dir, f32::INFINITY)).exp();
         let mut rng = Pcg32::new(1, 1);
-        let n = 100_000;
-        let (mut sum, mut squares) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
-        for _ in 0..n {
-            let t = m
-                .transmittance_with(origin, dir, f32::INFINITY, &mut rng)
-                .as_dvec3();
-            sum += t;
-            squares += t * t;
-        }
-        let mean = sum / n as f64;
-        let se = ((squares / n as f64 - mean * mean) / n as f64).powf(0.5);
+        let (mean, se) = mean_and_error(100_000, || {
+            m.transmittance_with(origin, dir, f32::INFINITY, &mut rng)
+        });
         for c in 0..3 {
             assert!(
                 (mean[c] - exact[c]).abs() < 4.5 * se[c] + 1e-9,
@@ -656,15 +661,8 @@ mod tests {
                 depth += density * h;
             }
             let mut rng = Pcg32::new(7, 3);
-            let n = 100_000;
-            let (mut sum, mut squares) = (glam::DVec3::ZERO, glam::DVec3::ZERO);
-            for _ in 0..n {
-                let e = m.emitted_with(origin, dir, length, &mut rng).as_dvec3();
-                sum += e;
-                squares += e * e;
-            }
-            let mean = sum / n as f64;
-            let se = ((squares / n as f64 - mean * mean) / n as f64).powf(0.5);
+            let (mean, se) =
+                mean_and_error(100_000, || m.emitted_with(origin, dir, length, &mut rng));
             for c in 0..3 {
                 assert!(
                     (mean[c] - exact[c]).abs() < 4.5 * se[c] + 1e-9,
