@@ -223,7 +223,16 @@ pub fn texture_memory() -> Option<u64> {
 
 /// Refuses to allocate `bytes` for `what` when that alone exceeds the process limit.
 pub fn check_allocation(bytes: u64, what: &str) -> std::result::Result<(), String> {
-    match process_limit() {
+    check_allocation_within(bytes, what, process_limit())
+}
+
+/// Refuses to allocate `bytes` for `what` when that alone exceeds `limit`.
+pub fn check_allocation_within(
+    bytes: u64,
+    what: &str,
+    limit: Option<u64>,
+) -> std::result::Result<(), String> {
+    match limit {
         Some(limit) if bytes > limit => Err(format!(
             "{what} would need {} to decode, more than the limit of {} (--max-memory)",
             Bytes(bytes),

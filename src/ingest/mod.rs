@@ -9,6 +9,7 @@ pub mod skinning;
 pub mod tangents;
 pub mod uri;
 pub mod usd;
+pub mod vdb;
 pub mod vol;
 
 use crate::error::{Error, Result};

@@ -37,6 +37,9 @@ fn run(target: &str, bytes: &[u8], discards: bool) -> Result<(), String> {
     if target == "density_grid" {
         return grid_walks::walk_the_grid(bytes);
     }
+    if target == "vdb_decode" {
+        return grid_walks::walk_the_vdb(bytes);
+    }
     if target == "image_decode" {
         // Measuring from the header alone (the texture memory's decision) must not panic.
         let _ = lucerna::ingest::image::decoded_bytes(bytes);
@@ -72,7 +75,13 @@ fn fuzz_findings_stay_fixed() {
         serde_json::from_slice(&std::fs::read(dir.join("expected.json")).unwrap()).unwrap();
     let expected = expected.as_object().unwrap();
     let mut checked = 0;
-    for target in ["gltf_ingest", "scene_file", "image_decode", "density_grid"] {
+    for target in [
+        "gltf_ingest",
+        "scene_file",
+        "image_decode",
+        "density_grid",
+        "vdb_decode",
+    ] {
         let Ok(entries) = std::fs::read_dir(dir.join(target)) else {
             continue;
         };

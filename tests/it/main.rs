@@ -27,3 +27,4 @@ mod split;
 mod stress;
 mod texture_cache;
 mod texture_filter;
+mod vdb;

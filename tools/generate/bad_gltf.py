@@ -209,6 +209,31 @@ def cases():
                meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1,
                                         "material": 0}]}])),
            "materials[0].extras.lucerna.medium.density", "bytes, the file has 48")
+    def vdb(kind="Tree_float_5_4_3", grid_class="fog volume", cut=None):
+        """An OpenVDB file of one grid up to its metadata (enough for the errors wanted)."""
+        def string(text):
+            return struct.pack("<I", len(text)) + text.encode()
+        grid = struct.pack("<I", 0x6) + struct.pack("<I", 1) + string("class") + string("string") + string(grid_class)
+        head = b" BDV\0\0\0\0" + struct.pack("<3I", 224, 10, 0) + b"\1" + b"0" * 36 + struct.pack("<2I", 0, 1)
+        head += string("density") + string(kind) + string("")
+        start = len(head) + 24
+        data = head + struct.pack("<3q", start, start + len(grid), start + len(grid)) + grid
+        return data[:cut] if cut else data
+
+    def with_vdb(data, **medium):
+        uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode()
+        return variant(lambda d: d.update(
+            materials=[{"extras": {"lucerna": {"bsdf": "interface", "medium": {
+                "scattering": 1.0, "density": uri, **medium}}}}],
+            meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}]))
+    yield ("medium-vdb-level-set.gltf", with_vdb(vdb(grid_class="level set")),
+           "materials[0].extras.lucerna.medium.density", "is a level set (signed distances), not a density")
+    yield ("medium-vdb-vector-grid.gltf", with_vdb(vdb(kind="Tree_vec3s_5_4_3")),
+           "materials[0].extras.lucerna.medium.density", "lucerna reads scalar float and double grids")
+    yield ("medium-vdb-truncated.gltf", with_vdb(vdb(cut=30)),
+           "materials[0].extras.lucerna.medium.density", "the file ends early")
+    yield ("medium-vdb-missing-grid.gltf", with_vdb(vdb(), density_grid="smoke"),
+           "materials[0].extras.lucerna.medium.density", "it has no grid \"smoke\" (grids: density (Tree_float_5_4_3))")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

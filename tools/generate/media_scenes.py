@@ -27,6 +27,12 @@ interfaces as `null` BSDFs with a `homogeneous` interior medium and an HG phase 
   density 1, absorbing and scattering), the only light in the dark Cornell box: emission
   gathered along segments through a grid. Mitsuba 3's media do not emit, so this one has
   no Mitsuba counterpart.
+- cloud.gltf: Walt Disney Animation Studios' cumulus cloud at a sixteenth of its resolution
+  (wdas-cloud-sixteenth.vdb, an OpenVDB file: 415 642 active voxels of 3.3 m; CC BY-SA 3.0,
+  LICENSE-wdas-cloud.txt) lit by a low sun: an OpenVDB grid read as it is, in its own
+  placement (the interface box around it comes from its active voxels' box), extinction
+  0.1 per metre at density 1 and albedo 0.99, strongly forward scattering (g = 0.8).
+  Render it with a sky: `--env 0.25,0.35,0.6`.
 
     .venv/bin/python tools/generate/media_scenes.py [DIR]   (default scenes/media)
 """
@@ -170,15 +176,38 @@ def glowing_smoke(out):
     return smoke(out, [30.0, 40.0, 60.0], [0.6, 0.5, 0.4], emission=[60.0, 22.0, 6.0], light=False)
 
 
+# The cloud's active voxels in index space and its voxel size (OpenVDB's own reading).
+CLOUD_INDEX_BOX = ((-66, -21, -90), (59, 64, 63))
+CLOUD_VOXEL = 10.0 / 3.0
+
+
+def cloud(out):
+    w = GltfWriter("lucerna tools/generate/media_scenes.py")
+    lo = [(c - 1.0) * CLOUD_VOXEL for c in CLOUD_INDEX_BOX[0]]
+    hi = [(c + 1.0) * CLOUD_VOXEL for c in CLOUD_INDEX_BOX[1]]
+    positions, triangles = box(lo, hi)
+    medium = {"scattering": 0.1 * 0.99, "absorption": 0.1 * 0.01, "anisotropy": 0.8,
+              "density": "wdas-cloud-sixteenth.vdb", "density_grid": "density"}
+    w.node(name="cloud", mesh=w.mesh("cloud", positions, triangles, interface(w, "cloud", medium)))
+    w._use("KHR_lights_punctual")
+    w.doc["extensions"] = {"KHR_lights_punctual": {"lights": [
+        {"name": "sun", "type": "directional", "color": [1.0, 0.93, 0.82], "intensity": 4.0}]}}
+    w.node(name="sun", rotation=look_rotation(unit((-0.6, -0.35, -0.5))),
+           extensions={"KHR_lights_punctual": {"light": 0}})
+    w.camera("camera", yfov=0.7, aspect=1.5, translation=(-60.0, 40.0, 900.0), target=(-8.0, 70.0, -40.0), znear=1.0)
+    return w
+
+
 SCENES = {"fog-spot": fog_spot, "chromatic-cube": chromatic_cube, "scattering-glass": scattering_glass,
-          "smoke-plume": smoke_plume, "chromatic-smoke": chromatic_smoke, "glowing-smoke": glowing_smoke}
+          "smoke-plume": smoke_plume, "chromatic-smoke": chromatic_smoke, "glowing-smoke": glowing_smoke,
+          "cloud": cloud}
 
 
 def main():
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "scenes" / "media"
     for name, build in SCENES.items():
         path = out / f"{name}.gltf"
-        (build(out) if "smoke" in name else build()).write_gltf(path)
+        (build(out) if "smoke" in name or name == "cloud" else build()).write_gltf(path)
         print(f"wrote {path}")
 
 

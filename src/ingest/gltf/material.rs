@@ -210,7 +210,9 @@ impl<'a> Importer<'a> {
             // The extension's absorption stays where the medium gives none.
             let absorption = material.volume.map_or(Vec3::ZERO, |v| v.absorption);
             let density = match &medium.density {
-                Some(uri) => Some(self.density_grid(uri, element)?),
+                Some(uri) => {
+                    Some(self.density_grid(uri, medium.density_grid.as_deref(), element)?)
+                }
                 None => None,
             };
             material.volume = Some(scene::Volume {
@@ -443,19 +445,35 @@ impl<'a> Importer<'a> {
         }
     }
 
-    /// The scene grid of the density file at `uri` (read once however many materials use
-    /// it); `element` is the material's, for messages.
-    fn density_grid(&mut self, uri: &str, element: &str) -> Result<u32> {
-        if let Some(&g) = self.grids.get(uri) {
+    /// The scene grid of the density file at `uri` (a `.vol` file, or grid `name` of a
+    /// `.vdb` file; read once however many materials use it); `element` is the material's,
+    /// for messages.
+    fn density_grid(&mut self, uri: &str, name: Option<&str>, element: &str) -> Result<u32> {
+        let key = format!("{uri}\u{1e}{}", name.unwrap_or_default());
+        if let Some(&g) = self.grids.get(&key) {
             return Ok(g);
         }
         let e = format!("{element}.extras.lucerna.medium.density");
         let bytes = crate::ingest::uri::read(uri, self.base).map_err(|r| self.err(&e, r))?;
-        let grid = crate::ingest::vol::parse(&bytes, uri)
-            .map_err(|r| self.err(&e, format!("{uri}: {r}")))?;
+        let grid = if crate::ingest::vdb::is_vdb(&bytes) {
+            let read = crate::ingest::vdb::parse(&bytes, uri, name)
+                .map_err(|r| self.err(&e, format!("{uri}: {r}")))?;
+            for warning in &read.warnings {
+                self.warn(&e, warning);
+            }
+            read.grid
+        } else if name.is_some() {
+            return Err(self.err(
+                format!("{element}.extras.lucerna.medium.density_grid"),
+                format!("{uri} is not an OpenVDB file, whose grids could be named"),
+            ));
+        } else {
+            crate::ingest::vol::parse(&bytes, uri)
+                .map_err(|r| self.err(&e, format!("{uri}: {r}")))?
+        };
         let g = self.scene.grids.len() as u32;
         self.scene.grids.push(grid);
-        self.grids.insert(uri.to_string(), g);
+        self.grids.insert(key, g);
         Ok(g)
     }
 

@@ -184,9 +184,13 @@ pub(super) struct MediumExtras {
     scattering: Option<SpecularValue>,
     #[serde(default)]
     anisotropy: f32,
-    /// A density grid (a Mitsuba `.vol` file beside the glTF) that scales absorption and
-    /// scattering point by point: they are then the coefficients at density 1.
+    /// A density grid (a Mitsuba `.vol` or an OpenVDB `.vdb` file beside the glTF) that
+    /// scales absorption and scattering point by point: they are then the coefficients at
+    /// density 1.
     density: Option<String>,
+    /// The grid of a `.vdb` file to read (default: `density`, or the file's only grid).
+    #[serde(default)]
+    density_grid: Option<String>,
     /// Radiance emitted per metre (scaled by the density grid, if any).
     emission: Option<SpecularValue>,
 }

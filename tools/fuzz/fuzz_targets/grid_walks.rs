@@ -1,22 +1,41 @@
-//! What the `density_grid` fuzz target does with its bytes, shared with the regression test
-//! (tests/it/fuzz_regressions.rs): parse them as a Mitsuba `.vol` density grid, build the
-//! heterogeneous medium over it, and walk rays through it (delta-tracked flights,
-//! ratio-tracked transmittance, gathered emission), panicking (a finding) where a walk
-//! returns a value that is not finite or is negative.
+//! What the `density_grid` and `vdb_decode` fuzz targets do with their bytes, shared with
+//! the regression test (tests/it/fuzz_regressions.rs): parse them as a Mitsuba `.vol`
+//! density grid or an OpenVDB file, build the heterogeneous medium over the grid, and walk
+//! rays through it (delta-tracked flights, ratio-tracked transmittance, gathered emission),
+//! panicking (a finding) where a walk returns a value that is not finite or is negative.
 
 use glam::{DMat4, Vec3};
 use lucerna::medium::{Flight, Heterogeneous};
 
+/// The most bytes a fuzzed VDB file's dense grid may take.
+const VDB_LIMIT: u64 = 64 << 20;
+
 /// `Err` with the reader's message where the bytes are refused.
 pub fn walk_the_grid(data: &[u8]) -> Result<(), String> {
-    let grid = lucerna::ingest::vol::parse(data, "fuzz.vol")?;
+    walk(&lucerna::ingest::vol::parse(data, "fuzz.vol")?)
+}
+
+/// The same for an OpenVDB file: its default grid, then its grid `temperature` if it
+/// names one (a second grid read from the same bytes).
+pub fn walk_the_vdb(data: &[u8]) -> Result<(), String> {
+    let read = lucerna::ingest::vdb::parse_within(data, "fuzz.vdb", None, Some(VDB_LIMIT))?;
+    walk(&read.grid)?;
+    if let Ok(other) =
+        lucerna::ingest::vdb::parse_within(data, "fuzz.vdb", Some("temperature"), Some(VDB_LIMIT))
+    {
+        walk(&other.grid)?;
+    }
+    Ok(())
+}
+
+fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
     // Coefficients as a glTF medium gives them: absorbing, scattering, chromatic, emitting.
     let coefficients = [
         Vec3::new(0.5, 1.0, 2.0),
         Vec3::new(3.0, 1.0, 0.2),
         Vec3::new(1.0, 0.5, 0.1),
     ];
-    let Some(medium) = Heterogeneous::new(&grid, coefficients, 0.3, DMat4::IDENTITY) else {
+    let Some(medium) = Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY) else {
         return Ok(());
     };
     // Rays from outside the grid's box through its centre, and one starting inside it.

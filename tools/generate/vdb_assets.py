@@ -1,0 +1,120 @@
+"""Writes the OpenVDB test files of tests/assets/vdb with OpenVDB's own library, and what
+OpenVDB reads back from them (expected.json), for the reader's tests.
+
+Run with a Python that has `pyopenvdb` (Debian/Ubuntu: `apt-get install python3-openvdb`,
+then `/usr/bin/python3 tools/generate/vdb_assets.py`). The files:
+
+- plume.vdb: the smoke plume of scenes/media/smoke-plume.vol as a float grid placed where
+  the .vol file's box is (so both read as the same density field), with a second grid
+  (`temperature`) and a vector grid (`velocity`) beside it; Blosc-compressed (OpenVDB's
+  default when it has Blosc).
+- plume-half.vdb: the same plume saved as halves.
+- tiles.vdb: active tiles beside leaves, negative coordinates and a rotated, scaled
+  transform (an affine map), values that include negative ones.
+- sphere-level-set.vdb: a level set, which the reader refuses.
+
+wdas-cloud-sixteenth.vdb (vendored: Walt Disney Animation Studios' cloud at a sixteenth of
+its resolution, CC BY-SA 3.0, LICENSE-wdas-cloud.txt) is described too when it is there.
+"""
+
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pyopenvdb as vdb
+
+sys.path[:0] = [str(Path(__file__).resolve().parent), str(Path(__file__).resolve().parents[1])]
+from media_scenes import PLUME_BOX, PLUME_RESOLUTION, plume_density  # noqa: E402
+
+
+def describe(grid, probes):
+    """What OpenVDB reads back: counts, sums, bounds and values at `probes` (index points)."""
+    active = 0
+    total = 0.0
+    for item in grid.citerOnValues():  # a tile counts for all its voxels
+        active += item.count
+        total += item.value * item.count
+    accessor = grid.getConstAccessor()
+    lo, hi = grid.evalActiveVoxelBoundingBox()
+    return {
+        "name": grid.name,
+        "active_voxels": active,
+        "active_sum": total,
+        "active_box": [list(lo), list(hi)],
+        "background": grid.background,
+        "probes": [{"index": list(p), "value": accessor.getValue(tuple(p)),
+                    "world": list(grid.transform.indexToWorld(tuple(float(c) for c in p)))}
+                   for p in probes],
+    }
+
+
+def plume_grid(half):
+    lo, hi = PLUME_BOX
+    nx, ny, nz = PLUME_RESOLUTION
+    voxel = [(h - l) / n for l, h, n in zip(lo, hi, (nx, ny, nz))]
+    density = np.ascontiguousarray(plume_density().astype(np.float32).transpose(2, 1, 0))
+    grid = vdb.FloatGrid()
+    grid.copyFromArray(density, ijk=(0, 0, 0), tolerance=0)
+    grid.name = "density"
+    grid.gridClass = vdb.GridClass.FOG_VOLUME
+    # Voxel (i, j, k) at the centre of the .vol file's voxel (i, j, k).
+    grid.transform = vdb.createLinearTransform(
+        [[voxel[0], 0, 0, 0], [0, voxel[1], 0, 0], [0, 0, voxel[2], 0],
+         [lo[0] + voxel[0] / 2, lo[1] + voxel[1] / 2, lo[2] + voxel[2] / 2, 1]])
+    grid.saveFloatAsHalf = half
+    return grid
+
+
+def main():
+    out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "tests" / "assets" / "vdb"
+    out.mkdir(parents=True, exist_ok=True)
+    expected = {}
+    probes = [(0, 0, 0), (20, 5, 20), (13, 31, 25), (39, 39, 39), (21, 12, 18)]
+
+    plume = plume_grid(False)
+    temperature = plume.deepCopy()
+    temperature.name = "temperature"
+    temperature.mapOn(lambda v: 300.0 + 900.0 * v)
+    velocity = vdb.Vec3SGrid()
+    velocity.name = "velocity"
+    velocity.fill((0, 0, 0), (7, 7, 7), (0.0, 1.0, 0.0))
+    vdb.write(str(out / "plume.vdb"), grids=[plume, temperature, velocity])
+    expected["plume.vdb"] = {"density": describe(plume, probes), "temperature": describe(temperature, probes)}
+
+    half = plume_grid(True)
+    vdb.write(str(out / "plume-half.vdb"), grids=[half])
+    # OpenVDB reads the halves back: describe what it reads.
+    expected["plume-half.vdb"] = {"density": describe(vdb.read(str(out / "plume-half.vdb"), "density"), probes)}
+
+    tiles = vdb.FloatGrid()
+    tiles.name = "density"
+    tiles.gridClass = vdb.GridClass.FOG_VOLUME
+    tiles.fill((-16, -8, 0), (15, 15, 31), 0.75)  # whole 8^3 leaves: active tiles
+    accessor = tiles.getAccessor()
+    for i in range(24):
+        accessor.setValueOn((20 + i % 5, -3 + i // 5, 9 + i % 3), 0.05 * i - 0.2)
+    c, s = math.cos(0.4), math.sin(0.4)
+    tiles.transform = vdb.createLinearTransform(
+        [[0.02 * c, 0.02 * s, 0, 0], [-0.03 * s, 0.03 * c, 0, 0], [0, 0, 0.025, 0], [0.5, -0.25, 1.0, 1]])
+    tiles.prune()
+    vdb.write(str(out / "tiles.vdb"), grids=[tiles])
+    expected["tiles.vdb"] = {"density": describe(tiles, [(-16, -8, 0), (0, 0, 0), (15, 15, 31), (22, -1, 10),
+                                                         (16, 0, 0), (-17, 0, 0), (43, 1, 11)])}
+
+    sphere = vdb.createLevelSetSphere(radius=1.0, center=(0, 0, 0), voxelSize=0.25, halfWidth=3.0)
+    sphere.name = "surface"
+    vdb.write(str(out / "sphere-level-set.vdb"), grids=[sphere])
+
+    cloud = out / "wdas-cloud-sixteenth.vdb"
+    if cloud.exists():
+        grid = vdb.read(str(cloud), "density")
+        expected[cloud.name] = {"density": describe(grid, [(0, 0, 0), (-20, 10, 5), (3, 40, -12), (10, -30, 20)])}
+    (out / "expected.json").write_text(json.dumps(expected, indent=1) + "\n")
+    for f in sorted(out.glob("*.vdb")):
+        print(f"wrote {f} ({f.stat().st_size} bytes)")
+
+
+if __name__ == "__main__":
+    main()
