@@ -1,7 +1,7 @@
 //! The scene file: the internal [`Scene`] on disk, so that other programs (the USD plugin,
 //! the benchmark's Mitsuba exporter) can write or read exactly what the renderer sees.
 //!
-//! One concept in one file (1050 lines): the format, read and written here side by side so
+//! One concept in one file (some 1280 lines): the format, read and written here side by side so
 //! that every field's validation sits next to its writing.
 //!
 //! Two files: a JSON manifest `NAME.lucerna` and one little-endian binary buffer beside it
@@ -11,6 +11,10 @@
 //! normals 3 × f32, tangents and colours 4 × f32, uvs 2 × f32, triangles 3 × u32, texels
 //! 4 × u8 (`rgba8`, sRGB-encoded or data as the material slot says) or 4 × f32 (`rgba32f`).
 //! Matrices are 16 f64 in column-major order; enums are externally tagged in snake_case.
+//! Density grids are either in the buffer (`grids`, dense f32) or read from OpenVDB files
+//! (`volumes`: file, grid, transform and the interface material whose medium they scale;
+//! the reader adds the grid and a box of that material around it, and writes them back as
+//! `grids`, meshes and instances).
 //!
 //! A scene file is untrusted input: [`read`] checks the format and version, every view
 //! against the buffer, every count, index and range, and that every number is finite,
@@ -65,6 +69,22 @@ struct Manifest {
     subdivision_surfaces: Vec<SubdivisionEntry>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     grids: Vec<GridEntry>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    volumes: Vec<VolumeEntry>,
+}
+
+/// A volume whose grid is read from an OpenVDB file (USD `Volume` prims): the grid `grid`
+/// of `file` (relative to the scene file's folder unless absolute), its own transform
+/// followed by `to_world` (column-major 4x4), inside an enclosing box of `material`, an
+/// interface with a medium that the grid's densities scale.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct VolumeEntry {
+    name: String,
+    file: String,
+    grid: Option<String>,
+    to_world: [f64; 16],
+    material: u32,
 }
 
 /// A density grid: its resolution, its unit cube to world (a column-major 4x4 matrix) and
@@ -299,6 +319,9 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         render_settings: scene.render_settings.clone(),
         subdivision_surfaces,
         grids,
+        // Volumes read from OpenVDB files are written as the grids, meshes and instances
+        // they became.
+        volumes: Vec::new(),
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
@@ -599,6 +622,11 @@ pub fn parse(
         }
         scene.grids.push(grid);
     }
+    let mut volume_grids = HashMap::new();
+    for (i, entry) in manifest.volumes.iter().enumerate() {
+        read_volume(&mut scene, path, entry, &mut volume_grids)
+            .map_err(|(field, reason)| bad(&format!("volumes[{i}]{field}"), reason))?;
+    }
     for (i, entry) in manifest.subdivision_surfaces.iter().enumerate() {
         let surface = read_subdivision(&buffer, entry, &format!("subdivision_surfaces[{i}]"))
             .map_err(|(element, reason)| bad(&element, reason))?;
@@ -615,6 +643,114 @@ pub fn parse(
     scene.warnings.extend(udim_warnings);
     scene.warnings.extend(cache_notice);
     Ok(scene)
+}
+
+/// Reads the grid of a volume entry into `scene` (the scene file at `path` locates a
+/// relative file; `read` keeps the grids read so far by file and grid name, so instances
+/// of one volume share their densities), scales its material's medium by it and encloses it
+/// in a box of that material (a copy of it where an earlier volume took the material for
+/// its own grid); errors are (field, reason).
+fn read_volume(
+    scene: &mut Scene,
+    path: &Path,
+    v: &VolumeEntry,
+    read: &mut HashMap<(String, Option<String>), super::DensityGrid>,
+) -> std::result::Result<(), (String, String)> {
+    let Some(material) = scene.materials.get(v.material as usize) else {
+        return Err((
+            ".material".into(),
+            format!("material {} does not exist", v.material),
+        ));
+    };
+    let Some(volume) = material.volume else {
+        return Err((
+            ".material".into(),
+            format!(
+                "material {} has no medium for the grid to scale",
+                v.material
+            ),
+        ));
+    };
+    let key = (v.file.clone(), v.grid.clone());
+    let mut grid = match read.get(&key) {
+        Some(grid) => grid.clone(),
+        None => {
+            let file = path.parent().unwrap_or(Path::new("")).join(&v.file);
+            let bytes = crate::files::read_input(&file)
+                .map_err(|reason| (".file".into(), format!("{}: {reason}", file.display())))?;
+            let parsed = crate::ingest::vdb::parse(&bytes, &v.file, v.grid.as_deref())
+                .map_err(|reason| (".file".into(), format!("{}: {reason}", v.file)))?;
+            scene
+                .warnings
+                .extend(parsed.warnings.iter().map(|w| format!("{}: {w}", v.name)));
+            read.insert(key, parsed.grid.clone());
+            parsed.grid
+        }
+    };
+    grid.to_world = glam::DMat4::from_cols_array(&v.to_world) * grid.to_world;
+    if let Some(reason) = grid.defect() {
+        return Err((".to_world".into(), reason));
+    }
+    let density = Some(scene.grids.len() as u32);
+    let material = if volume.density.is_none() {
+        v.material
+    } else {
+        scene
+            .materials
+            .push(scene.materials[v.material as usize].clone());
+        scene.materials.len() as u32 - 1
+    };
+    if let Some(volume) = scene.materials[material as usize].volume.as_mut() {
+        volume.density = density;
+    }
+    let (mesh, mut instance) = enclosure(&grid, &v.name, material);
+    instance.mesh = scene.meshes.len() as u32;
+    scene.meshes.push(mesh);
+    scene.instances.push(instance);
+    scene.grids.push(grid);
+    Ok(())
+}
+
+/// A closed box of `material` around the grid (its unit cube as a mesh named `name`,
+/// placed by the grid's transform), faces outward: the interface that holds a medium
+/// the grid scales, for volumes that come without a surface (USD `Volume` prims).
+fn enclosure(grid: &super::DensityGrid, name: &str, material: u32) -> (Mesh, Instance) {
+    let corner = |i: u32| glam::Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32);
+    // Two triangles a face, counter-clockwise seen from outside the cube.
+    let mut triangles = vec![
+        [0, 2, 3],
+        [0, 3, 1], // z = 0
+        [4, 5, 7],
+        [4, 7, 6], // z = 1
+        [0, 1, 5],
+        [0, 5, 4], // y = 0
+        [2, 6, 7],
+        [2, 7, 3], // y = 1
+        [0, 4, 6],
+        [0, 6, 2], // x = 0
+        [1, 3, 7],
+        [1, 7, 5], // x = 1
+    ];
+    if grid.to_world.determinant() < 0.0 {
+        // A mirroring transform turns the faces inward: wind them the other way.
+        triangles.iter_mut().for_each(|t| t.swap(1, 2));
+    }
+    let mesh = Mesh {
+        name: name.to_string(),
+        positions: (0..8).map(corner).collect(),
+        normals: None,
+        tangents: None,
+        uvs: [None, None],
+        colors: None,
+        triangles,
+        material,
+    };
+    let instance = Instance {
+        name: name.to_string(),
+        mesh: 0,
+        transform: grid.to_world,
+    };
+    (mesh, instance)
 }
 
 /// Reads and checks one subdivision surface: polygons of 3 or more points (triangles for

@@ -483,3 +483,100 @@ fn subdivision_surfaces_round_trip() {
         "{text}"
     );
 }
+
+/// The Cornell box's scene file with an interface material of a medium and `volumes`
+/// entries (as the USD plugin writes for `Volume` prims) added by `volumes`.
+fn with_volumes(name: &str, volumes: impl FnOnce(&mut Value)) -> lucerna::Result<Scene> {
+    let dir = temp_dir(name);
+    let path = dir.join("box.lucerna");
+    file::write(&ingest::default_scene().unwrap(), &path).unwrap();
+    let mut manifest: Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    let mut smoke = manifest["materials"][0].clone();
+    smoke["name"] = json!("smoke");
+    smoke["model"] = json!("interface");
+    smoke["volume"] = json!({"absorption": [1.0, 1.0, 1.0], "scattering": [9.0, 9.0, 9.0]});
+    manifest["materials"].as_array_mut().unwrap().push(smoke);
+    volumes(&mut manifest);
+    std::fs::write(&path, serde_json::to_vec(&manifest).unwrap()).unwrap();
+    ingest::load(&path, &Default::default())
+}
+
+fn plume_vdb() -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/assets/vdb/plume.vdb")
+        .to_string_lossy()
+        .into_owned()
+}
+
+#[test]
+fn volumes_read_their_grids_and_get_a_box() {
+    let base = ingest::default_scene().unwrap();
+    let scene = with_volumes("volumes-read", |m| {
+        let smoke = m["materials"].as_array().unwrap().len() - 1;
+        let placed = |x: f64| {
+            json!({"name": format!("/Smoke{x}"), "file": plume_vdb(), "grid": "density",
+                   "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, x, 0, 0, 1], "material": smoke})
+        };
+        m["volumes"] = json!([placed(0.0), placed(0.5)]);
+    })
+    .unwrap();
+    // Two instances of one grid: its densities are read once and shared.
+    assert_eq!(scene.grids.len(), 2);
+    assert!(std::sync::Arc::ptr_eq(
+        &scene.grids[0].values,
+        &scene.grids[1].values
+    ));
+    assert_eq!(
+        scene.grids[1].to_world.w_axis.x - scene.grids[0].to_world.w_axis.x,
+        0.5
+    );
+    // Each box has its own material (the second a copy), scaled by its own grid.
+    assert_eq!(scene.materials.len(), base.materials.len() + 2);
+    assert_eq!(scene.meshes.len(), base.meshes.len() + 2);
+    for (k, instance) in scene.instances[base.instances.len()..].iter().enumerate() {
+        assert_eq!(instance.name, format!("/Smoke{}", [0.0, 0.5][k]));
+        assert_eq!(instance.transform, scene.grids[k].to_world);
+        let mesh = &scene.meshes[instance.mesh as usize];
+        let volume = scene.materials[mesh.material as usize].volume.unwrap();
+        assert_eq!(volume.density, Some(k as u32));
+        assert_eq!(mesh.triangles.len(), 12);
+    }
+}
+
+#[test]
+fn volumes_that_cannot_be_read_are_errors() {
+    type Edit = Box<dyn FnOnce(&mut Value)>;
+    let cases: [(&str, Edit, &str); 3] = [
+        (
+            "volume-no-medium",
+            Box::new(|m| {
+                m["volumes"] = json!([{"name": "/V", "file": plume_vdb(), "grid": null,
+                    "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": 0}])
+            }),
+            "volumes[0].material: material 0 has no medium for the grid to scale",
+        ),
+        (
+            "volume-missing-file",
+            Box::new(|m| {
+                let smoke = m["materials"].as_array().unwrap().len() - 1;
+                m["volumes"] = json!([{"name": "/V", "file": "nowhere.vdb", "grid": null,
+                    "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": smoke}])
+            }),
+            "volumes[0].file",
+        ),
+        (
+            "volume-flat",
+            Box::new(|m| {
+                let smoke = m["materials"].as_array().unwrap().len() - 1;
+                m["volumes"] = json!([{"name": "/V", "file": plume_vdb(), "grid": "density",
+                    "to_world": [1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": smoke}])
+            }),
+            "volumes[0].to_world: its transform is not finite or flattens the grid",
+        ),
+    ];
+    for (name, volumes, fragment) in cases {
+        let error = with_volumes(name, volumes).err().unwrap();
+        assert_eq!(error.kind, ErrorKind::BadInput, "{error}");
+        assert!(error.to_string().contains(fragment), "{name}: {error}");
+    }
+}

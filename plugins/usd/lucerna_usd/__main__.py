@@ -225,11 +225,11 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             if line.strip():
                 writer.warnings.append(f"usd-core: {line.strip()}")
     if not (writer.instances or writer.spheres or writer.disks or writer.cylinders or writer.lights
-            or writer.environment is not None):
+            or writer.volumes or writer.environment is not None):
         # What explains it (validator findings, skipped prims) comes first.
         for text in writer.warnings[:20]:
             print(f"lucerna-usd: warning: {text}", file=sys.stderr)
-        _error(path, "stage", "nothing to render (no meshes, spheres or lights)")
+        _error(path, "stage", "nothing to render (no meshes, spheres, volumes or lights)")
         return EXIT_BAD_INPUT
     try:
         writer.write(output)

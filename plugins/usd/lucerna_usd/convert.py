@@ -18,7 +18,7 @@ import math
 import numpy as np
 from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, UsdVol
 
-from . import curves, lights
+from . import curves, lights, volumes
 from .materials import MaterialConverter
 from .mesh import MeshData
 from .skel import Skinning
@@ -154,6 +154,11 @@ class Converter:
                             "name": f"{name}[{i}]" if len(world) == 1 else f"{name}[{k}][{i}]",
                             "centre": [float(x) for x in centre],
                             "radius": float(radius * scale), "material": material})
+            elif g.kind == "volume":
+                file, grid, material, name = g.payload
+                for k, m in enumerate(world):
+                    self.writer.add_volume(name if len(world) == 1 else f"{name}[{k}]", file, grid,
+                                           matrix(m), material)
             elif g.kind == "camera":
                 for m in world:
                     self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
@@ -161,7 +166,8 @@ class Converter:
                 self._isolated(g.payload.GetPath(), lights.convert, self.writer, g.payload,
                                list(world_usd), self.to_lucerna, self.time, self.warn)
         lights.finish_domes(self.writer, self.warn)
-        if not (self.writer.instances or self.writer.spheres or self.writer.disks or self.writer.cylinders):
+        if not (self.writer.instances or self.writer.spheres or self.writer.disks or self.writer.cylinders
+                or self.writer.volumes):
             self.warn("stage", "no renderable geometry")
         return self.writer
 
@@ -228,8 +234,7 @@ class Converter:
         elif prim.IsA(UsdGeom.BasisCurves):
             groups += self._curves(prim, inherited)
         elif prim.IsA(UsdVol.Volume):
-            self.warn(path, f"Volume is not rendered yet ({_fields(prim)}): skipped; lucerna reads "
-                            "density grids from glTF extras.lucerna.medium.density (docs/media.md)")
+            groups += self._volume(prim, inherited)
         elif any(prim.IsA(t) for t in _SKIPPED_GPRIMS):
             self.warn(path, f"{prim.GetTypeName()} is not supported: skipped")
         if prim.IsInstance():
@@ -259,6 +264,23 @@ class Converter:
         if sync and sync.HasAuthoredValue():
             self.warn(path, f"light:materialSyncMode {sync.Get()!r} is not read: the mesh emits "
                       "the light's radiance over its material")
+
+    def _volume(self, prim, inherited):
+        """A Volume: its density field and the medium of its material (volumes.py), or a
+        warning saying why it is skipped."""
+        path = str(prim.GetPath())
+        bound = self._bound_material(prim) or inherited
+        material = UsdShade.Material(self.stage.GetPrimAtPath(bound)) if bound else None
+        shader = volumes.volume_shader(material)
+        inputs = volumes.shader_inputs(shader, self.time)
+        field, reason = volumes.density_field(prim, str(inputs["density_channel"]), self.time)
+        if field is None:
+            self.warn(path, f"Volume skipped: {reason} ({_fields(prim)})")
+            return []
+        name = f"{path} ({bound})" if shader else path
+        index = self.writer.add_material(
+            volumes.medium_material(name, inputs, 1.0 / self.meters_per_unit, self.warn))
+        return [Group("volume", (field[0], field[1], index, path))]
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

@@ -81,6 +81,8 @@ class SceneWriter:
         # Dome lights met so far (lights.finish_domes makes the environment of them).
         self.domes = []
         self.light_groups = []
+        # Volumes whose OpenVDB grids the renderer reads (add_volume).
+        self.volumes = []
         self.warnings = []
         # The stage's UsdRender settings and products (render_settings.convert), or None.
         self.render_settings = None
@@ -148,6 +150,14 @@ class SceneWriter:
                 "mesh": int(mesh),
                 "transform": matrix(m),
             })
+
+    def add_volume(self, name, file, grid, to_world, material):
+        """Adds a volume: grid `grid` of the OpenVDB `file` (an absolute path), its index
+        space placed by `to_world` (the scene file's 16 numbers) after the grid's own
+        transform, filling an interface box of `material` (whose medium the grid's
+        densities scale)."""
+        self.volumes.append({"name": name, "file": file, "grid": grid,
+                             "to_world": to_world, "material": material})
 
     def add_to_light_group(self, group, member):
         """Puts the emitter named `member` into light group `group` (the lg_<group> AOV)."""
@@ -224,6 +234,8 @@ class SceneWriter:
             "render_settings": self.render_settings,
             "subdivision_surfaces": self.subdivision_surfaces,
         }
+        if self.volumes:
+            manifest["volumes"] = self.volumes
         _check_numbers(manifest)
         text = json.dumps(manifest, indent=1, allow_nan=False)
         self._spool.seek(0)

@@ -514,8 +514,8 @@ def test_subdivision_mesh_with_a_nan_point_still_renders(stage_file):
 
 
 def test_a_volume_is_skipped_with_its_fields_named(stage_file, converted):
-    """A UsdVol.Volume is not rendered yet: the conversion says so on the prim, naming each
-    field's OpenVDB file and grid, and renders the rest of the stage."""
+    """A UsdVol.Volume whose density file is missing is skipped: the conversion says so on
+    the prim, naming each field's OpenVDB file and grid, and renders the rest of the stage."""
     s = converted(stage_file('''
 def Xform "World" {
     def Volume "Smoke" {
@@ -534,6 +534,6 @@ def Xform "World" {
     }
 }
 '''), no_validate=True)
-    assert s.warnings_about("/World/Smoke: Volume is not rendered yet (fields density: ./smoke.vdb[density], "
-                            "temperature: ./smoke.vdb[temperature]): skipped")
+    assert s.warnings_about("/World/Smoke: Volume skipped: its field 'density': the file ./smoke.vdb cannot be "
+                            "found (fields density: ./smoke.vdb[density], temperature: ./smoke.vdb[temperature])")
     assert len(s.manifest["spheres"]) == 1

@@ -1,0 +1,114 @@
+"""UsdVol `Volume` prims: the OpenVDB density field they bind and the medium their material
+describes, as a scene file's `volumes` entry (the renderer reads the grid itself and
+encloses it in an interface box: docs/media.md).
+
+The field: the Volume's `field:density` relationship (or the field its shader's
+`density_channel` names), an `OpenVDBAsset` whose `filePath` (time-sampled paths give a
+file per frame) and `fieldName` (default: the relationship's name) choose the file and
+grid. Other field types (Field3D) are reported and skipped.
+
+The medium: the surface-less shader connected to the bound material's `volume` output (of
+any render context: `outputs:volume`, `outputs:arnold:volume`, ...), read with the inputs of
+Arnold's `standard_volume`, the volume shader that Houdini, Maya and MtoA users write:
+`density` (extinction per stage unit at grid density 1), `scatter` and `scatter_color`
+(the single-scattering albedo is their product), `scatter_anisotropy` (Henyey-Greenstein
+g), `emission` and `emission_color` (radiance per stage unit at density 1, with
+`emission_mode` "density"). A Volume without such a shader renders as standard_volume with
+its defaults (density 1, albedo 0.5 grey, g 0, no emission), as Arnold and Karma render an
+unshaded volume. Emission from a temperature field by a blackbody is not read yet: a
+shader that asks for it is reported.
+"""
+
+from pxr import Sdf, UsdShade, UsdVol
+
+from .scene_file import default_material
+
+# Arnold standard_volume's defaults, for the inputs lucerna reads.
+DEFAULTS = {"density": 1.0, "scatter": 1.0, "scatter_color": (0.5, 0.5, 0.5), "scatter_anisotropy": 0.0,
+            "emission": 0.0, "emission_color": (1.0, 1.0, 1.0), "emission_mode": "density",
+            "density_channel": "density"}
+
+
+def volume_shader(material):
+    """The shader connected to a `volume` output of `material` (a UsdShade.Material), or None."""
+    if not material:
+        return None
+    for output in material.GetOutputs():
+        name = output.GetBaseName()
+        if name == "volume" or name.endswith(":volume"):
+            for source in output.GetConnectedSources()[0]:
+                shader = UsdShade.Shader(source.source.GetPrim())
+                if shader:
+                    return shader
+    return None
+
+
+def shader_inputs(shader, time):
+    """The standard_volume inputs of `shader` (authored values, else defaults)."""
+    values = dict(DEFAULTS)
+    if shader is None:
+        return values
+    for name in DEFAULTS:
+        shader_input = shader.GetInput(name)
+        if shader_input:
+            value = shader_input.Get(time)
+            if value is not None:
+                values[name] = tuple(float(c) for c in value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+    return values
+
+
+def density_field(volume, channel, time):
+    """(file, grid name) of the OpenVDB field `channel` of `volume` (a Usd.Prim), or
+    (None, reason)."""
+    fields = UsdVol.Volume(volume).GetFieldPaths()
+    target = fields.get(channel)
+    if target is None:
+        # A field whose grid is named `channel` under another relationship name.
+        for path in fields.values():
+            field = volume.GetStage().GetPrimAtPath(path)
+            if field and field.IsA(UsdVol.OpenVDBAsset) and UsdVol.OpenVDBAsset(field).GetFieldNameAttr().Get(time) == channel:
+                target = path
+                break
+    if target is None:
+        return None, f"it has no field {channel!r} (fields: {', '.join(sorted(fields)) or 'none'})"
+    field = volume.GetStage().GetPrimAtPath(target)
+    if not field or not field.IsA(UsdVol.OpenVDBAsset):
+        kind = field.GetTypeName() if field else "missing"
+        return None, f"its field {channel!r} ({target}) is {kind}, not an OpenVDBAsset"
+    asset = UsdVol.OpenVDBAsset(field)
+    path = asset.GetFilePathAttr().Get(time)
+    if not isinstance(path, Sdf.AssetPath) or not path.path:
+        return None, f"its field {channel!r} ({target}) has no filePath"
+    if not path.resolvedPath:
+        return None, f"its field {channel!r}: the file {path.path} cannot be found"
+    grid = asset.GetFieldNameAttr().Get(time) or channel
+    return (path.resolvedPath, str(grid)), None
+
+
+def medium_material(name, inputs, per_metre, warn):
+    """The scene-file material of an interface around the medium `inputs` describe."""
+    density = float(inputs["density"])
+    albedo = [min(max(float(inputs["scatter"]) * float(c), 0.0), 1.0) for c in inputs["scatter_color"]]
+    g = float(inputs["scatter_anisotropy"])
+    if not -1.0 < g < 1.0:
+        warn(name, f"scatter_anisotropy {g} is outside (-1, 1): clamped")
+        g = min(max(g, -0.99), 0.99)
+    if density < 0.0:
+        warn(name, f"density {density} is negative: 0 is used")
+        density = 0.0
+    extinction = density * per_metre
+    emission = [0.0, 0.0, 0.0]
+    strength = float(inputs["emission"])
+    if strength > 0.0:
+        if inputs["emission_mode"] in ("density", "constant"):
+            emission = [max(strength * float(c), 0.0) * per_metre for c in inputs["emission_color"]]
+            if inputs["emission_mode"] == "constant":
+                warn(name, "emission_mode 'constant' is rendered scaled by the density, as 'density'")
+        else:
+            warn(name, f"emission_mode {inputs['emission_mode']!r} (a temperature or emission field "
+                       "through a blackbody) is not rendered yet: the volume does not glow")
+    return default_material(
+        name, model="interface", metallic=0.0, ior=1.0,
+        volume={"absorption": [extinction * (1.0 - a) for a in albedo],
+                "scattering": [extinction * a for a in albedo],
+                "anisotropy": g, "emission": emission})
