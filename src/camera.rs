@@ -23,9 +23,13 @@ pub struct Camera {
     kind: Kind,
     lens_radius: f32,
     focus_distance: f32,
+    /// The image rendered, overscan included.
     width: u32,
     height: u32,
-    /// Film position (pixels) to NDC scale: 2 / width, 2 / height.
+    /// The image without overscan, and the overscan around it.
+    display: (u32, u32),
+    overscan: Overscan,
+    /// Film position (pixels of the image proper) to NDC scale: 2 / width, 2 / height.
     film_to_ndc: Vec2,
     /// World to camera space (x right, y up, z forward: OpenEXR's convention).
     pub world_to_camera: DMat4,
@@ -36,6 +40,91 @@ pub struct Camera {
     /// Clipping range along the viewing axis, render space.
     clip_near: f32,
     clip_far: f32,
+}
+
+/// Pixels rendered beyond each edge of the image (overscan): the EXR's data window reaches
+/// past its display window by these, so that a compositor's distortion, shake or blur has
+/// picture to pull in from outside the frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Overscan {
+    pub left: u32,
+    pub top: u32,
+    pub right: u32,
+    pub bottom: u32,
+}
+
+/// The most pixels of overscan an edge may have.
+pub const MAX_OVERSCAN: u32 = 16384;
+
+impl Overscan {
+    /// The same overscan on every edge.
+    pub fn uniform(pixels: u32) -> Self {
+        Self {
+            left: pixels,
+            top: pixels,
+            right: pixels,
+            bottom: pixels,
+        }
+    }
+
+    /// Parses `N` (every edge) or `LEFT,TOP,RIGHT,BOTTOM`, in pixels.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let numbers: Vec<u32> = text
+            .split(',')
+            .map(|v| v.trim().parse::<u32>())
+            .collect::<Result<_, _>>()
+            .map_err(|_| format!("expected PIXELS or LEFT,TOP,RIGHT,BOTTOM, got {text:?}"))?;
+        let overscan = match numbers[..] {
+            [n] => Self::uniform(n),
+            [left, top, right, bottom] => Self {
+                left,
+                top,
+                right,
+                bottom,
+            },
+            _ => {
+                return Err(format!(
+                    "expected PIXELS or LEFT,TOP,RIGHT,BOTTOM, got {text:?}"
+                ));
+            }
+        };
+        if overscan.edges().iter().any(|&e| e > MAX_OVERSCAN) {
+            return Err(format!(
+                "overscan {text:?}: at most {MAX_OVERSCAN} pixels an edge"
+            ));
+        }
+        Ok(overscan)
+    }
+
+    /// `LEFT,TOP,RIGHT,BOTTOM`, as [`Overscan::parse`] reads it.
+    pub fn describe(&self) -> String {
+        let [l, t, r, b] = self.edges();
+        format!("{l},{t},{r},{b}")
+    }
+
+    fn edges(&self) -> [u32; 4] {
+        [self.left, self.top, self.right, self.bottom]
+    }
+
+    pub fn is_none(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// The size rendered for an image of `width` × `height` with this overscan.
+    pub fn extend(&self, (width, height): (u32, u32)) -> (u32, u32) {
+        (
+            width + self.left + self.right,
+            height + self.top + self.bottom,
+        )
+    }
+
+    /// The size of the image whose rendered size (with this overscan) is `size`.
+    pub fn display(&self, (width, height): (u32, u32)) -> (u32, u32) {
+        (
+            width - self.left - self.right,
+            height - self.top - self.bottom,
+        )
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -177,6 +266,8 @@ impl Camera {
             focus_distance: (c.focus_distance * space.scale) as f32,
             width,
             height,
+            display: (width, height),
+            overscan: Overscan::default(),
             film_to_ndc: Vec2::new(2.0 / width as f32, 2.0 / height as f32),
             world_to_camera,
             world_to_ndc: projection * world_to_camera,
@@ -188,12 +279,43 @@ impl Camera {
         }
     }
 
-    /// Image width in pixels.
+    /// The camera rendering `overscan` pixels beyond the edges of its image as well: the
+    /// image it renders grows by them, its view of the image inside stays the same (every
+    /// pixel keeps its ray), and its EXR's data window reaches past the display window.
+    pub fn overscanned(mut self, overscan: Overscan) -> Self {
+        (self.width, self.height) = overscan.extend(self.display);
+        self.overscan = overscan;
+        self
+    }
+
+    /// Pixel (`x`, `y`) of the image rendered in the coordinates of the image proper
+    /// (negative left of and above it, in the overscan): where its rays go
+    /// ([`Camera::generate_ray`]) and which samples it takes, so that a pixel renders the
+    /// same whatever the overscan.
+    #[inline]
+    pub fn image_pixel(&self, x: u32, y: u32) -> (i32, i32) {
+        (
+            x.wrapping_sub(self.overscan.left) as i32,
+            y.wrapping_sub(self.overscan.top) as i32,
+        )
+    }
+
+    /// The image without its overscan (the EXR's display window).
+    pub fn display(&self) -> (u32, u32) {
+        self.display
+    }
+
+    /// Pixels rendered beyond each edge of the image.
+    pub fn overscan(&self) -> Overscan {
+        self.overscan
+    }
+
+    /// Width in pixels of the image rendered (overscan included).
     pub fn width(&self) -> u32 {
         self.width
     }
 
-    /// Image height in pixels.
+    /// Height in pixels of the image rendered (overscan included).
     pub fn height(&self) -> u32 {
         self.height
     }
@@ -204,7 +326,8 @@ impl Camera {
         self.origin
     }
 
-    /// The primary ray through film position `film` (pixels, (0, 0) = top-left corner),
+    /// The primary ray through film position `film` (pixels of the image proper, (0, 0) =
+    /// its top-left corner, negative in the overscan left of and above it),
     /// with lens sample `lens` for depth of field, limited to the clipping range. The
     /// direction is unit length.
     #[inline]
@@ -257,10 +380,10 @@ impl Camera {
         match self.kind {
             Kind::Perspective { tan_half_y, .. } => RayCone {
                 width: 0.0,
-                spread: 2.0 * tan_half_y / self.height as f32,
+                spread: 2.0 * tan_half_y / self.display.1 as f32,
             },
             Kind::Orthographic { half_height, .. } => RayCone {
-                width: 2.0 * half_height / self.height as f32,
+                width: 2.0 * half_height / self.display.1 as f32,
                 spread: 0.0,
             },
         }
@@ -424,6 +547,31 @@ mod tests {
                     }
                 }
             }
+        }
+    }
+
+    #[test]
+    fn overscan_grows_the_image_and_keeps_its_pixels() {
+        let plain = camera(
+            Projection::Perspective {
+                yfov: 0.8,
+                aspect: None,
+            },
+            0.0,
+        );
+        let o = Overscan::parse("3,1,4,2").unwrap();
+        let wide = plain.clone().overscanned(o);
+        assert_eq!((wide.width(), wide.height()), (71, 51));
+        assert_eq!(wide.display(), (64, 48));
+        // Rendered pixel (3, 1) is the image's (0, 0), the first pixel (-3, -1) beyond it.
+        assert_eq!(wide.image_pixel(3, 1), (0, 0));
+        assert_eq!(wide.image_pixel(0, 0), (-3, -1));
+        assert_eq!(wide.pixel_cone().spread, plain.pixel_cone().spread);
+        assert_eq!(wide.world_to_ndc, plain.world_to_ndc);
+        assert_eq!(Overscan::parse("5").unwrap(), Overscan::uniform(5));
+        assert_eq!(Overscan::parse(&o.describe()).unwrap(), o);
+        for bad in ["", "1,2", "-1", "1,2,3,4,5", "16385"] {
+            assert!(Overscan::parse(bad).is_err(), "{bad:?}");
         }
     }
 }

@@ -212,6 +212,12 @@ struct RenderArgs {
     /// whole image]
     #[arg(long, help_heading = "Output")]
     crop: Option<String>,
+    /// Also render PIXELS beyond every edge of the image (or LEFT,TOP,RIGHT,BOTTOM), the
+    /// view of the image itself unchanged: the EXR's data window reaches past its display
+    /// window (for lens distortion, shake and blur in the composite). USD: a product's
+    /// dataWindowNDC beyond 0..1. [default: none]
+    #[arg(long, value_name = "PIXELS", help_heading = "Output")]
+    overscan: Option<String>,
     /// Store the light layers (beauty, light and lobe layers, light groups, denoised) as
     /// 16-bit half floats; data layers, Cryptomatte, sample counts and variance stay 32-bit.
     #[arg(long, help_heading = "Output")]

@@ -16,6 +16,7 @@ pub mod router;
 pub mod tile;
 pub mod window;
 
+use crate::camera::Overscan;
 use aov::{Aov, AovSet, MEAN_DATA};
 use glam::{DVec3, Vec3};
 use planes::Planes;
@@ -42,8 +43,11 @@ pub struct Film {
     pub height: u32,
     /// Where those pixels lie in the image.
     pub window: Window,
-    /// Size of the whole image (the EXR display window).
+    /// Size of the whole image rendered, overscan included (the EXR's display window
+    /// grown by the overscan).
     pub display: (u32, u32),
+    /// Pixels of `display` beyond the edges of the image proper.
+    pub overscan: Overscan,
     pub aovs: AovSet,
     pub router: Router,
     pub tiles: Vec<Tile>,
@@ -73,6 +77,7 @@ impl Film {
         Self {
             width: window.width,
             height: window.height,
+            overscan: Overscan::default(),
             window,
             display,
             aovs,
@@ -379,6 +384,7 @@ impl Film {
         Planes {
             display: self.display,
             window: self.window,
+            overscan: self.overscan,
             channels,
         }
     }

@@ -7,10 +7,13 @@ use super::window::Window;
 /// data window of the whole image (the display window, whose origin is 0, 0).
 #[derive(Clone, Debug)]
 pub struct Planes {
-    /// Size of the whole image.
+    /// Size of the whole image, overscan included.
     pub display: (u32, u32),
-    /// The pixels present (all of the image but for crop renders).
+    /// The pixels present (all of the image but for crop renders), in `display`.
     pub window: Window,
+    /// Pixels of `display` beyond the edges of the image proper (the EXR's display window
+    /// is `display` without them; its data window reaches into them).
+    pub overscan: crate::camera::Overscan,
     /// Channel name (`layer.C`, the beauty unprefixed) and its row-major plane over the
     /// window.
     pub channels: Vec<(String, Vec<f32>)>,

@@ -59,6 +59,16 @@ impl Window {
             && self.y as u64 + self.height as u64 <= height as u64
     }
 
+    /// This window of an image (display coordinates) in the coordinates of the image
+    /// rendered with `overscan` around it.
+    pub fn beyond(&self, overscan: crate::camera::Overscan) -> Self {
+        Self {
+            x: self.x + overscan.left,
+            y: self.y + overscan.top,
+            ..*self
+        }
+    }
+
     /// Number of pixels.
     pub fn pixel_count(&self) -> usize {
         self.width as usize * self.height as usize

@@ -37,7 +37,9 @@ pub fn memory_estimate(
     let camera = camera
         .and_then(|name| scene.camera(name))
         .or(scene.cameras.first());
-    let (width, height) = crate::camera::resolve_resolution(resolution, camera);
+    let (width, height) = options
+        .overscan
+        .extend(crate::camera::resolve_resolution(resolution, camera));
     let mut estimate = memory::MemoryEstimate {
         film: Film::estimated_bytes(
             width,
@@ -131,7 +133,8 @@ pub(super) fn prepare(
         options.spp,
     );
     let build_seconds = build_start.elapsed().as_secs_f64();
-    let (width, height) = (world.camera.width(), world.camera.height());
+    let (width, height) = world.camera.display();
+    world.camera = world.camera.clone().overscanned(options.overscan);
     if let Some(crop) = options.crop.filter(|c| !c.fits(width, height)) {
         return Err(Error::bad_input(
             "",

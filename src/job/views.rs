@@ -65,6 +65,13 @@ pub(super) fn frame_views(
             if let (None, None, Some(crop)) = (options.crop, job.resolution, settings.crop) {
                 view_options.crop = Some(pixel_window(crop));
             }
+            if let (true, None, Some(o)) = (
+                options.overscan.is_none(),
+                job.resolution,
+                settings.overscan,
+            ) {
+                view_options.overscan = overscan(o);
+            }
             vec![View {
                 camera,
                 resolution: job.resolution.or(settings.resolution.map(|[w, h]| (w, h))),
@@ -83,7 +90,12 @@ fn declared_views(
     options: &RenderOptions,
     settings: &RenderSettings,
 ) -> Result<Vec<View>> {
-    type Shared = (Option<String>, Option<(u32, u32)>, Option<[u32; 4]>);
+    type Shared = (
+        Option<String>,
+        Option<(u32, u32)>,
+        Option<[u32; 4]>,
+        Option<[u32; 4]>,
+    );
     let mut groups: Vec<(Shared, View, Vec<&str>)> = Vec::new();
     for (i, product) in settings.products.iter().enumerate() {
         let element = format!("{}: product {i}", settings.path);
@@ -95,6 +107,11 @@ fn declared_views(
         } else {
             product.crop
         };
+        let declared_overscan = if !options.overscan.is_none() || job.resolution.is_some() {
+            None
+        } else {
+            product.overscan
+        };
         let own = if job.aov_given {
             None
         } else {
@@ -104,7 +121,7 @@ fn declared_views(
             path: PathBuf::from(&product.output),
             aovs: own,
         };
-        let key = (camera.clone(), resolution, crop);
+        let key = (camera.clone(), resolution, crop, declared_overscan);
         match groups.iter_mut().find(|(k, ..)| *k == key) {
             Some((_, view, aovs)) => {
                 view.outputs.push(output);
@@ -114,6 +131,9 @@ fn declared_views(
                 let mut view_options = options.clone();
                 if let Some(window) = crop.map(pixel_window) {
                     view_options.crop = Some(window);
+                }
+                if let Some(o) = declared_overscan {
+                    view_options.overscan = overscan(o);
                 }
                 let view = View {
                     camera,
@@ -157,5 +177,15 @@ fn pixel_window([x0, y0, x1, y1]: [u32; 4]) -> Window {
         y: y0,
         width: x1 - x0,
         height: y1 - y0,
+    }
+}
+
+/// A declared overscan, `[left, top, right, bottom]` pixels.
+fn overscan([left, top, right, bottom]: [u32; 4]) -> crate::camera::Overscan {
+    crate::camera::Overscan {
+        left,
+        top,
+        right,
+        bottom,
     }
 }

@@ -9,6 +9,7 @@
 //! `colorInteropID` `lin_rec709_scene`; `owner`, `capDate` and `comments` (a one-line
 //! summary of the render) are set, `framesPerSecond` for frames of an animation.
 
+use crate::camera::{MAX_OVERSCAN, Overscan};
 use crate::error::{Error, Result};
 use crate::film::aov::Aov;
 use crate::film::planes::Planes;
@@ -263,7 +264,14 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
     check_names(planes.channels.iter().map(|(n, _)| n.as_str()))
         .and_then(|()| check_names(header.attributes.iter().map(|(n, _)| n.as_str())))
         .map_err(|reason| Error::bad_input(path, "channels", reason))?;
-    let (display, window) = (planes.display, planes.window);
+    // The display window is the image without its overscan; the data window, in its
+    // coordinates, may start left of and above its origin.
+    let display = planes.overscan.display(planes.display);
+    let window = planes.window;
+    let origin = (
+        window.x as i64 - planes.overscan.left as i64,
+        window.y as i64 - planes.overscan.top as i64,
+    );
     let mut planes = planes;
     let replaced = make_finite(&mut planes.channels);
     let mut header = header.clone();
@@ -316,7 +324,7 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         software_name: Some(text(crate::RENDERER)),
         world_to_camera: header.world_to_camera,
         world_to_normalized_device: header.world_to_ndc,
-        layer_position: Vec2(window.x as i32, window.y as i32),
+        layer_position: Vec2(origin.0 as i32, origin.1 as i32),
         owner: owner().map(|o| text(&o)),
         comments: summary(header).map(|c| text(&c)),
         capture_date: Some(text(&capture_date(std::time::SystemTime::now()))),
@@ -555,28 +563,51 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
             channels.push(channel);
         }
     }
-    let (x, y) = (position.x(), position.y());
-    let window = Window {
-        x: u32::try_from(x).map_err(|_| bad("dataWindow", format!("negative origin {x}")))?,
-        y: u32::try_from(y).map_err(|_| bad("dataWindow", format!("negative origin {y}")))?,
-        width: size.width() as u32,
-        height: size.height() as u32,
-    };
-    let display = (
-        display_window.size.width() as u32,
-        display_window.size.height() as u32,
+    // A data window beyond the display window is overscan: the planes cover the display
+    // window grown by it, and the window is placed in that.
+    let (x, y) = (position.x() as i64, position.y() as i64);
+    let (w, h) = (size.width() as i64, size.height() as i64);
+    let (dw, dh) = (
+        display_window.size.width() as i64,
+        display_window.size.height() as i64,
     );
-    if !window.fits(display.0, display.1) {
+    let beyond = |v: i64| u32::try_from(v.max(0)).ok().filter(|&v| v <= MAX_OVERSCAN);
+    let edges = [-x, -y, x + w - dw, y + h - dh].map(beyond);
+    let [Some(left), Some(top), Some(right), Some(bottom)] = edges else {
         return Err(bad(
             "dataWindow",
-            format!("{} lies outside the display window", window.describe()),
+            format!("it reaches more than {MAX_OVERSCAN} pixels beyond the display window"),
         ));
-    }
+    };
     let header = header_of(&layer.attributes);
+    // A crop of an overscanned render need not reach into the overscan: the render's own
+    // record of it, where it covers the data window, says how large the image rendered was.
+    let recorded = header.text("lucerna/settings").and_then(|text| {
+        let mut options = crate::render::options::RenderOptions::default();
+        options.load_recorded_settings(text).ok()?;
+        Some(options.overscan)
+    });
+    let overscan = match recorded {
+        Some(o) if o.left >= left && o.top >= top && o.right >= right && o.bottom >= bottom => o,
+        _ => Overscan {
+            left,
+            top,
+            right,
+            bottom,
+        },
+    };
+    let display = overscan.extend((dw as u32, dh as u32));
+    let window = Window {
+        x: (x + overscan.left as i64) as u32,
+        y: (y + overscan.top as i64) as u32,
+        width: w as u32,
+        height: h as u32,
+    };
     Ok((
         Planes {
             display,
             window,
+            overscan,
             channels,
         },
         header,

@@ -323,6 +323,7 @@ pub fn merge(parts: &[Part]) -> Result<(Planes, Header)> {
     let planes = Planes {
         display,
         window,
+        overscan: parts[0].planes.overscan,
         channels,
     };
     let header = merged_header(parts, &planes)?;
@@ -388,8 +389,15 @@ fn merged_header(parts: &[Part], planes: &Planes) -> Result<Header> {
             .load_recorded_settings(text)
             .map_err(|e| Error::bad_input(&parts[0].path, "lucerna/settings", e))?;
         options.pass = None;
-        options.crop = (planes.window != Window::full(planes.display.0, planes.display.1))
-            .then_some(planes.window);
+        // The crop in the image's coordinates: the merged window without the overscan.
+        let o = planes.overscan;
+        options.overscan = o;
+        options.crop =
+            (planes.window != Window::full(planes.display.0, planes.display.1)).then(|| Window {
+                x: planes.window.x.saturating_sub(o.left),
+                y: planes.window.y.saturating_sub(o.top),
+                ..planes.window
+            });
         let taken = spp.unwrap_or(options.spp.unwrap_or(0));
         header.set("lucerna/settings", Attribute::Text(options.to_toml(taken)));
     }

@@ -261,6 +261,7 @@ fn write_ocio(
     let planes = crate::film::planes::Planes {
         display: (width, height),
         window: crate::film::Window::full(width, height),
+        overscan: Default::default(),
         channels: ["R", "G", "B"]
             .iter()
             .map(|c| c.to_string())

@@ -5,6 +5,7 @@
 
 use super::plan::{PlanMode, RenderPlan};
 use super::progress::ProgressLines;
+use crate::camera::Overscan;
 use crate::film::aov::AovSet;
 use crate::film::filter::PixelFilter;
 use crate::film::{Film, Window};
@@ -43,8 +44,12 @@ pub struct RenderOptions {
     pub filter: PixelFilter,
     /// Light groups of the request (`--light-group`), before the scene's own.
     pub light_groups: Vec<crate::scene::LightGroup>,
-    /// Render only these pixels of the image (a tile of a split render).
+    /// Render only these pixels of the image (a tile of a split render), in the image's
+    /// coordinates (without overscan).
     pub crop: Option<Window>,
+    /// Pixels rendered beyond the image's edges (the EXR's data window past its display
+    /// window).
+    pub overscan: Overscan,
     /// Take only pass K of N (1-based): the K-th of N disjoint ranges of each pixel's sample
     /// sequence, so that merging the N renders gives the render with all the samples.
     pub pass: Option<(u32, u32)>,
@@ -70,6 +75,7 @@ impl Default for RenderOptions {
             filter: PixelFilter::blackman_harris(1.5),
             light_groups: Vec::new(),
             crop: None,
+            overscan: Overscan::default(),
             pass: None,
             progress: false,
             progress_lines: None,
@@ -136,6 +142,7 @@ impl RenderOptions {
             }
             "aov" => self.aovs = AovSet::parse(value)?,
             "crop" => self.crop = Some(Window::parse(value)?),
+            "overscan" => self.overscan = Overscan::parse(value)?,
             "light-groups" => self.light_groups = crate::light::groups::parse(value)?,
             "pass" => {
                 let pass = value
@@ -206,6 +213,9 @@ impl RenderOptions {
         }
         if let Some(window) = self.crop {
             pairs.push(("crop".into(), window.describe()));
+        }
+        if !self.overscan.is_none() {
+            pairs.push(("overscan".into(), self.overscan.describe()));
         }
         if let Some((k, n)) = self.pass {
             pairs.push(("pass".into(), format!("{k}/{n}")));
@@ -293,6 +303,7 @@ impl RenderOptions {
                 self.filter.describe() != other.filter.describe(),
             ),
             ("crop", self.crop != other.crop),
+            ("overscan", self.overscan != other.overscan),
             ("light groups", self.light_groups != other.light_groups),
             ("pass", self.pass != other.pass),
             (
@@ -307,7 +318,9 @@ impl RenderOptions {
     /// The empty film this request renders into, for `world`'s camera, with a layer for
     /// each light group if they are requested.
     pub fn film(&self, world: &World) -> Film {
+        // The image rendered: overscan included, a crop within the image moved into it.
         let display = (world.camera.width(), world.camera.height());
+        let overscan = world.camera.overscan();
         let groups = self
             .aovs
             .wants_light_groups()
@@ -318,10 +331,12 @@ impl RenderOptions {
         };
         let mut film = Film::cropped(
             display,
-            self.crop.unwrap_or(Window::full(display.0, display.1)),
+            self.crop
+                .map_or(Window::full(display.0, display.1), |c| c.beyond(overscan)),
             aovs,
             self.noise_threshold.is_some(),
         );
+        film.overscan = overscan;
         if let Some(g) = groups {
             film.router.set_light_groups(&g.of_light);
         }
@@ -390,6 +405,7 @@ mod tests {
             ("mis", "balance"),
             ("light-groups", "key=lamp_*,sun;sky=environment"),
             ("crop", "1,2,30,40"),
+            ("overscan", "4,0,4,8"),
         ] {
             options.set(name, value).unwrap();
         }
@@ -405,5 +421,6 @@ mod tests {
         assert_eq!(read.settings, options.settings);
         assert_eq!(read.light_groups, options.light_groups);
         assert_eq!(read.crop, options.crop);
+        assert_eq!(read.overscan, options.overscan);
     }
 }

@@ -106,9 +106,10 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                     let mut pixel_parts = PixelParts::default();
                     let pixel_rays = rays.closest + rays.shadow;
                     for index in first..first + n {
-                        sampler.start(x, y, index);
+                        let (ix, iy) = camera.image_pixel(x, y);
+                        sampler.start(ix as u32, iy as u32, index);
                         let cs = sampler.camera();
-                        let centre = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                        let centre = Vec2::new(ix as f32 + 0.5, iy as f32 + 0.5);
                         let ray =
                             camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
                         record.clear();

@@ -1004,16 +1004,24 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             "render_settings".to_string(),
             settings.resolution,
             settings.crop,
+            settings.overscan,
         ))
         .chain(settings.products.iter().enumerate().map(|(i, p)| {
             (
                 format!("render_settings.products[{i}]"),
                 p.resolution,
                 p.crop,
+                p.overscan,
             )
         }));
         let side = 1..=crate::camera::MAX_IMAGE_SIDE;
-        for (element, resolution, crop) in views {
+        for (element, resolution, crop, overscan) in views {
+            if overscan.is_some_and(|o| o.iter().any(|&e| e > crate::camera::MAX_OVERSCAN)) {
+                return fail(
+                    format!("{element}.overscan"),
+                    "at most 16384 pixels an edge",
+                );
+            }
             if let Some([w, h]) = resolution
                 && !(side.contains(&w) && side.contains(&h))
             {

@@ -113,6 +113,10 @@ pub struct RenderSettings {
     pub resolution: Option<[u32; 2]>,
     #[serde(default)]
     pub crop: Option<[u32; 4]>,
+    /// Pixels `[left, top, right, bottom]` rendered beyond the image's edges (a data window
+    /// beyond the display window).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overscan: Option<[u32; 4]>,
     pub products: Vec<RenderProduct>,
 }
 
@@ -125,8 +129,12 @@ pub struct RenderProduct {
     pub camera: Option<String>,
     /// Width and height in pixels; `None`: from the camera.
     pub resolution: Option<[u32; 2]>,
-    /// Pixels `[x0, y0, x1, y1]` (ends excluded) to render, the EXR's data window.
+    /// Pixels `[x0, y0, x1, y1]` (ends excluded) of the image to render.
     pub crop: Option<[u32; 4]>,
+    /// Pixels `[left, top, right, bottom]` rendered beyond the image's edges: with `crop`,
+    /// the EXR's data window.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub overscan: Option<[u32; 4]>,
     /// lucerna's AOV list (as `--aov` takes it) for this file's layers.
     pub aovs: String,
 }

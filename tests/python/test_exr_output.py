@@ -223,3 +223,58 @@ def test_multi_part_output(tmp_path):
     bad = subprocess.run([BIN, "render", "-o", str(tmp_path / "bad.exr"), "--exr-parts", "views", "-q"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "unknown split \"views\"" in bad.stderr, bad.stderr
+
+
+def windows(path, index=0):
+    """(data window, display window) of part `index` as (x, y, width, height)."""
+    inp = oiio.ImageInput.open(str(path))
+    try:
+        inp.seek_subimage(index, 0)
+        s = inp.spec()
+        return (s.x, s.y, s.width, s.height), (s.full_x, s.full_y, s.full_width, s.full_height)
+    finally:
+        inp.close()
+
+
+def test_overscan(tmp_path):
+    """--overscan renders beyond the image's edges: the data window reaches past the display
+    window by the overscan (in every part of a multi-part file), and the pixels of the image
+    itself are the render's without overscan, to the bit, in every layer. A crop of an
+    overscanned render resumes and merges with the rest into the whole."""
+    view = ["--aov", "beauty,direct,albedo,normal,depth,crypto", "--resolution", "48x32",
+            "--env", "0.3,0.3,0.3", "-q"]
+    aovs = [*view, "--spp", "4"]
+    plain = tmp_path / "plain.exr"
+    subprocess.run([BIN, "render", "-o", str(plain), *aovs], check=True)
+    reference = read(plain)[1]
+    wide = tmp_path / "wide.exr"
+    subprocess.run([BIN, "render", "-o", str(wide), "--overscan", "8,4,6,2", *aovs], check=True)
+    assert windows(wide) == ((-8, -4, 62, 38), (0, 0, 48, 32))
+    got = read(wide)[1]
+    for name, plane in reference.items():
+        assert np.array_equal(got[name][4:36, 8:56], plane), name
+    # Beyond the frame the render goes on: the environment around the box is there.
+    assert got["R"][:, :8].min() > 0.1
+    parts = tmp_path / "parts.exr"
+    subprocess.run([BIN, "render", "-o", str(parts), "--overscan", "16", "--exr-parts", "layer", *aovs], check=True)
+    for index in range(len(parts_of(parts))):
+        assert windows(parts, index) == ((-16, -16, 80, 64), (0, 0, 48, 32)), index
+    # A crop inside the image, resumed with more samples, then merged with the rest.
+    left, right = tmp_path / "left.exr", tmp_path / "right.exr"
+    split = ["--aov", "beauty,direct,depth,spp", "--resolution", "48x32", "--env", "0.3,0.3,0.3", "-q",
+             "--overscan", "8,4,6,2"]
+    subprocess.run([BIN, "render", "-o", str(left), "--crop", "0,0,24,32", *split, "--spp", "2"], check=True)
+    subprocess.run([BIN, "render", "-o", str(left), "--crop", "0,0,24,32", "--resume", *split, "--spp", "4"],
+                   check=True)
+    assert windows(left) == ((0, 0, 24, 32), (0, 0, 48, 32))
+    subprocess.run([BIN, "render", "-o", str(right), "--crop", "24,0,48,32", *split, "--spp", "4"], check=True)
+    merged = tmp_path / "merged.exr"
+    subprocess.run([BIN, "merge", str(left), str(right), "-o", str(merged)], check=True, capture_output=True)
+    assert windows(merged) == ((0, 0, 48, 32), (0, 0, 48, 32))
+    got = read(merged)[1]
+    for name in ["R", "direct.G", "depth.Z"]:
+        # A resumed render sums its samples in another order: equal to float rounding.
+        assert np.allclose(got[name], reference[name], rtol=1e-5, atol=1e-6), name
+    bad = subprocess.run([BIN, "render", "-o", str(tmp_path / "bad.exr"), "--overscan", "1,2", "-q"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "expected PIXELS or LEFT,TOP,RIGHT,BOTTOM" in bad.stderr, bad.stderr

@@ -8,7 +8,8 @@ the settings'):
 
 - camera: the `camera` relationship (lucerna's cameras are named by prim path);
 - resolution in pixels; dataWindowNDC (x0, y0, x1, y1, origin bottom-left) becomes the
-  pixel window rendered, the EXR's data window;
+  pixel window rendered, the EXR's data window: within 0..1 a crop, beyond it overscan
+  (pixels past the image's edges; the display window stays the image);
 - aspectRatioConformPolicy: expandAperture, the default, is every USD camera's own fit in
   lucerna (the whole aperture stays in view); cropAperture, adjustApertureWidth and
   adjustApertureHeight give a per-product camera with the field of view they imply;
@@ -25,6 +26,9 @@ warning (the product is skipped)."""
 
 import math
 import re
+
+# The most pixels of overscan an edge may have (the renderer's limit).
+MAX_OVERSCAN = 16384
 
 from pxr import Sdf, Usd, UsdRender
 
@@ -193,6 +197,8 @@ def convert(stage, writer, time, frame, explicit, warn):
         "crop": settings_product["crop"],
         "products": products,
     }
+    if "overscan" in settings_product:
+        writer.render_settings["overscan"] = settings_product["overscan"]
 
 
 def _product(writer, stage, fields, output, aovs, element, warn, time):
@@ -208,24 +214,41 @@ def _product(writer, stage, fields, output, aovs, element, warn, time):
     if camera is not None:
         camera = _fitted_camera(writer, camera, width, height, pixel_aspect,
                                 str(fields.get("conform", "expandAperture")), element, warn)
-    crop = None
+    crop = overscan = None
     window = fields.get("window")
     if window is not None and width is not None:
         x0, y0, x1, y1 = (float(v) for v in window)
         if (x0, y0, x1, y1) != (0.0, 0.0, 1.0, 1.0):
-            px0 = max(0, math.floor(x0 * width))
-            px1 = min(width, math.ceil(x1 * width))
-            py0 = max(0, math.floor((1.0 - y1) * height))
-            py1 = min(height, math.ceil((1.0 - y0) * height))
+            # Beyond 0..1 the window is overscan: pixels past the image's edges (at most
+            # MAX_OVERSCAN an edge); within, it crops the image.
+            # Edges a hair off a pixel boundary (a float4's -0.1 is -0.100000001) snap to it.
+            def snap(v):
+                return round(v) if abs(v - round(v)) < 1e-3 else v
+            px0, px1 = math.floor(snap(x0 * width)), math.ceil(snap(x1 * width))
+            py0, py1 = math.floor(snap((1.0 - y1) * height)), math.ceil(snap((1.0 - y0) * height))
+            edges = [max(0, -px0), max(0, -py0), max(0, px1 - width), max(0, py1 - height)]
+            if any(e > MAX_OVERSCAN for e in edges):
+                warn(element, f"dataWindowNDC {tuple(window)} reaches more than {MAX_OVERSCAN} pixels "
+                              "beyond the image: the overscan is limited to that")
+                edges = [min(e, MAX_OVERSCAN) for e in edges]
+            if any(edges):
+                overscan = edges
+            px0, px1 = max(0, px0), min(width, px1)
+            py0, py1 = max(0, py0), min(height, py1)
             if px0 < px1 and py0 < py1:
-                crop = [px0, py0, px1, py1]
+                if (px0, py0, px1, py1) != (0, 0, width, height):
+                    crop = [px0, py0, px1, py1]
             else:
                 warn(element, f"dataWindowNDC {tuple(window)} holds no pixel: the whole image is rendered")
+                overscan = None
     elif window is not None and tuple(float(v) for v in window) != (0.0, 0.0, 1.0, 1.0):
         warn(element, "dataWindowNDC needs a resolution: the whole image is rendered")
-    return {"output": output, "camera": camera,
-            "resolution": [width, height] if width is not None else None,
-            "crop": crop, "aovs": ",".join(aovs) if aovs else "beauty"}
+    product = {"output": output, "camera": camera,
+               "resolution": [width, height] if width is not None else None,
+               "crop": crop, "aovs": ",".join(aovs) if aovs else "beauty"}
+    if overscan:
+        product["overscan"] = overscan
+    return product
 
 
 _POLICIES = {"expandAperture", "cropAperture", "adjustApertureWidth", "adjustApertureHeight",

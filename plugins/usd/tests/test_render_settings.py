@@ -199,3 +199,25 @@ def test_frame_tokens():
     assert expand_frame("a.%04d.exr", 5) == "a.0005.exr"
     assert expand_frame("a.{frame}.exr", 5) == "a.0005.exr"
     assert expand_frame("a.$F4.exr", 1.5) == "a.1.5.exr"
+
+
+def test_a_data_window_beyond_the_image_is_overscan(tmp_path):
+    """dataWindowNDC beyond 0..1 renders past the image's edges: the EXR's display window is
+    the image, its data window reaches out by the overscan (here 10 % of 40 pixels left and
+    right, 5 % of 40 at the bottom), and the image inside is the render's without it."""
+    stage = STAGE.replace("float4 dataWindowNDC = (0, 0, 0.5, 1)", "float4 dataWindowNDC = (-0.1, -0.05, 1.1, 1)")
+    (tmp_path / "shot.usda").write_text(stage)
+    done = subprocess.run([lucerna_bin(), "render", "shot.usda", "--spp", "4"], cwd=tmp_path,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    side = spec(tmp_path / "out" / "side.0007.exr")
+    assert (side.full_x, side.full_y, side.full_width, side.full_height) == (0, 0, 40, 40)
+    assert (side.x, side.y, side.width, side.height) == (-4, 0, 48, 42)
+    plain = tmp_path / "plain.exr"
+    done = subprocess.run([lucerna_bin(), "render", "shot.usda", "--spp", "4", "--camera", "/World/Side",
+                           "--resolution", "40x40", "--aov", "normal,depth", "-o", str(plain)],
+                          cwd=tmp_path, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    wide = oiio.ImageBuf(str(tmp_path / "out" / "side.0007.exr")).get_pixels(oiio.FLOAT)
+    reference = oiio.ImageBuf(str(plain)).get_pixels(oiio.FLOAT)
+    assert np.array_equal(wide[0:40, 4:44, :4], reference[:, :, :4])

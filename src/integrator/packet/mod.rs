@@ -291,7 +291,8 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         for (lane, &(item, index)) in starts.iter().enumerate() {
             let w = &work[item];
             let mut sampler = self.sampler.clone();
-            sampler.start(w.x, w.y, index);
+            let (ix, iy) = self.world.camera.image_pixel(w.x, w.y);
+            sampler.start(ix as u32, iy as u32, index);
             if let Some((r, s)) = sampler.camera_sobol() {
                 (rev[lane], seed[lane]) = (r, s);
             } else {
@@ -299,7 +300,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                 (u[0][lane], u[1][lane]) = (cs.film.x, cs.film.y);
                 (u[2][lane], u[3][lane]) = (cs.lens.x, cs.lens.y);
             }
-            (centre[0][lane], centre[1][lane]) = (w.x as f32 + 0.5, w.y as f32 + 0.5);
+            (centre[0][lane], centre[1][lane]) = (ix as f32 + 0.5, iy as f32 + 0.5);
             sample[lane] = self.start_slot(w, index, sampler, buffers);
         }
         let u = if self.sampler.camera_sobol().is_some() {
