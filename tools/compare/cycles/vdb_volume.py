@@ -1,0 +1,201 @@
+#!/usr/bin/env python3
+"""lucerna's OpenVDB media against Cycles' (Blender 5.0, pip `bpy`): the same OpenVDB file
+rendered by both, each reading it itself (lucerna: `ingest::vdb`; Blender: OpenVDB and
+NanoVDB), so that the grid's placement (index space, voxel centres, transform), its
+interpolation and the medium's coefficients are compared end to end:
+
+    BLENDER=/path/to/bpy-venv/bin/python .venv/bin/python tools/compare/cycles/vdb_volume.py \\
+        [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
+
+The smoke plume of tests/assets/vdb/plume.vdb (36 x 36 x 31 active voxels of 9 mm, Blosc)
+with extinction 90 per metre at density 1, albedo (0.9, 0.8, 0.65) and Henyey-Greenstein
+g = 0.3, over a grey Lambertian floor under a uniform sky, seen from 1.2 m. lucerna: a glTF
+interface box around the grid with `extras.lucerna.medium.density` naming the file. Cycles:
+a Volume object of the same file (turned from glTF's Y up to Blender's Z up) with a
+Principled Volume of Density 90 (times the grid's `density`), Color the albedo (Cycles
+scatters Color x Density and absorbs (1 - Color) x Density: the same coefficients) and
+Anisotropy 0.3. Cycles: bounce limits 1024, no clamping, no denoiser, a 1-pixel box
+filter, linear EXR. Writes a contact sheet (lucerna | Cycles | |difference| x 4) and
+figures.json: relMSE and luminance ratio over the image and over the plume's pixels (those
+the plume darkens or lights by more than 1 % in lucerna's render), and the noise floor
+(two seeds of each renderer).
+"""
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+import lucerna_tools as lt
+from lucerna_tools.gltf_writer import GltfWriter, box
+
+PLUME = lt.ROOT / "tests" / "assets" / "vdb" / "plume.vdb"
+EXTINCTION = 90.0
+ALBEDO = (0.9, 0.8, 0.65)
+ANISOTROPY = 0.3
+FLOOR = 0.5
+SKY = 1.0
+VFOV = 0.55
+CAMERA = (0.28, 0.2, 1.2)  # glTF (Y up), looking down -Z
+# The grid's box in the scene (the .vol file's, which the VDB file reproduces), padded.
+BOX = ((0.09, -0.005, 0.11), (0.47, 0.37, 0.49))
+
+BLENDER_SCRIPT = r'''
+import json, math, sys
+import bpy
+job = json.loads(open(sys.argv[-1]).read())
+bpy.ops.wm.read_factory_settings(use_empty=True)
+scene = bpy.context.scene
+scene.render.engine = "CYCLES"
+c = scene.cycles
+c.device = "CPU"
+c.samples = job["spp"]
+c.seed = job["seed"]
+c.use_adaptive_sampling = False
+c.use_denoising = False
+for attr in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
+             "volume_bounces", "transparent_max_bounces"):
+    setattr(c, attr, 1024)
+c.sample_clamp_direct = 0.0
+c.sample_clamp_indirect = 0.0
+c.pixel_filter_type = "BOX"
+c.filter_width = 1.0
+scene.render.resolution_x, scene.render.resolution_y = job["width"], job["height"]
+scene.render.resolution_percentage = 100
+scene.view_settings.view_transform = "Standard"
+scene.render.image_settings.file_format = "OPEN_EXR"
+scene.render.image_settings.color_depth = "32"
+world = bpy.data.worlds.new("sky")
+world.use_nodes = True
+world.node_tree.nodes["Background"].inputs["Color"].default_value = (job["sky"],) * 3 + (1,)
+world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
+scene.world = world
+
+volume = bpy.data.volumes.new("plume")
+volume.filepath = job["vdb"]
+plume = bpy.data.objects.new("plume", volume)
+# glTF's Y up to Blender's Z up: (x, y, z) -> (x, -z, y).
+plume.rotation_euler = (math.pi / 2, 0, 0)
+scene.collection.objects.link(plume)
+smoke = bpy.data.materials.new("smoke")
+smoke.use_nodes = True
+nodes = smoke.node_tree.nodes
+for n in list(nodes):
+    nodes.remove(n)
+out = nodes.new("ShaderNodeOutputMaterial")
+pv = nodes.new("ShaderNodeVolumePrincipled")
+pv.inputs["Color"].default_value = tuple(job["albedo"]) + (1,)
+pv.inputs["Density"].default_value = job["extinction"]
+pv.inputs["Anisotropy"].default_value = job["anisotropy"]
+smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
+volume.materials.append(smoke)
+
+bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0, 0, -0.01))
+floor = bpy.context.active_object
+grey = bpy.data.materials.new("floor")
+grey.use_nodes = True
+gn = grey.node_tree.nodes
+for n in list(gn):
+    gn.remove(n)
+diffuse = gn.new("ShaderNodeBsdfDiffuse")
+diffuse.inputs["Color"].default_value = (job["floor"],) * 3 + (1,)
+fout = gn.new("ShaderNodeOutputMaterial")
+grey.node_tree.links.new(diffuse.outputs[0], fout.inputs["Surface"])
+floor.data.materials.append(grey)
+
+cam_data = bpy.data.cameras.new("cam")
+cam_data.sensor_fit = "VERTICAL"
+cam_data.angle_y = job["vfov"]
+cam_data.clip_start = 0.01
+cam = bpy.data.objects.new("cam", cam_data)
+x, y, z = job["camera"]
+cam.location = (x, -z, y)
+cam.rotation_euler = (math.pi / 2, 0, 0)
+scene.collection.objects.link(cam)
+scene.camera = cam
+scene.render.filepath = job["out"]
+bpy.ops.render.render(write_still=True)
+'''
+
+
+def write_gltf(path, width, height):
+    w = GltfWriter("lucerna tools/compare/cycles/vdb_volume.py")
+    floor = w.material("floor", base=(FLOOR,) * 3, extras={"lucerna": {"bsdf": "lambert"}})
+    w.node(name="floor", mesh=w.mesh("floor", [(-20, -0.01, -20), (-20, -0.01, 20), (20, -0.01, 20),
+                                               (20, -0.01, -20)], [(0, 1, 2), (0, 2, 3)], floor))
+    smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": {
+        "scattering": [EXTINCTION * a for a in ALBEDO],
+        "absorption": [EXTINCTION * (1 - a) for a in ALBEDO],
+        "anisotropy": ANISOTROPY, "density": PLUME.name}}})
+    positions, triangles = box(*BOX)
+    w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, smoke))
+    cam = w._list("cameras", {"name": "camera", "type": "perspective",
+                              "perspective": {"yfov": VFOV, "aspectRatio": width / height, "znear": 0.01}})
+    w.node(name="camera", camera=cam, translation=list(CAMERA))
+    w.write_gltf(path)
+
+
+def render_cycles(work, width, height, spp, seed):
+    job = {"width": width, "height": height, "spp": spp, "seed": seed, "vdb": str(work / PLUME.name),
+           "extinction": EXTINCTION, "albedo": ALBEDO, "anisotropy": ANISOTROPY, "floor": FLOOR, "sky": SKY,
+           "vfov": VFOV, "camera": CAMERA, "out": str(work / f"cycles_{seed}.exr")}
+    (work / "job.json").write_text(json.dumps(job))
+    (work / "blender_vdb_volume.py").write_text(BLENDER_SCRIPT)
+    blender = os.environ.get("BLENDER", "blender")
+    proc = subprocess.run([blender, str(work / "blender_vdb_volume.py"), str(work / "job.json")],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        sys.exit(f"blender failed: {proc.stdout[-2000:]} {proc.stderr[-2000:]}")
+    channels, _ = lt.read_exr(job["out"])
+    return lt.rgb(channels)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--spp", type=int, default=256)
+    parser.add_argument("--resolution", default="160x160")
+    parser.add_argument("--out", default=str(lt.ROOT / "tools" / "compare" / "cycles" / "results" / "vdb-volume"))
+    args = parser.parse_args()
+    width, height = map(int, args.resolution.split("x"))
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        shutil.copy(PLUME, work / PLUME.name)
+        gltf = work / "plume.gltf"
+        write_gltf(gltf, width, height)
+        env = ",".join([str(SKY)] * 3)
+        ours, header, _ = lt.render(gltf, work / "a.exr", (width, height), spp=args.spp, seed=1, filter="box", env=env)
+        ours_b, _, _ = lt.render(gltf, work / "b.exr", (width, height), spp=args.spp, seed=2, filter="box", env=env)
+        empty = work / "empty.gltf"
+        doc = json.loads(gltf.read_text())
+        doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if doc["nodes"][n].get("name") != "smoke"]
+        empty.write_text(json.dumps(doc))
+        background, _, _ = lt.render(empty, work / "e.exr", (width, height), spp=16, seed=1, filter="box", env=env)
+        cycles_a = render_cycles(work, width, height, args.spp, 1)
+        cycles_b = render_cycles(work, width, height, args.spp, 2)
+    weights = np.array([0.2126, 0.7152, 0.0722])
+    plume = np.abs((ours - background) @ weights) > 0.01 * np.maximum(background @ weights, 1e-3)
+    everywhere = np.ones(plume.shape, dtype=bool)
+    lum = lambda img, m: float((img[m] @ weights).mean())  # noqa: E731
+    rel = lambda x, ref, m: float(np.mean((x[m] - ref[m]) ** 2 / (ref[m] ** 2 + 0.01)))  # noqa: E731
+    figures = {"spp": args.spp, "resolution": [width, height], "plume_pixels": int(plume.sum())}
+    for name, m in (("image", everywhere), ("plume", plume)):
+        figures[name] = {
+            "luminance_ratio": (lum(ours, m) + lum(ours_b, m)) / (lum(cycles_a, m) + lum(cycles_b, m)),
+            "channel_ratio": ((ours[m] + ours_b[m]).mean(0) / (cycles_a[m] + cycles_b[m]).mean(0)).tolist(),
+            "relmse_lucerna_vs_cycles": rel(ours, cycles_a, m),
+            "noise_floor": (rel(cycles_b, cycles_a, m) + rel(ours_b, ours, m)) / 2}
+    figures["seconds_lucerna"] = header["lucerna/render_seconds"]
+    (out / "figures.json").write_text(json.dumps(figures, indent=1) + "\n")
+    print(json.dumps(figures, indent=1))
+    lt.difference_sheet(ours, cycles_a, out / "plume.png")
+
+
+if __name__ == "__main__":
+    main()
