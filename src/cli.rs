@@ -222,6 +222,11 @@ struct RenderArgs {
     /// 16-bit half floats; data layers, Cryptomatte, sample counts and variance stay 32-bit.
     #[arg(long, help_heading = "Output")]
     exr_half: bool,
+    /// Also write the data layers under the names Karma, RenderMan and Nuke's tools expect:
+    /// `N.X N.Y N.Z` (the normal), `P.X P.Y P.Z` (the position) and `Z` (the depth),
+    /// alongside lucerna's `normal`, `position` and `depth`.
+    #[arg(long, help_heading = "Output")]
+    exr_aliases: bool,
     /// EXR compression: none, rle, zips, zip, piz, or lossy pxr24, b44, b44a,
     /// dwaa[:LEVEL], dwab[:LEVEL] (refused with data or Cryptomatte layers). [default: zip]
     #[arg(long, value_name = "NAME", help_heading = "Output")]

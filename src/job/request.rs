@@ -97,7 +97,7 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 41] = [
+pub const JOB_SETTINGS: [&str; 42] = [
     "output",
     "frames",
     "frame",
@@ -121,6 +121,7 @@ pub const JOB_SETTINGS: [&str; 41] = [
     "stats-json",
     "no-default-light",
     "exr-half",
+    "exr-aliases",
     "exr-compression",
     "exr-parts",
     "preview",
@@ -265,6 +266,7 @@ impl RenderJob {
             "stats-json" => self.stats_json = Some(value.into()),
             "no-default-light" => self.default_light = !parse_bool(value)?,
             "exr-half" => self.storage.half_light_layers = parse_bool(value)?,
+            "exr-aliases" => self.storage.aliases = parse_bool(value)?,
             "exr-compression" => self.storage.compression = exr::parse_compression(value)?,
             "exr-parts" => self.storage.parts = exr::parse_parts(value)?,
             "preview" => self.preview = Some(value.into()),

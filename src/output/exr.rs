@@ -36,6 +36,25 @@ pub struct Storage {
     pub half_light_layers: bool,
     /// How the channels are split into the file's parts.
     pub parts: Parts,
+    /// Also write the data layers under Karma's and RenderMan's names ([`ALIASES`]).
+    pub aliases: bool,
+}
+
+/// Data channels and the names Karma, RenderMan and Nuke's tools know them by
+/// (`--exr-aliases`): copies written beside lucerna's, dropped again on reading (they are
+/// derived), so that merging and resuming see lucerna's layers only.
+pub const ALIASES: [(&str, &str); 7] = [
+    ("normal.X", "N.X"),
+    ("normal.Y", "N.Y"),
+    ("normal.Z", "N.Z"),
+    ("position.X", "P.X"),
+    ("position.Y", "P.Y"),
+    ("position.Z", "P.Z"),
+    ("depth.Z", "Z"),
+];
+
+fn is_alias(name: &str) -> bool {
+    ALIASES.iter().any(|&(_, alias)| alias == name)
 }
 
 /// How a file's channels are split into OpenEXR parts (`--exr-parts`). Every channel keeps
@@ -67,7 +86,11 @@ pub fn parse_parts(text: &str) -> std::result::Result<Parts, String> {
 
 /// The part channel `name` goes to under `parts`.
 fn part_of(name: &str, parts: Parts) -> &str {
-    let layer = name.rsplit_once('.').map(|(layer, _)| layer);
+    // The depth's alias `Z` has no layer: it goes with the depth.
+    let layer = match name {
+        "Z" => Some("depth"),
+        _ => name.rsplit_once('.').map(|(layer, _)| layer),
+    };
     match (parts, layer) {
         (Parts::Single, _) => "rgba",
         (Parts::Layer, None) => "rgba",
@@ -84,6 +107,7 @@ impl Default for Storage {
             compression: Compression::ZIP16,
             half_light_layers: false,
             parts: Parts::Single,
+            aliases: false,
         }
     }
 }
@@ -140,6 +164,9 @@ pub fn is_lossy(compression: Compression) -> bool {
 /// Whether channel `name` holds data rather than light: normals, depth, positions,
 /// albedos, sample counts, variance and Cryptomatte must be stored exactly.
 pub fn is_data_channel(name: &str) -> bool {
+    if is_alias(name) {
+        return true;
+    }
     let Some((layer, _)) = name.rsplit_once('.') else {
         return false; // The beauty: R, G, B, A.
     };
@@ -273,6 +300,13 @@ pub fn write_planes(path: &Path, planes: Planes, header: &Header) -> Result<()> 
         window.y as i64 - planes.overscan.top as i64,
     );
     let mut planes = planes;
+    if header.storage.aliases {
+        for (from, to) in ALIASES {
+            if let Some(plane) = planes.channel(from).map(<[f32]>::to_vec) {
+                planes.channels.push((to.to_string(), plane));
+            }
+        }
+    }
     let replaced = make_finite(&mut planes.channels);
     let mut header = header.clone();
     if replaced > 0 {
@@ -614,11 +648,12 @@ pub fn read(path: &Path) -> Result<(Planes, Header)> {
     ))
 }
 
-/// A part's channels as f32 planes.
+/// A part's channels as f32 planes, without the aliases (derived from the others).
 fn planes_of(channels: AnyChannels<FlatSamples>) -> Vec<(String, Vec<f32>)> {
     channels
         .list
         .into_iter()
+        .filter(|c| !is_alias(&c.name.to_string()))
         .map(|c| {
             let plane = match c.sample_data {
                 FlatSamples::F32(v) => v,

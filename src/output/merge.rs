@@ -98,12 +98,11 @@ fn check(parts: &[Part]) -> Result<()> {
         check_values(part)?;
     }
     let first = &parts[0];
+    // The same channels in any order (files split into parts differently list them so).
     let names = |p: &Part| {
-        p.planes
-            .channels
-            .iter()
-            .map(|(n, _)| n.clone())
-            .collect::<Vec<_>>()
+        let mut names: Vec<String> = p.planes.channels.iter().map(|(n, _)| n.clone()).collect();
+        names.sort();
+        names
     };
     let settings = shared_settings(&first.header);
     for part in &parts[1..] {

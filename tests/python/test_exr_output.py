@@ -278,3 +278,35 @@ def test_overscan(tmp_path):
     bad = subprocess.run([BIN, "render", "-o", str(tmp_path / "bad.exr"), "--overscan", "1,2", "-q"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "expected PIXELS or LEFT,TOP,RIGHT,BOTTOM" in bad.stderr, bad.stderr
+
+
+def test_channel_aliases(tmp_path):
+    """--exr-aliases writes the normal, position and depth again as N, P and Z (Karma's and
+    RenderMan's names), as data (32-bit with --exr-half), in every split of parts; lucerna's
+    own reading (resume, merge) leaves them out."""
+    args = ["--aov", "normal,position,depth,spp", "--resolution", "24x16", "--spp", "2", "-q"]
+    out = tmp_path / "aliases.exr"
+    subprocess.run([BIN, "render", "-o", str(out), "--exr-aliases", "--exr-half", *args], check=True)
+    spec, channels = read(out)
+    for layer, alias in [("normal", "N"), ("position", "P")]:
+        for c in "XYZ":
+            assert np.array_equal(channels[f"{alias}.{c}"], channels[f"{layer}.{c}"]), (alias, c)
+    assert np.array_equal(channels["Z"], channels["depth.Z"])
+    types = dict(zip(spec.channelnames, spec.channelformats or [spec.format] * spec.nchannels))
+    assert str(types["Z"]) == "float" and str(types["N.X"]) == "float" and str(types["R"]) == "half", types
+    parts = tmp_path / "parts.exr"
+    subprocess.run([BIN, "render", "-o", str(parts), "--exr-aliases", "--exr-parts", "layer", *args], check=True)
+    names = dict(parts_of(parts))
+    assert names["N"] == ["N.X", "N.Y", "N.Z"] and names["P"] == ["P.X", "P.Y", "P.Z"], names
+    assert sorted(names["depth"]) == ["Z", "depth.Z"], names
+    # Crops written with aliases, one file single-part and one split by layer, merge.
+    left, right, merged = tmp_path / "left.exr", tmp_path / "right.exr", tmp_path / "merged.exr"
+    subprocess.run([BIN, "render", "-o", str(left), "--exr-aliases", "--crop", "0,0,12,16", *args], check=True)
+    subprocess.run([BIN, "render", "-o", str(right), "--exr-aliases", "--exr-parts", "layer", "--crop",
+                    "12,0,24,16", *args], check=True)
+    subprocess.run([BIN, "merge", str(left), str(right), "-o", str(merged)], check=True, capture_output=True)
+    spec, got = read(merged)
+    assert not {"Z", "N.X", "P.X"} & set(spec.channelnames)
+    whole = tmp_path / "whole.exr"
+    subprocess.run([BIN, "render", "-o", str(whole), *args], check=True)
+    assert np.array_equal(got["depth.Z"], read(whole)[1]["depth.Z"])

@@ -228,3 +228,19 @@ fn corrupt_arrays_and_headers_are_errors() {
         "{refused}"
     );
 }
+
+#[test]
+fn non_finite_densities_are_errors_naming_the_voxel() {
+    let mut values = vec![0.5; 512];
+    values[9] = f32::NAN;
+    values[10] = f32::INFINITY;
+    let leaves = vec![(0, values, [u64::MAX; 8])];
+    for compression in [0, ZIP | ACTIVE_MASK] {
+        let err = parse(&write(&leaves, compression, 4, false), "x", None).unwrap_err();
+        // Entry 9 of the leaf at the origin: x 0, y 1, z 1 (z fastest).
+        assert!(
+            err.contains("voxel [0, 1, 1] has value NaN: densities must be finite"),
+            "{err}"
+        );
+    }
+}
