@@ -34,6 +34,10 @@ const ZIP: u32 = 0x1;
 const ACTIVE_MASK: u32 = 0x2;
 const BLOSC: u32 = 0x4;
 
+/// The most voxels of the dense grid a file becomes (8 GiB of densities), whatever the
+/// memory limit.
+const MAX_DENSE_VOXELS: u64 = 1 << 31;
+
 /// Separates a grid's name from the suffix that makes it unique in its file.
 const NAME_SUFFIX: char = '\u{1e}';
 
@@ -629,8 +633,14 @@ fn densify(
         .to_array()
         .iter()
         .try_fold(1u64, |n, &d| n.checked_mul(d as u64))
-        .filter(|&n| n <= u32::MAX as u64 * 4)
-        .ok_or_else(|| format!("its active voxels span {dims}, too many to hold"))?;
+        .filter(|&n| n <= MAX_DENSE_VOXELS)
+        .ok_or_else(|| {
+            format!(
+                "its active voxels span {}x{}x{} voxels, more than the {MAX_DENSE_VOXELS} a \
+                 dense grid holds",
+                dims.x, dims.y, dims.z
+            )
+        })?;
     crate::memory::check_allocation_within(
         count * 4,
         &format!("the dense grid of {}x{}x{} voxels", dims.x, dims.y, dims.z),

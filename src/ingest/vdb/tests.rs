@@ -13,6 +13,17 @@ fn write(
     size: usize,
     raw_in_zip: bool,
 ) -> Vec<u8> {
+    write_with(leaves, compression, size, raw_in_zip, &[])
+}
+
+/// [`write`] with active root tiles (origin, value) of 4096³ voxels beside the child.
+fn write_with(
+    leaves: &[(usize, Vec<f32>, [u64; 8])],
+    compression: u32,
+    size: usize,
+    raw_in_zip: bool,
+    tiles: &[([i32; 3], f32)],
+) -> Vec<u8> {
     let mut out = MAGIC.to_vec();
     let u32s = |out: &mut Vec<u8>, v: &[u32]| v.iter().for_each(|v| out.extend(v.to_le_bytes()));
     let string = |out: &mut Vec<u8>, s: &str| {
@@ -72,7 +83,13 @@ fn write(
         |out: &mut Vec<u8>, words: &[u64]| words.iter().for_each(|w| out.extend(w.to_le_bytes()));
     u32s(&mut out, &[1]);
     value(&mut out, 0.0);
-    u32s(&mut out, &[0, 1, 0, 0, 0]); // no tiles, one child at the origin
+    u32s(&mut out, &[tiles.len() as u32, 1]);
+    for (origin, v) in tiles {
+        origin.iter().for_each(|c| out.extend(c.to_le_bytes()));
+        value(&mut out, *v);
+        out.push(1);
+    }
+    u32s(&mut out, &[0, 0, 0]); // one child at the origin
     let mut upper = vec![0u64; 512];
     upper[0] = 1;
     masks(&mut out, &upper);
@@ -243,4 +260,22 @@ fn non_finite_densities_are_errors_naming_the_voxel() {
             "{err}"
         );
     }
+}
+
+#[test]
+fn active_tiles_too_wide_for_a_dense_grid_are_refused_before_allocation() {
+    // An active root tile of 4096³ voxels beside leaves at the origin: 1.4e11, beyond any
+    // dense grid.
+    let bytes = write_with(
+        &leaves(),
+        ZIP | ACTIVE_MASK,
+        4,
+        false,
+        &[([4096, 0, 0], 0.5)],
+    );
+    let err = parse_within(&bytes, "x", None, None).unwrap_err();
+    assert!(
+        err.contains("8194x4098x4098 voxels, more than the 2147483648"),
+        "{err}"
+    );
 }
