@@ -37,7 +37,7 @@ cargo build --release --locked
 step "3/5 the Python package's wheel (maturin; about 2 minutes from scratch)"
 "$venv/bin/maturin" build --quiet --release --locked -m python/Cargo.toml --out target/wheels
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check --no-deps --force-reinstall \
-    target/wheels/lucerna-*.whl
+    target/wheels/lucerna_render-*.whl
 
 step "4/5 Rust tests (unit tests and tests/it; about 2 minutes)"
 if cargo nextest --version >/dev/null 2>&1; then

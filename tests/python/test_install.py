@@ -53,3 +53,28 @@ def test_without_usd_core_the_error_says_how_to_set_up(tmp_path):
     done = subprocess.run([str(exe), "render", str(USD_TWIN), "-o", str(tmp_path / "o.exr")],
                           env=env, capture_output=True, text=True)
     assert done.returncode != 0 and "lucerna setup" in done.stderr, done.stderr
+
+
+def test_the_wheel_installs_into_an_empty_venv_and_renders(tmp_path):
+    """The wheel tools/test.sh builds (distribution lucerna-render: the PyPI name lucerna is
+    another project's) installs into an empty venv with nothing else and, away from the
+    checkout, renders the default scene and a USD stage. usd-core comes from the `usd` extra
+    on a user's machine; here the test venv's Python, which has it, stands in for it (the
+    extra needs PyPI)."""
+    wheels = sorted((ROOT / "target" / "wheels").glob("lucerna_render-*-abi3-manylinux_*.whl"))
+    assert wheels, "no lucerna_render wheel in target/wheels (tools/test.sh builds it)"
+    venv = tmp_path / "empty"
+    subprocess.run([sys.executable, "-m", "venv", str(venv)], check=True)
+    subprocess.run([str(venv / "bin" / "python"), "-m", "pip", "install", "--quiet", "--no-index",
+                    "--no-deps", "--disable-pip-version-check", str(wheels[-1])], check=True)
+    work = tmp_path / "work"
+    shutil.copytree(USD_TWIN.parent, work / "shot")
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path / "user"), "XDG_CACHE_HOME": str(tmp_path / "cache"),
+           "LUCERNA_PYTHON": sys.executable}
+    lucerna = str(venv / "bin" / "lucerna")
+    for scene in [[], ["shot/usd-twin.usda"]]:
+        done = subprocess.run([lucerna, "render", *scene, "-o", "out.exr", "--spp", "2", "--resolution", "32x24"],
+                              cwd=work, env=env, capture_output=True, text=True)
+        assert done.returncode == 0 and (work / "out.exr").exists(), done.stderr
+        assert "wrote out.exr" in done.stderr, done.stderr
+        (work / "out.exr").unlink()
