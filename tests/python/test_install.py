@@ -78,3 +78,37 @@ def test_the_wheel_installs_into_an_empty_venv_and_renders(tmp_path):
         assert done.returncode == 0 and (work / "out.exr").exists(), done.stderr
         assert "wrote out.exr" in done.stderr, done.stderr
         (work / "out.exr").unlink()
+
+
+def test_the_release_tarball_unpacks_anywhere_and_renders(tmp_path):
+    """tools/package/release.py: a reproducible tarball (the same bytes twice) with a
+    checksum file `sha256sum -c` accepts; unpacked away from the checkout, its binary renders
+    the default scene and a USD stage (the plugin is embedded in it) and its man pages and
+    completions are there."""
+    digests = []
+    for k in range(2):
+        out = tmp_path / f"dist{k}"
+        subprocess.run([sys.executable, str(ROOT / "tools/package/release.py"), "--out", str(out)], check=True,
+                       capture_output=True)
+        [checksum] = out.glob("*.sha256")
+        done = subprocess.run(["sha256sum", "-c", checksum.name], cwd=out, capture_output=True, text=True)
+        assert done.returncode == 0 and ": OK" in done.stdout, done.stdout + done.stderr
+        digests.append(checksum.read_text().split()[0])
+    assert digests[0] == digests[1]
+    [archive] = (tmp_path / "dist0").glob("lucerna-*.tar.gz")
+    unpacked = tmp_path / "opt"
+    unpacked.mkdir()
+    subprocess.run(["tar", "xzf", str(archive), "-C", str(unpacked)], check=True)
+    [release] = unpacked.iterdir()
+    for part in ["bin/lucerna", "share/man/man1/lucerna-render.1", "share/bash-completion/completions/lucerna",
+                 "LICENSE-MIT", "LICENSE-APACHE", "README.md"]:
+        assert (release / part).is_file(), part
+    work = tmp_path / "work"
+    shutil.copytree(USD_TWIN.parent, work / "shot")
+    env = {"PATH": "/usr/bin:/bin", "HOME": str(tmp_path / "user"), "XDG_CACHE_HOME": str(tmp_path / "cache"),
+           "LUCERNA_PYTHON": sys.executable}
+    for scene in [[], ["shot/usd-twin.usda"]]:
+        done = subprocess.run([str(release / "bin" / "lucerna"), "render", *scene, "-o", "out.exr", "--spp", "2",
+                               "--resolution", "32x24"], cwd=work, env=env, capture_output=True, text=True)
+        assert done.returncode == 0 and (work / "out.exr").exists(), done.stderr
+        (work / "out.exr").unlink()
