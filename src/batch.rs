@@ -449,15 +449,8 @@ fn spawn_and_wait(
         .stdout(file)
         .stderr(err);
     // The child starts with SIGUSR1 ignored, until its own handler takes it over: a
-    // snapshot request forwarded in its first milliseconds must not end it (SIGUSR1's
-    // default action).
-    // SAFETY: signal(2) is async-signal-safe, as code between fork and exec must be.
-    unsafe {
-        std::os::unix::process::CommandExt::pre_exec(&mut command, || {
-            libc::signal(libc::SIGUSR1, libc::SIG_IGN);
-            Ok(())
-        });
-    }
+    // snapshot request forwarded in its first milliseconds must not end it.
+    crate::platform::start_ignoring_snapshots(&mut command);
     let mut child = command
         .spawn()
         .map_err(|e| format!("cannot start {}: {e}", program.join(" ")))?;
@@ -468,12 +461,10 @@ fn spawn_and_wait(
         }
         if crate::interrupt::take_snapshot_request() {
             // SIGUSR1 to the batch: the frame being rendered writes a snapshot.
-            // SAFETY: kill(2) with the pid of a child this process has not yet reaped.
-            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGUSR1) };
+            crate::platform::ask(&mut child, crate::platform::Request::Snapshot);
         }
         if stop.load(Ordering::Relaxed) && !forwarded {
-            // SAFETY: kill(2) with the pid of a child this process has not yet reaped.
-            unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGTERM) };
+            crate::platform::ask(&mut child, crate::platform::Request::Stop);
             forwarded = true;
         }
         std::thread::sleep(Duration::from_millis(20));

@@ -11,30 +11,17 @@
 use crate::error::{Error, Result};
 use std::path::Path;
 
-/// What kind of file system object `meta` is, for messages.
-fn kind(meta: &std::fs::Metadata) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    let t = meta.file_type();
-    if t.is_dir() {
-        "a directory"
-    } else if t.is_fifo() {
-        "a FIFO"
-    } else if t.is_char_device() || t.is_block_device() {
-        "a device"
-    } else if t.is_socket() {
-        "a socket"
-    } else {
-        "not a regular file"
-    }
-}
-
 /// Checks that `path` (symbolic links followed) is a regular file; the reason otherwise.
 pub fn check_input(path: &Path) -> std::result::Result<(), String> {
     let meta = std::fs::metadata(path).map_err(|e| format!("cannot read: {e}"))?;
     if meta.is_file() {
         Ok(())
     } else {
-        Err(format!("{} is {}, not a file", path.display(), kind(&meta)))
+        Err(format!(
+            "{} is {}, not a file",
+            path.display(),
+            crate::platform::file_kind(&meta)
+        ))
     }
 }
 
@@ -77,7 +64,7 @@ pub fn check_output(path: &Path, element: &str) -> Result<()> {
             element,
             format!(
                 "is {}: an output must be a file, and this is never replaced",
-                kind(&meta)
+                crate::platform::file_kind(&meta)
             ),
         ));
     }
@@ -184,7 +171,7 @@ where
     result
 }
 
-#[cfg(test)]
+#[cfg(all(test, unix))]
 mod tests {
     use super::*;
 

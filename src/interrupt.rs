@@ -52,17 +52,7 @@ pub fn install() -> Result<Arc<AtomicBool>> {
     static INSTALLED: OnceLock<std::result::Result<(), String>> = OnceLock::new();
     INSTALLED
         .get_or_init(|| {
-            use signal_hook::consts::{SIGINT, SIGTERM, SIGUSR1};
-            let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGUSR1])
-                .map_err(|e| e.to_string())?;
-            std::thread::Builder::new()
-                .name("lucerna-signals".into())
-                .spawn(move || {
-                    for signal in signals.forever() {
-                        handle(signal);
-                    }
-                })
-                .map_err(|e| e.to_string())?;
+            crate::platform::watch_signals(handle)?;
             Ok(())
         })
         .clone()
@@ -72,7 +62,7 @@ pub fn install() -> Result<Arc<AtomicBool>> {
 
 fn handle(signal: i32) {
     let s = state();
-    if signal == signal_hook::consts::SIGUSR1 {
+    if Some(signal) == crate::platform::SNAPSHOT_SIGNAL {
         s.snapshot.store(true, Ordering::SeqCst);
         return;
     }
@@ -101,14 +91,7 @@ fn clean_up() {
         .iter()
     {
         match cleanup {
-            // SAFETY: kill(2) and waitpid(2) with a pid this process started and has not
-            // reaped yet. Waiting makes sure the child is gone before this process exits (a
-            // killed process can take a while to tear down on a loaded machine); where the
-            // thread that runs it reaps it first, waitpid returns at once (ECHILD).
-            Cleanup::Child(pid) => unsafe {
-                libc::kill(*pid as libc::pid_t, libc::SIGKILL);
-                libc::waitpid(*pid as libc::pid_t, std::ptr::null_mut(), 0);
-            },
+            Cleanup::Child(pid) => crate::platform::kill_and_reap(*pid),
             Cleanup::Path(path) if path.is_dir() => {
                 let _ = std::fs::remove_dir_all(path);
             }

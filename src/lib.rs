@@ -30,6 +30,7 @@ pub mod material;
 pub mod medium;
 pub mod memory;
 pub mod output;
+pub mod platform;
 pub mod render;
 pub mod sampling;
 pub mod scene;

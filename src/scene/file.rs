@@ -367,7 +367,7 @@ impl BufferSource {
                 out.copy_from_slice(&b[offset as usize..offset as usize + out.len()]);
                 Ok(())
             }
-            BufferSource::File(f) => std::os::unix::fs::FileExt::read_exact_at(f, out, offset),
+            BufferSource::File(f) => crate::platform::read_exact_at(f, out, offset),
         }
     }
 }

@@ -28,7 +28,6 @@ use glam::Vec4;
 use std::fmt;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
-use std::os::unix::fs::FileExt;
 use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, OnceLock};
 
@@ -144,27 +143,12 @@ impl TexturePlan {
 fn folder_for_copies() -> std::path::PathBuf {
     let temp = std::env::temp_dir();
     let var_tmp = std::path::Path::new("/var/tmp");
-    if in_memory(&temp) && var_tmp.is_dir() && !in_memory(var_tmp) {
+    if crate::platform::in_memory(&temp) && var_tmp.is_dir() && !crate::platform::in_memory(var_tmp)
+    {
         var_tmp.to_path_buf()
     } else {
         temp
     }
-}
-
-/// Whether the file system of `folder` keeps its files in memory.
-fn in_memory(folder: &std::path::Path) -> bool {
-    const TMPFS_MAGIC: i64 = 0x0102_1994;
-    const RAMFS_MAGIC: i64 = 0x8584_58f6;
-    use std::os::unix::ffi::OsStrExt;
-    let Ok(path) = std::ffi::CString::new(folder.as_os_str().as_bytes()) else {
-        return false;
-    };
-    let mut stats: libc::statfs = unsafe { std::mem::zeroed() };
-    // SAFETY: `path` is a NUL-terminated string and `stats` a buffer of the right type.
-    if unsafe { libc::statfs(path.as_ptr(), &mut stats) } != 0 {
-        return false;
-    }
-    matches!(stats.f_type as i64, TMPFS_MAGIC | RAMFS_MAGIC)
 }
 
 /// What the cache has done so far.
@@ -459,7 +443,7 @@ struct WriteAt<'a> {
 
 impl Write for WriteAt<'_> {
     fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
-        let n = self.file.write_at(bytes, self.offset)?;
+        let n = crate::platform::write_at(self.file, bytes, self.offset)?;
         self.offset += n as u64;
         Ok(n)
     }
@@ -611,7 +595,7 @@ impl TiledImage {
         let bytes = level.tile_bytes(self.format);
         let mut buffer = vec![0u8; bytes];
         let offset = level.offset + tile as u64 * bytes as u64;
-        if let Err(e) = self.file.read_exact_at(&mut buffer, offset) {
+        if let Err(e) = crate::platform::read_exact_at(&self.file, &mut buffer, offset) {
             if !self.cache.read_failed.swap(true, Ordering::Relaxed) {
                 log::error!(
                     "{}: reading a texture tile failed ({e}): it reads as black",
@@ -732,10 +716,13 @@ mod tests {
     #[test]
     fn copies_are_not_written_to_memory() {
         if Path::new("/dev/shm").is_dir() {
-            assert!(in_memory(Path::new("/dev/shm")));
+            assert!(crate::platform::in_memory(Path::new("/dev/shm")));
         }
-        assert!(!in_memory(Path::new("/proc")));
-        assert!(!in_memory(&folder_for_copies()) || !in_memory(Path::new("/var/tmp")));
+        assert!(!crate::platform::in_memory(Path::new("/proc")));
+        assert!(
+            !crate::platform::in_memory(&folder_for_copies())
+                || !crate::platform::in_memory(Path::new("/var/tmp"))
+        );
     }
 
     #[test]

@@ -312,6 +312,7 @@ fn periodic_checkpoints_are_resumable() {
 
 /// SIGUSR1 writes a snapshot (a checkpoint) and the render goes on to finish.
 #[test]
+#[cfg(unix)]
 fn sigusr1_writes_a_snapshot_and_the_render_goes_on() {
     let dir = temp_dir("sigusr1");
     let out = dir.join("u.exr");
@@ -333,6 +334,7 @@ fn sigusr1_writes_a_snapshot_and_the_render_goes_on() {
 /// SIGUSR1 sent to `lucerna batch` reaches the frame being rendered, which writes a
 /// snapshot and goes on.
 #[test]
+#[cfg(unix)]
 fn sigusr1_to_a_batch_reaches_its_render() {
     let dir = temp_dir("batch-sigusr1");
     let job = dir.join("job.toml");

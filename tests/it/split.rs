@@ -7,6 +7,7 @@ use common::cli::{lucerna, lucerna_ok, temp_dir};
 use lucerna::film::planes::Planes;
 use lucerna::output::exr;
 use std::path::Path;
+#[cfg(unix)]
 use std::process::Command;
 
 fn path(dir: &Path, name: &str) -> String {
