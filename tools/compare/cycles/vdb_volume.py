@@ -5,19 +5,22 @@ NanoVDB), so that the grid's placement (index space, voxel centres, transform), 
 interpolation and the medium's coefficients are compared end to end:
 
     BLENDER=/path/to/bpy-venv/bin/python .venv/bin/python tools/compare/cycles/vdb_volume.py \\
-        [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
+        [--case plume|cloud] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
 
 The smoke plume of tests/assets/vdb/plume.vdb (36 x 36 x 31 active voxels of 9 mm, Blosc)
 with extinction 90 per metre at density 1, albedo (0.9, 0.8, 0.65) and Henyey-Greenstein
-g = 0.3, over a grey Lambertian floor under a uniform sky, seen from 1.2 m. lucerna: a glTF
+g = 0.3, over a grey Lambertian floor under a uniform sky, seen from 1.2 m (`--case plume`);
+or Walt Disney Animation Studios' cloud (scenes/media/wdas-cloud-sixteenth.vdb, an older,
+uncompressed file) with extinction 0.1 per metre, albedo 0.99 and g = 0.8 under a sky of
+0.5 (`--case cloud`). lucerna: a glTF
 interface box around the grid with `extras.lucerna.medium.density` naming the file. Cycles:
 a Volume object of the same file (turned from glTF's Y up to Blender's Z up) with a
-Principled Volume of Density 90 (times the grid's `density`), Color the albedo (Cycles
+Principled Volume of Density the extinction (times the grid's `density`), Color the albedo (Cycles
 scatters Color x Density and absorbs (1 - Color) x Density: the same coefficients) and
-Anisotropy 0.3. Cycles: bounce limits 1024, no clamping, no denoiser, a 1-pixel box
+Anisotropy the case's g. Cycles: bounce limits 1024, no clamping, no denoiser, a 1-pixel box
 filter, linear EXR. Writes a contact sheet (lucerna | Cycles | |difference| x 4) and
-figures.json: relMSE and luminance ratio over the image and over the plume's pixels (those
-the plume darkens or lights by more than 1 % in lucerna's render), and the noise floor
+CASE.json: relMSE and luminance ratio over the image and over the volume's pixels (those
+the volume darkens or lights by more than 1 % in lucerna's render), and the noise floor
 (two seeds of each renderer).
 """
 import argparse
@@ -34,16 +37,20 @@ import numpy as np
 import lucerna_tools as lt
 from lucerna_tools.gltf_writer import GltfWriter, box
 
-PLUME = lt.ROOT / "tests" / "assets" / "vdb" / "plume.vdb"
-EXTINCTION = 90.0
-ALBEDO = (0.9, 0.8, 0.65)
-ANISOTROPY = 0.3
+# Each case: the file, the medium (extinction per metre at density 1, albedo, g), the sky,
+# the camera (glTF, Y up, looking down -Z; vertical field of view), the interface box around
+# the grid in lucerna's scene and the floor's height.
+CASES = {
+    "plume": {"vdb": lt.ROOT / "tests" / "assets" / "vdb" / "plume.vdb", "extinction": 90.0,
+              "albedo": (0.9, 0.8, 0.65), "anisotropy": 0.3, "sky": 1.0, "camera": (0.28, 0.2, 1.2),
+              "vfov": 0.55, "box": ((0.09, -0.005, 0.11), (0.47, 0.37, 0.49)), "floor_y": -0.01,
+              "floor_half": 20.0, "near": 0.01},
+    "cloud": {"vdb": lt.ROOT / "scenes" / "media" / "wdas-cloud-sixteenth.vdb", "extinction": 0.1,
+              "albedo": (0.99, 0.99, 0.99), "anisotropy": 0.8, "sky": 0.5, "camera": (-8.0, 70.0, 900.0),
+              "vfov": 0.6, "box": ((-230.0, -80.0, -310.0), (205.0, 222.0, 220.0)), "floor_y": -300.0,
+              "floor_half": 2e4, "near": 1.0},
+}
 FLOOR = 0.5
-SKY = 1.0
-VFOV = 0.55
-CAMERA = (0.28, 0.2, 1.2)  # glTF (Y up), looking down -Z
-# The grid's box in the scene (the .vol file's, which the VDB file reproduces), padded.
-BOX = ((0.09, -0.005, 0.11), (0.47, 0.37, 0.49))
 
 BLENDER_SCRIPT = r'''
 import json, math, sys
@@ -95,7 +102,7 @@ pv.inputs["Anisotropy"].default_value = job["anisotropy"]
 smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
 volume.materials.append(smoke)
 
-bpy.ops.mesh.primitive_plane_add(size=40.0, location=(0, 0, -0.01))
+bpy.ops.mesh.primitive_plane_add(size=2 * job["floor_half"], location=(0, 0, job["floor_y"]))
 floor = bpy.context.active_object
 grey = bpy.data.materials.new("floor")
 grey.use_nodes = True
@@ -111,7 +118,8 @@ floor.data.materials.append(grey)
 cam_data = bpy.data.cameras.new("cam")
 cam_data.sensor_fit = "VERTICAL"
 cam_data.angle_y = job["vfov"]
-cam_data.clip_start = 0.01
+cam_data.clip_start = job["near"]
+cam_data.clip_end = 1e5
 cam = bpy.data.objects.new("cam", cam_data)
 x, y, z = job["camera"]
 cam.location = (x, -z, y)
@@ -123,27 +131,30 @@ bpy.ops.render.render(write_still=True)
 '''
 
 
-def write_gltf(path, width, height):
+def write_gltf(path, width, height, case):
     w = GltfWriter("lucerna tools/compare/cycles/vdb_volume.py")
     floor = w.material("floor", base=(FLOOR,) * 3, extras={"lucerna": {"bsdf": "lambert"}})
-    w.node(name="floor", mesh=w.mesh("floor", [(-20, -0.01, -20), (-20, -0.01, 20), (20, -0.01, 20),
-                                               (20, -0.01, -20)], [(0, 1, 2), (0, 2, 3)], floor))
+    y, h = case["floor_y"], case["floor_half"]
+    w.node(name="floor", mesh=w.mesh("floor", [(-h, y, -h), (-h, y, h), (h, y, h), (h, y, -h)],
+                                     [(0, 1, 2), (0, 2, 3)], floor))
+    e, albedo = case["extinction"], case["albedo"]
     smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": {
-        "scattering": [EXTINCTION * a for a in ALBEDO],
-        "absorption": [EXTINCTION * (1 - a) for a in ALBEDO],
-        "anisotropy": ANISOTROPY, "density": PLUME.name}}})
-    positions, triangles = box(*BOX)
+        "scattering": [e * a for a in albedo], "absorption": [e * (1 - a) for a in albedo],
+        "anisotropy": case["anisotropy"], "density": case["vdb"].name}}})
+    positions, triangles = box(*case["box"])
     w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, smoke))
     cam = w._list("cameras", {"name": "camera", "type": "perspective",
-                              "perspective": {"yfov": VFOV, "aspectRatio": width / height, "znear": 0.01}})
-    w.node(name="camera", camera=cam, translation=list(CAMERA))
+                              "perspective": {"yfov": case["vfov"], "aspectRatio": width / height,
+                                              "znear": case["near"]}})
+    w.node(name="camera", camera=cam, translation=list(case["camera"]))
     w.write_gltf(path)
 
 
-def render_cycles(work, width, height, spp, seed):
-    job = {"width": width, "height": height, "spp": spp, "seed": seed, "vdb": str(work / PLUME.name),
-           "extinction": EXTINCTION, "albedo": ALBEDO, "anisotropy": ANISOTROPY, "floor": FLOOR, "sky": SKY,
-           "vfov": VFOV, "camera": CAMERA, "out": str(work / f"cycles_{seed}.exr")}
+def render_cycles(work, width, height, spp, seed, case):
+    job = {"width": width, "height": height, "spp": spp, "seed": seed, "vdb": str(work / case["vdb"].name),
+           "extinction": case["extinction"], "albedo": case["albedo"], "anisotropy": case["anisotropy"],
+           "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "sky": case["sky"], "vfov": case["vfov"],
+           "camera": case["camera"], "near": case["near"], "out": str(work / f"cycles_{seed}.exr")}
     (work / "job.json").write_text(json.dumps(job))
     (work / "blender_vdb_volume.py").write_text(BLENDER_SCRIPT)
     blender = os.environ.get("BLENDER", "blender")
@@ -159,17 +170,19 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--spp", type=int, default=256)
     parser.add_argument("--resolution", default="160x160")
+    parser.add_argument("--case", choices=sorted(CASES), default="plume")
     parser.add_argument("--out", default=str(lt.ROOT / "tools" / "compare" / "cycles" / "results" / "vdb-volume"))
     args = parser.parse_args()
+    case = CASES[args.case]
     width, height = map(int, args.resolution.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
-        shutil.copy(PLUME, work / PLUME.name)
-        gltf = work / "plume.gltf"
-        write_gltf(gltf, width, height)
-        env = ",".join([str(SKY)] * 3)
+        shutil.copy(case["vdb"], work / case["vdb"].name)
+        gltf = work / "scene.gltf"
+        write_gltf(gltf, width, height, case)
+        env = ",".join([str(case["sky"])] * 3)
         ours, header, _ = lt.render(gltf, work / "a.exr", (width, height), spp=args.spp, seed=1, filter="box", env=env)
         ours_b, _, _ = lt.render(gltf, work / "b.exr", (width, height), spp=args.spp, seed=2, filter="box", env=env)
         empty = work / "empty.gltf"
@@ -177,24 +190,25 @@ def main():
         doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if doc["nodes"][n].get("name") != "smoke"]
         empty.write_text(json.dumps(doc))
         background, _, _ = lt.render(empty, work / "e.exr", (width, height), spp=16, seed=1, filter="box", env=env)
-        cycles_a = render_cycles(work, width, height, args.spp, 1)
-        cycles_b = render_cycles(work, width, height, args.spp, 2)
+        cycles_a = render_cycles(work, width, height, args.spp, 1, case)
+        cycles_b = render_cycles(work, width, height, args.spp, 2, case)
     weights = np.array([0.2126, 0.7152, 0.0722])
     plume = np.abs((ours - background) @ weights) > 0.01 * np.maximum(background @ weights, 1e-3)
     everywhere = np.ones(plume.shape, dtype=bool)
     lum = lambda img, m: float((img[m] @ weights).mean())  # noqa: E731
     rel = lambda x, ref, m: float(np.mean((x[m] - ref[m]) ** 2 / (ref[m] ** 2 + 0.01)))  # noqa: E731
-    figures = {"spp": args.spp, "resolution": [width, height], "plume_pixels": int(plume.sum())}
-    for name, m in (("image", everywhere), ("plume", plume)):
+    figures = {"case": args.case, "spp": args.spp, "resolution": [width, height],
+               "volume_pixels": int(plume.sum())}
+    for name, m in (("image", everywhere), ("volume", plume)):
         figures[name] = {
             "luminance_ratio": (lum(ours, m) + lum(ours_b, m)) / (lum(cycles_a, m) + lum(cycles_b, m)),
             "channel_ratio": ((ours[m] + ours_b[m]).mean(0) / (cycles_a[m] + cycles_b[m]).mean(0)).tolist(),
             "relmse_lucerna_vs_cycles": rel(ours, cycles_a, m),
             "noise_floor": (rel(cycles_b, cycles_a, m) + rel(ours_b, ours, m)) / 2}
     figures["seconds_lucerna"] = header["lucerna/render_seconds"]
-    (out / "figures.json").write_text(json.dumps(figures, indent=1) + "\n")
+    (out / f"{args.case}.json").write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps(figures, indent=1))
-    lt.difference_sheet(ours, cycles_a, out / "plume.png")
+    lt.difference_sheet(ours, cycles_a, out / f"{args.case}.png")
 
 
 if __name__ == "__main__":
