@@ -17,14 +17,13 @@ over the sphere's pixels, and the same between two Cycles seeds (the noise floor
 import argparse
 import json
 import math
-import os
-import subprocess
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 import lucerna_tools as lt
+from lucerna_tools import cycles
 
 COLOUR = (0.8, 0.5, 0.3)
 RADIUS = (1.0, 0.5, 0.25)
@@ -96,34 +95,7 @@ def Xform "World"
 }}
 """
 
-BLENDER_SCRIPT = r'''
-import json, math, sys
-import bpy
-job = json.loads(open(sys.argv[-1]).read())
-bpy.ops.wm.read_factory_settings(use_empty=True)
-scene = bpy.context.scene
-scene.render.engine = "CYCLES"
-scene.cycles.device = "CPU"
-scene.cycles.samples = job["spp"]
-scene.cycles.seed = job["seed"]
-scene.cycles.use_adaptive_sampling = False
-scene.cycles.use_denoising = False
-for attr in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
-             "volume_bounces", "transparent_max_bounces"):
-    setattr(scene.cycles, attr, 1024)
-scene.cycles.sample_clamp_direct = 0.0
-scene.cycles.sample_clamp_indirect = 0.0
-scene.cycles.filter_width = 1.0
-scene.render.resolution_x, scene.render.resolution_y = job["width"], job["height"]
-scene.render.resolution_percentage = 100
-scene.view_settings.view_transform = "Standard"
-scene.render.image_settings.file_format = "OPEN_EXR"
-scene.render.image_settings.color_depth = "32"
-world = bpy.data.worlds.new("sky")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
-scene.world = world
+SCENE_SCRIPT = r'''
 bpy.ops.mesh.primitive_uv_sphere_add(segments=256, ring_count=128, radius=1.0, location=(0, 0, 1))
 ball = bpy.context.active_object
 bpy.ops.object.shade_smooth()
@@ -146,30 +118,15 @@ g = grey.node_tree.nodes["Principled BSDF"]
 g.inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1)
 g.inputs["Roughness"].default_value = 1.0
 floor.data.materials.append(grey)
-cam_data = bpy.data.cameras.new("cam")
-cam_data.sensor_fit = "VERTICAL"
-cam_data.angle_y = job["vfov"]
-cam = bpy.data.objects.new("cam", cam_data)
-cam.location = (0, -job["distance"], 1)
-cam.rotation_euler = (math.pi / 2, 0, 0)
-scene.collection.objects.link(cam)
-scene.camera = cam
-scene.render.filepath = job["out"]
-bpy.ops.render.render(write_still=True)
+camera((0, 1, job["distance"]), job["vfov"])
 '''
 
 
-def render_cycles(work, width, height, spp, seed, scale):
-    job = {"width": width, "height": height, "spp": spp, "seed": seed, "colour": COLOUR,
-           "radius": RADIUS, "scale": scale, "ior": IOR, "roughness": ROUGHNESS, "vfov": VFOV,
-           "distance": CAMERA_DISTANCE, "out": str(work / f"cycles_{seed}.exr")}
-    (work / "job.json").write_text(json.dumps(job))
-    (work / "blender_subsurface.py").write_text(BLENDER_SCRIPT)
-    blender = os.environ.get("BLENDER", "blender")
-    subprocess.run([blender, str(work / "blender_subsurface.py"), str(work / "job.json")], check=True,
-                   capture_output=True)
-    channels, _ = lt.read_exr(job["out"])
-    return lt.rgb(channels)
+def cycles_job(width, height, spp, scale):
+    """The values SCENE_SCRIPT reads (Cycles' default pixel filter, a white sky)."""
+    return {"width": width, "height": height, "spp": spp, "sky": 1.0, "box_filter": False, "colour": COLOUR,
+            "radius": RADIUS, "scale": scale, "ior": IOR, "roughness": ROUGHNESS, "vfov": VFOV,
+            "distance": CAMERA_DISTANCE}
 
 
 def sphere_mask(width, height):
@@ -200,8 +157,8 @@ def main():
                                       haperture=aperture * width / height, distance=CAMERA_DISTANCE))
         ours, header, _ = lt.render(stage, work / "lucerna.exr", (width, height), spp=args.spp, seed=1,
                                     filter="box")
-        cycles_a = render_cycles(work, width, height, args.spp, 1, args.scale)
-        cycles_b = render_cycles(work, width, height, args.spp, 2, args.scale)
+        job = cycles_job(width, height, args.spp, args.scale)
+        cycles_a, cycles_b = (cycles.render(work, "subsurface", SCENE_SCRIPT, job, seed) for seed in (1, 2))
     mask = sphere_mask(width, height)
     lum = lambda img: float((img[mask] @ np.array([0.2126, 0.7152, 0.0722])).mean())  # noqa: E731
     rel = lambda x, ref: float(np.mean((x[mask] - ref[mask]) ** 2 / (ref[mask] ** 2 + 0.01)))  # noqa: E731

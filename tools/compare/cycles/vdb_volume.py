@@ -25,16 +25,14 @@ the volume darkens or lights by more than 1 % in lucerna's render), and the nois
 """
 import argparse
 import json
-import os
 import shutil
-import subprocess
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
 
 import lucerna_tools as lt
+from lucerna_tools import cycles
 from lucerna_tools.gltf_writer import GltfWriter, box
 
 # Each case: the file, the medium (extinction per metre at density 1, albedo, g), the sky,
@@ -52,82 +50,22 @@ CASES = {
 }
 FLOOR = 0.5
 
-BLENDER_SCRIPT = r'''
-import json, math, sys
-import bpy
-job = json.loads(open(sys.argv[-1]).read())
-bpy.ops.wm.read_factory_settings(use_empty=True)
-scene = bpy.context.scene
-scene.render.engine = "CYCLES"
-c = scene.cycles
-c.device = "CPU"
-c.samples = job["spp"]
-c.seed = job["seed"]
-c.use_adaptive_sampling = False
-c.use_denoising = False
-for attr in ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces",
-             "volume_bounces", "transparent_max_bounces"):
-    setattr(c, attr, 1024)
-c.sample_clamp_direct = 0.0
-c.sample_clamp_indirect = 0.0
-c.pixel_filter_type = "BOX"
-c.filter_width = 1.0
-scene.render.resolution_x, scene.render.resolution_y = job["width"], job["height"]
-scene.render.resolution_percentage = 100
-scene.view_settings.view_transform = "Standard"
-scene.render.image_settings.file_format = "OPEN_EXR"
-scene.render.image_settings.color_depth = "32"
-world = bpy.data.worlds.new("sky")
-world.use_nodes = True
-world.node_tree.nodes["Background"].inputs["Color"].default_value = (job["sky"],) * 3 + (1,)
-world.node_tree.nodes["Background"].inputs["Strength"].default_value = 1.0
-scene.world = world
-
-volume = bpy.data.volumes.new("plume")
+SCENE_SCRIPT = r'''
+volume = bpy.data.volumes.new("volume")
 volume.filepath = job["vdb"]
-plume = bpy.data.objects.new("plume", volume)
+grid = bpy.data.objects.new("volume", volume)
 # glTF's Y up to Blender's Z up: (x, y, z) -> (x, -z, y).
-plume.rotation_euler = (math.pi / 2, 0, 0)
-scene.collection.objects.link(plume)
-smoke = bpy.data.materials.new("smoke")
-smoke.use_nodes = True
-nodes = smoke.node_tree.nodes
-for n in list(nodes):
-    nodes.remove(n)
-out = nodes.new("ShaderNodeOutputMaterial")
-pv = nodes.new("ShaderNodeVolumePrincipled")
+grid.rotation_euler = (math.pi / 2, 0, 0)
+scene.collection.objects.link(grid)
+smoke, out = material("smoke")
+pv = smoke.node_tree.nodes.new("ShaderNodeVolumePrincipled")
 pv.inputs["Color"].default_value = tuple(job["albedo"]) + (1,)
 pv.inputs["Density"].default_value = job["extinction"]
 pv.inputs["Anisotropy"].default_value = job["anisotropy"]
 smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
 volume.materials.append(smoke)
-
-bpy.ops.mesh.primitive_plane_add(size=2 * job["floor_half"], location=(0, 0, job["floor_y"]))
-floor = bpy.context.active_object
-grey = bpy.data.materials.new("floor")
-grey.use_nodes = True
-gn = grey.node_tree.nodes
-for n in list(gn):
-    gn.remove(n)
-diffuse = gn.new("ShaderNodeBsdfDiffuse")
-diffuse.inputs["Color"].default_value = (job["floor"],) * 3 + (1,)
-fout = gn.new("ShaderNodeOutputMaterial")
-grey.node_tree.links.new(diffuse.outputs[0], fout.inputs["Surface"])
-floor.data.materials.append(grey)
-
-cam_data = bpy.data.cameras.new("cam")
-cam_data.sensor_fit = "VERTICAL"
-cam_data.angle_y = job["vfov"]
-cam_data.clip_start = job["near"]
-cam_data.clip_end = 1e5
-cam = bpy.data.objects.new("cam", cam_data)
-x, y, z = job["camera"]
-cam.location = (x, -z, y)
-cam.rotation_euler = (math.pi / 2, 0, 0)
-scene.collection.objects.link(cam)
-scene.camera = cam
-scene.render.filepath = job["out"]
-bpy.ops.render.render(write_still=True)
+grey_floor(job["floor_half"], job["floor_y"], job["floor"])
+camera(job["camera"], job["vfov"], job["near"])
 '''
 
 
@@ -150,20 +88,12 @@ def write_gltf(path, width, height, case):
     w.write_gltf(path)
 
 
-def render_cycles(work, width, height, spp, seed, case):
-    job = {"width": width, "height": height, "spp": spp, "seed": seed, "vdb": str(work / case["vdb"].name),
-           "extinction": case["extinction"], "albedo": case["albedo"], "anisotropy": case["anisotropy"],
-           "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "sky": case["sky"], "vfov": case["vfov"],
-           "camera": case["camera"], "near": case["near"], "out": str(work / f"cycles_{seed}.exr")}
-    (work / "job.json").write_text(json.dumps(job))
-    (work / "blender_vdb_volume.py").write_text(BLENDER_SCRIPT)
-    blender = os.environ.get("BLENDER", "blender")
-    proc = subprocess.run([blender, str(work / "blender_vdb_volume.py"), str(work / "job.json")],
-                          capture_output=True, text=True)
-    if proc.returncode != 0:
-        sys.exit(f"blender failed: {proc.stdout[-2000:]} {proc.stderr[-2000:]}")
-    channels, _ = lt.read_exr(job["out"])
-    return lt.rgb(channels)
+def cycles_job(work, width, height, spp, case):
+    """The values SCENE_SCRIPT reads."""
+    return {"width": width, "height": height, "spp": spp, "sky": case["sky"], "vdb": str(work / case["vdb"].name),
+            "extinction": case["extinction"], "albedo": case["albedo"], "anisotropy": case["anisotropy"],
+            "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "vfov": case["vfov"],
+            "camera": case["camera"], "near": case["near"]}
 
 
 def main():
@@ -190,21 +120,13 @@ def main():
         doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if doc["nodes"][n].get("name") != "smoke"]
         empty.write_text(json.dumps(doc))
         background, _, _ = lt.render(empty, work / "e.exr", (width, height), spp=16, seed=1, filter="box", env=env)
-        cycles_a = render_cycles(work, width, height, args.spp, 1, case)
-        cycles_b = render_cycles(work, width, height, args.spp, 2, case)
-    weights = np.array([0.2126, 0.7152, 0.0722])
-    plume = np.abs((ours - background) @ weights) > 0.01 * np.maximum(background @ weights, 1e-3)
-    everywhere = np.ones(plume.shape, dtype=bool)
-    lum = lambda img, m: float((img[m] @ weights).mean())  # noqa: E731
-    rel = lambda x, ref, m: float(np.mean((x[m] - ref[m]) ** 2 / (ref[m] ** 2 + 0.01)))  # noqa: E731
+        job = cycles_job(work, width, height, args.spp, case)
+        cycles_a, cycles_b = (cycles.render(work, "vdb_volume", SCENE_SCRIPT, job, seed) for seed in (1, 2))
+    volume = np.abs((ours - background) @ cycles.LUMINANCE) > 0.01 * np.maximum(background @ cycles.LUMINANCE, 1e-3)
     figures = {"case": args.case, "spp": args.spp, "resolution": [width, height],
-               "volume_pixels": int(plume.sum())}
-    for name, m in (("image", everywhere), ("volume", plume)):
-        figures[name] = {
-            "luminance_ratio": (lum(ours, m) + lum(ours_b, m)) / (lum(cycles_a, m) + lum(cycles_b, m)),
-            "channel_ratio": ((ours[m] + ours_b[m]).mean(0) / (cycles_a[m] + cycles_b[m]).mean(0)).tolist(),
-            "relmse_lucerna_vs_cycles": rel(ours, cycles_a, m),
-            "noise_floor": (rel(cycles_b, cycles_a, m) + rel(ours_b, ours, m)) / 2}
+               "volume_pixels": int(volume.sum())}
+    figures.update(cycles.figures(ours, ours_b, cycles_a, cycles_b,
+                                  {"image": np.ones(volume.shape, dtype=bool), "volume": volume}))
     figures["seconds_lucerna"] = header["lucerna/render_seconds"]
     (out / f"{args.case}.json").write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps(figures, indent=1))
