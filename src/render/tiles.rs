@@ -105,11 +105,12 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                     pixel.clear();
                     let mut pixel_parts = PixelParts::default();
                     let pixel_rays = rays.closest + rays.shadow;
+                    // The pixel in the image's own coordinates: its samples and rays.
+                    let (ix, iy) = camera.image_pixel(x, y);
+                    let centre = Vec2::new(ix as f32 + 0.5, iy as f32 + 0.5);
                     for index in first..first + n {
-                        let (ix, iy) = camera.image_pixel(x, y);
                         sampler.start(ix as u32, iy as u32, index);
                         let cs = sampler.camera();
-                        let centre = Vec2::new(ix as f32 + 0.5, iy as f32 + 0.5);
                         let ray =
                             camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
                         record.clear();
