@@ -27,9 +27,11 @@
 //! (a diffusive cube of optical depth 12 rendered 6 % dark); so is sampling by one channel
 //! without MIS, as Mitsuba's `volpath` does.
 
+pub mod blackbody;
 pub mod flight;
 pub mod grid;
 pub mod homogeneous;
+mod lattice;
 pub mod phase;
 
 pub use flight::{Flight, transmittance};
@@ -64,6 +66,13 @@ impl Medium {
                 [sigma_a, sigma_s, emission],
                 v.anisotropy,
                 space.matrix(),
+                v.blackbody.and_then(|b| {
+                    Some(grid::Temperature {
+                        grid: grids.get(b.temperature? as usize)?,
+                        kelvin_per_unit: b.kelvin,
+                        scale: b.tint * b.intensity * per_unit,
+                    })
+                }),
             )
             .map(|h| Self::Heterogeneous(Box::new(h))),
         }

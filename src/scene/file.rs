@@ -85,6 +85,18 @@ struct VolumeEntry {
     grid: Option<String>,
     to_world: [f64; 16],
     material: u32,
+    /// The temperature field of the material's blackbody (a grid of an OpenVDB file, under
+    /// the same transform).
+    #[serde(default)]
+    temperature: Option<FieldEntry>,
+}
+
+/// A grid of an OpenVDB file beside the scene file.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FieldEntry {
+    file: String,
+    grid: Option<String>,
 }
 
 /// A density grid: its resolution, its unit cube to world (a column-major 4x4 matrix) and
@@ -671,26 +683,50 @@ fn read_volume(
             ),
         ));
     };
-    let key = (v.file.clone(), v.grid.clone());
-    let mut grid = match read.get(&key) {
-        Some(grid) => grid.clone(),
-        None => {
-            let file = path.parent().unwrap_or(Path::new("")).join(&v.file);
-            let bytes = crate::files::read_input(&file)
-                .map_err(|reason| (".file".into(), format!("{}: {reason}", file.display())))?;
-            let parsed = crate::ingest::vdb::parse(&bytes, &v.file, v.grid.as_deref())
-                .map_err(|reason| (".file".into(), format!("{}: {reason}", v.file)))?;
-            scene
-                .warnings
-                .extend(parsed.warnings.iter().map(|w| format!("{}: {w}", v.name)));
-            read.insert(key, parsed.grid.clone());
-            parsed.grid
+    let to_world = glam::DMat4::from_cols_array(&v.to_world);
+    let grid = field_grid(
+        scene,
+        path,
+        &v.name,
+        &v.file,
+        v.grid.as_deref(),
+        to_world,
+        read,
+    )
+    .map_err(|(field, reason)| (field.to_string(), reason))?;
+    let temperature = match &v.temperature {
+        None => None,
+        Some(t) => {
+            let Some(blackbody) = volume.blackbody else {
+                return Err((
+                    ".temperature".into(),
+                    format!("material {} has no blackbody for it", v.material),
+                ));
+            };
+            let grid = field_grid(
+                scene,
+                path,
+                &v.name,
+                &t.file,
+                t.grid.as_deref(),
+                to_world,
+                read,
+            )
+            .map_err(|(field, reason)| (format!(".temperature{field}"), reason))?;
+            let hottest = f64::from(grid.max_density()) * f64::from(blackbody.kelvin);
+            if hottest > super::Blackbody::HOTTEST {
+                return Err((
+                    ".temperature".into(),
+                    format!(
+                        "the grid reaches {hottest:e} K (its largest value times the blackbody's \
+                         kelvin), beyond {:e} K",
+                        super::Blackbody::HOTTEST
+                    ),
+                ));
+            }
+            Some(grid)
         }
     };
-    grid.to_world = glam::DMat4::from_cols_array(&v.to_world) * grid.to_world;
-    if let Some(reason) = grid.defect() {
-        return Err((".to_world".into(), reason));
-    }
     let density = Some(scene.grids.len() as u32);
     let material = if volume.density.is_none() {
         v.material
@@ -700,21 +736,84 @@ fn read_volume(
             .push(scene.materials[v.material as usize].clone());
         scene.materials.len() as u32 - 1
     };
-    if let Some(volume) = scene.materials[material as usize].volume.as_mut() {
-        volume.density = density;
-    }
-    let (mesh, mut instance) = enclosure(&grid, &v.name, material);
+    let (mesh, mut instance) = enclosure(covering(&grid, temperature.as_ref()), &v.name, material);
     instance.mesh = scene.meshes.len() as u32;
     scene.meshes.push(mesh);
     scene.instances.push(instance);
     scene.grids.push(grid);
+    let temperature = temperature.map(|t| {
+        scene.grids.push(t);
+        scene.grids.len() as u32 - 1
+    });
+    if let Some(volume) = scene.materials[material as usize].volume.as_mut() {
+        volume.density = density;
+        if let Some(b) = volume.blackbody.as_mut() {
+            b.temperature = temperature;
+        }
+    }
     Ok(())
 }
 
-/// A closed box of `material` around the grid (its unit cube as a mesh named `name`,
-/// placed by the grid's transform), faces outward: the interface that holds a medium
-/// the grid scales, for volumes that come without a surface (USD `Volume` prims).
-fn enclosure(grid: &super::DensityGrid, name: &str, material: u32) -> (Mesh, Instance) {
+/// Grid `name` of the OpenVDB file `file` (beside the scene file at `path`; read once per
+/// scene, `read` keeps them) under `to_world`, for volume `volume`; on failure, the entry's
+/// field at fault and why.
+fn field_grid(
+    scene: &mut Scene,
+    path: &Path,
+    volume: &str,
+    file: &str,
+    name: Option<&str>,
+    to_world: glam::DMat4,
+    read: &mut HashMap<(String, Option<String>), super::DensityGrid>,
+) -> std::result::Result<super::DensityGrid, (&'static str, String)> {
+    let key = (file.to_string(), name.map(str::to_string));
+    let mut grid = match read.get(&key) {
+        Some(grid) => grid.clone(),
+        None => {
+            let full = path.parent().unwrap_or(Path::new("")).join(file);
+            let bytes = crate::files::read_input(&full)
+                .map_err(|reason| (".file", format!("{}: {reason}", full.display())))?;
+            let parsed = crate::ingest::vdb::parse(&bytes, file, name)
+                .map_err(|reason| (".file", format!("{file}: {reason}")))?;
+            scene
+                .warnings
+                .extend(parsed.warnings.iter().map(|w| format!("{volume}: {w}")));
+            read.insert(key, parsed.grid.clone());
+            parsed.grid
+        }
+    };
+    grid.to_world = to_world * grid.to_world;
+    if let Some(reason) = grid.defect() {
+        return Err((".to_world", reason));
+    }
+    Ok(grid)
+}
+
+/// The unit cube to world transform of a box around `density`'s cube and `other`'s (a
+/// temperature grid, whose flames may reach beyond the smoke): the density's cube widened,
+/// in its own axes, to hold the other's corners.
+fn covering(density: &super::DensityGrid, other: Option<&super::DensityGrid>) -> glam::DMat4 {
+    let Some(other) = other else {
+        return density.to_world;
+    };
+    let to_density = density.to_world.inverse() * other.to_world;
+    let (mut lo, mut hi) = (glam::DVec3::ZERO, glam::DVec3::ONE);
+    for i in 0..8u32 {
+        let corner = glam::DVec3::new(
+            f64::from(i & 1),
+            f64::from(i >> 1 & 1),
+            f64::from(i >> 2 & 1),
+        );
+        let p = to_density.transform_point3(corner);
+        (lo, hi) = (lo.min(p), hi.max(p));
+    }
+    density.to_world * glam::DMat4::from_translation(lo) * glam::DMat4::from_scale(hi - lo)
+}
+
+/// A closed box of `material` (a unit cube as a mesh named `name`, placed by `to_world`),
+/// faces outward: the interface that holds a medium, for volumes that come without a
+/// surface (USD `Volume` prims).
+fn enclosure(to_world: glam::DMat4, name: &str, material: u32) -> (Mesh, Instance) {
     let corner = |i: u32| glam::Vec3::new((i & 1) as f32, (i >> 1 & 1) as f32, (i >> 2 & 1) as f32);
     // Two triangles a face, counter-clockwise seen from outside the cube.
     let mut triangles = vec![
@@ -731,7 +830,7 @@ fn enclosure(grid: &super::DensityGrid, name: &str, material: u32) -> (Mesh, Ins
         [1, 3, 7],
         [1, 7, 5], // x = 1
     ];
-    if grid.to_world.determinant() < 0.0 {
+    if to_world.determinant() < 0.0 {
         // A mirroring transform turns the faces inward: wind them the other way.
         triangles.iter_mut().for_each(|t| t.swap(1, 2));
     }
@@ -748,7 +847,7 @@ fn enclosure(grid: &super::DensityGrid, name: &str, material: u32) -> (Mesh, Ins
     let instance = Instance {
         name: name.to_string(),
         mesh: 0,
-        transform: grid.to_world,
+        transform: to_world,
     };
     (mesh, instance)
 }
@@ -1153,6 +1252,20 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                     && colour(v.emission)
                     && v.anisotropy.abs() < 1.0
                     && v.density.is_none_or(|g| (g as usize) < scene.grids.len())
+                    && v.blackbody.is_none_or(|b| {
+                        v.density.is_some()
+                            && b.kelvin.is_finite()
+                            && b.kelvin > 0.0
+                            && b.intensity.is_finite()
+                            && b.intensity >= 0.0
+                            && colour(b.tint)
+                            && b.temperature.is_none_or(|g| {
+                                scene.grids.get(g as usize).is_some_and(|t| {
+                                    f64::from(t.max_density()) * f64::from(b.kelvin)
+                                        <= super::Blackbody::HOTTEST
+                                })
+                            })
+                    })
             })
             && unit(m.specular.weight)
             && colour(m.specular.color)

@@ -127,6 +127,42 @@ pub struct Volume {
     /// grid): a flame's or glowing gas's light, which needs no absorption to exist.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub emission: Vec3,
+    /// Light emitted by a temperature grid through Planck's law (fire), besides
+    /// `emission`; only with a density grid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub blackbody: Option<Blackbody>,
+}
+
+/// Blackbody emission of a medium from a temperature grid, as Cycles' Principled Volume
+/// defines it (`crate::medium::blackbody`): radiance per metre σ T⁴ / π × 10⁻⁶ in the
+/// colour of Planck's spectrum, times `intensity` and `tint`, where T is the grid's value
+/// times `kelvin`; not scaled by the density.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Blackbody {
+    /// The temperature grid (an index into `Scene::grids`); a scene file's `volumes` entry
+    /// names it by its field instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature: Option<u32>,
+    /// Kelvin per unit of the grid's values (Cycles' Temperature input).
+    #[serde(default = "one")]
+    pub kelvin: f32,
+    /// Scales the radiance (Cycles' Blackbody Intensity, 1 for the physical brightness).
+    #[serde(default = "one")]
+    pub intensity: f32,
+    /// Multiplies the radiance per channel.
+    #[serde(default = "white")]
+    pub tint: Vec3,
+}
+
+impl Blackbody {
+    /// The hottest temperature a grid may reach, in kelvin: the radiance of hotter gas
+    /// (10⁻¹⁴ T⁴ per metre) overflows single precision within a few voxels.
+    pub const HOTTEST: f64 = 1e6;
+}
+
+fn white() -> Vec3 {
+    Vec3::ONE
 }
 
 fn is_zero(v: &Vec3) -> bool {
@@ -142,6 +178,7 @@ impl Volume {
             anisotropy: 0.0,
             density: None,
             emission: Vec3::ZERO,
+            blackbody: None,
         }
     }
 
@@ -153,6 +190,9 @@ impl Volume {
     /// True where it emits light.
     pub fn emits(&self) -> bool {
         self.emission.max_element() > 0.0
+            || self
+                .blackbody
+                .is_some_and(|b| b.intensity > 0.0 && b.tint.max_element() > 0.0)
     }
 }
 

@@ -1289,6 +1289,7 @@ fn delta_tracking_through_a_density_grid() {
         [Vec3::ZERO, Vec3::splat(sigma), Vec3::ZERO],
         0.0,
         DMat4::IDENTITY,
+        None,
     )
     .unwrap();
     // The density along the ray, at voxel coordinate x in [0, n].

@@ -333,6 +333,7 @@ fn medium(absorption: Vec3, scattering: Vec3, g: f32) -> lucerna::scene::Materia
             anisotropy: g,
             density: None,
             emission: Vec3::ZERO,
+            blackbody: None,
         }),
         ..material(BsdfModel::Interface, Vec3::ONE, 0.0, 0.0)
     }
@@ -406,6 +407,7 @@ fn scattering_media_disappear() {
                     anisotropy: 0.5,
                     density: None,
                     emission: Vec3::ZERO,
+                    blackbody: None,
                 }),
                 ..glass(Some(Vec3::ZERO), 1.5)
             },

@@ -72,7 +72,7 @@ fn grids_read_as_openvdb_reads_them() {
             checked += 1;
         }
     }
-    assert_eq!(checked, 5);
+    assert_eq!(checked, 7);
 }
 
 #[test]

@@ -222,9 +222,10 @@ def cases():
 
     def with_vdb(data, **medium):
         uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode()
+        fields = {"scattering": 1.0, "density": uri, **medium}
         return variant(lambda d: d.update(
             materials=[{"extras": {"lucerna": {"bsdf": "interface", "medium": {
-                "scattering": 1.0, "density": uri, **medium}}}}],
+                k: v for k, v in fields.items() if v is not None}}}}],
             meshes=[{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}]))
     yield ("medium-vdb-level-set.gltf", with_vdb(vdb(grid_class="level set")),
            "materials[0].extras.lucerna.medium.density", "is a level set (signed distances), not a density")
@@ -234,6 +235,22 @@ def cases():
            "materials[0].extras.lucerna.medium.density", "the file ends early")
     yield ("medium-vdb-missing-grid.gltf", with_vdb(vdb(), density_grid="smoke"),
            "materials[0].extras.lucerna.medium.density", "it has no grid \"smoke\" (grids: density (Tree_float_5_4_3))")
+    one_voxel = (b"VOL\x03" + struct.pack("<5i", 1, 1, 1, 1, 1) + struct.pack("<6f", 0, 0, 0, 1, 1, 1)
+                 + struct.pack("<f", 2.0))
+    one_voxel_uri = "data:application/octet-stream;base64," + base64.b64encode(one_voxel).decode()
+    yield ("medium-blackbody-without-density.gltf", with_vdb(vdb(), density=None,
+                                                             blackbody={"temperature": one_voxel_uri}),
+           "materials[0].extras.lucerna.medium.blackbody", "a blackbody needs the medium's density grid")
+    yield ("medium-blackbody-zero-kelvin.gltf", with_vdb(vdb(), blackbody={"temperature": one_voxel_uri, "kelvin": 0}),
+           "materials[0].extras.lucerna.medium.blackbody.kelvin", "0 must be positive and finite")
+    yield ("medium-blackbody-too-hot.gltf",
+           with_vdb(one_voxel, blackbody={"temperature": one_voxel_uri, "kelvin": 1e6}),
+           "materials[0].extras.lucerna.medium.blackbody", "the temperature grid reaches 2e6 K")
+    yield ("medium-blackbody-missing-grid.gltf",
+           with_vdb(one_voxel, blackbody={"temperature": "data:application/octet-stream;base64,"
+                                      + base64.b64encode(vdb()).decode()}),
+           "materials[0].extras.lucerna.medium.blackbody.temperature",
+           "it has no grid \"temperature\" (grids: density (Tree_float_5_4_3))")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

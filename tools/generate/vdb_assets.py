@@ -12,6 +12,9 @@ then `/usr/bin/python3 tools/generate/vdb_assets.py`). The files:
 - tiles.vdb: active tiles beside leaves, negative coordinates and a rotated, scaled
   transform (an affine map), values that include negative ones.
 - sphere-level-set.vdb: a level set, which the reader refuses.
+- fire.vdb: a small fire: `temperature` (a flame, values 0 to about 1.2, to be read as
+  3000 K per unit) over voxels that reach below the smoke's, and `density` (smoke
+  rising above it), on one transform of 1 cm voxels.
 
 wdas-cloud-sixteenth.vdb (vendored: Walt Disney Animation Studios' cloud at a sixteenth of
 its resolution, CC BY-SA 3.0, LICENSE-wdas-cloud.txt) is described too when it is there.
@@ -67,6 +70,31 @@ def plume_grid(half):
     return grid
 
 
+def fire_grids():
+    """(density, temperature) of a small fire: a flame whose core is hot where the smoke
+    is thin, smoke that thickens above it; each grid active only where it is not small,
+    so their active boxes differ."""
+    n = (32, 56, 32)
+    x, y, z = np.meshgrid(*(np.arange(k) + 0.5 for k in n), indexing="ij")
+    r2 = ((x - 16) ** 2 + (z - 16) ** 2) / 16.0 ** 2
+    flame = 1.2 * np.exp(-r2 / (2 * 0.18 ** 2) - ((y - 14) / 9.0) ** 2 / 2) * (1 + 0.15 * np.sin(0.7 * y + 0.4 * x))
+    smoke = 1.5 * np.exp(-r2 / (2 * (0.12 + 0.006 * y) ** 2)) / (1 + np.exp(-(y - 26) / 3.0))
+    smoke *= 1 + 0.3 * np.sin(0.5 * x) * np.sin(0.45 * y + 0.3 * z)
+    transform = vdb.createLinearTransform(
+        [[0.01, 0, 0, 0], [0, 0.01, 0, 0], [0, 0, 0.01, 0], [-0.16, 0.0, -0.16, 1]])
+    grids = []
+    for name, values in (("density", smoke), ("temperature", flame)):
+        values = np.where(values > 0.02, values, 0.0).astype(np.float32)
+        grid = vdb.FloatGrid()
+        grid.copyFromArray(np.ascontiguousarray(values), ijk=(0, 0, 0), tolerance=0)
+        grid.prune()
+        grid.name = name
+        grid.gridClass = vdb.GridClass.FOG_VOLUME
+        grid.transform = transform
+        grids.append(grid)
+    return grids
+
+
 def main():
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "tests" / "assets" / "vdb"
     out.mkdir(parents=True, exist_ok=True)
@@ -106,6 +134,10 @@ def main():
     sphere = vdb.createLevelSetSphere(radius=1.0, center=(0, 0, 0), voxelSize=0.25, halfWidth=3.0)
     sphere.name = "surface"
     vdb.write(str(out / "sphere-level-set.vdb"), grids=[sphere])
+
+    smoke, flame = fire_grids()
+    vdb.write(str(out / "fire.vdb"), grids=[smoke, flame])
+    expected["fire.vdb"] = {g.name: describe(g, [(16, 14, 16), (16, 40, 16), (3, 2, 16)]) for g in (smoke, flame)}
 
     cloud = out / "wdas-cloud-sixteenth.vdb"
     if cloud.exists():

@@ -25,6 +25,12 @@ from .skel import Skinning
 from .scene_file import SceneWriter, matrix, mean_scale
 
 # Implicit gprims rendered as meshes or spheres; other gprims are reported and skipped.
+def _authored(shader, name):
+    """True where UsdShade.Shader `shader` authors input `name`."""
+    shader_input = shader.GetInput(name)
+    return bool(shader_input) and shader_input.GetAttr().HasAuthoredValue()
+
+
 def _fields(volume):
     """The fields of UsdVol.Volume `volume` as `name: file[field]` for a message."""
     described = []
@@ -155,10 +161,10 @@ class Converter:
                             "centre": [float(x) for x in centre],
                             "radius": float(radius * scale), "material": material})
             elif g.kind == "volume":
-                file, grid, material, name = g.payload
+                file, grid, material, name, temperature = g.payload
                 for k, m in enumerate(world):
                     self.writer.add_volume(name if len(world) == 1 else f"{name}[{k}]", file, grid,
-                                           matrix(m), material)
+                                           matrix(m), material, temperature)
             elif g.kind == "camera":
                 for m in world:
                     self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
@@ -278,9 +284,17 @@ class Converter:
             self.warn(path, f"Volume skipped: {reason} ({_fields(prim)})")
             return []
         name = f"{path} ({bound})" if shader else path
-        index = self.writer.add_material(
-            volumes.medium_material(name, inputs, 1.0 / self.meters_per_unit, self.warn))
-        return [Group("volume", (field[0], field[1], index, path))]
+        temperature = None
+        if inputs["emission_mode"] == "blackbody":
+            temperature, missing = volumes.density_field(prim, str(inputs["temperature_channel"]), self.time)
+            if temperature is None and shader is not None and _authored(shader, "emission_mode"):
+                self.warn(path, f"blackbody emission needs a temperature field: {missing}")
+        material = volumes.medium_material(name, inputs, 1.0 / self.meters_per_unit, self.warn,
+                                           glowing=temperature is not None)
+        if "blackbody" not in material["volume"]:
+            temperature = None
+        index = self.writer.add_material(material)
+        return [Group("volume", (field[0], field[1], index, path, temperature))]
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

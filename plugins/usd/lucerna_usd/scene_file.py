@@ -151,13 +151,16 @@ class SceneWriter:
                 "transform": matrix(m),
             })
 
-    def add_volume(self, name, file, grid, to_world, material):
+    def add_volume(self, name, file, grid, to_world, material, temperature=None):
         """Adds a volume: grid `grid` of the OpenVDB `file` (an absolute path), its index
         space placed by `to_world` (the scene file's 16 numbers) after the grid's own
         transform, filling an interface box of `material` (whose medium the grid's
-        densities scale)."""
-        self.volumes.append({"name": name, "file": file, "grid": grid,
-                             "to_world": to_world, "material": material})
+        densities scale); `temperature`: (file, grid) of the field its material's blackbody
+        reads, under the same transform."""
+        entry = {"name": name, "file": file, "grid": grid, "to_world": to_world, "material": material}
+        if temperature is not None:
+            entry["temperature"] = {"file": temperature[0], "grid": temperature[1]}
+        self.volumes.append(entry)
 
     def add_to_light_group(self, group, member):
         """Puts the emitter named `member` into light group `group` (the lg_<group> AOV)."""

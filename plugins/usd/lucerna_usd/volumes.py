@@ -12,11 +12,16 @@ any render context: `outputs:volume`, `outputs:arnold:volume`, ...), read with t
 Arnold's `standard_volume`, the volume shader that Houdini, Maya and MtoA users write:
 `density` (extinction per stage unit at grid density 1), `scatter` and `scatter_color`
 (the single-scattering albedo is their product), `scatter_anisotropy` (Henyey-Greenstein
-g), `emission` and `emission_color` (radiance per stage unit at density 1, with
-`emission_mode` "density"). A Volume without such a shader renders as standard_volume with
-its defaults (density 1, albedo 0.5 grey, g 0, no emission), as Arnold and Karma render an
-unshaded volume. Emission from a temperature field by a blackbody is not read yet: a
-shader that asks for it is reported.
+g), and emission by `emission_mode`: "density" (`emission` x `emission_color`, radiance per
+stage unit at density 1) or "blackbody" (the default): the field `temperature_channel`
+names (default `temperature`) read as kelvin = value x `temperature` x `blackbody_kelvin`,
+glowing as Cycles' Principled Volume does (radiance per stage unit sigma T^4 / pi x 1e-6 in
+Planck's colour: docs/media.md), times `blackbody_intensity` x `emission` x
+`emission_color`. Arnold does not publish its blackbody's brightness, so a fire tuned in
+Arnold may render brighter or darker; `blackbody_intensity` scales it. A Volume without
+such a shader renders as standard_volume with its defaults (density 1, albedo 0.5 grey,
+g 0; blackbody emission where it has a temperature field), as Arnold and Karma render an
+unshaded volume.
 """
 
 from pxr import Sdf, UsdShade, UsdVol
@@ -25,8 +30,9 @@ from .scene_file import default_material
 
 # Arnold standard_volume's defaults, for the inputs lucerna reads.
 DEFAULTS = {"density": 1.0, "scatter": 1.0, "scatter_color": (0.5, 0.5, 0.5), "scatter_anisotropy": 0.0,
-            "emission": 0.0, "emission_color": (1.0, 1.0, 1.0), "emission_mode": "density",
-            "density_channel": "density"}
+            "emission": 1.0, "emission_color": (1.0, 1.0, 1.0), "emission_mode": "blackbody",
+            "density_channel": "density", "temperature": 1.0, "temperature_channel": "temperature",
+            "blackbody_kelvin": 5000.0, "blackbody_intensity": 1.0}
 
 
 def volume_shader(material):
@@ -85,8 +91,9 @@ def density_field(volume, channel, time):
     return (path.resolvedPath, str(grid)), None
 
 
-def medium_material(name, inputs, per_metre, warn):
-    """The scene-file material of an interface around the medium `inputs` describe."""
+def medium_material(name, inputs, per_metre, warn, glowing=False):
+    """The scene-file material of an interface around the medium `inputs` describe;
+    `glowing`: the volume has the temperature field that blackbody emission reads."""
     density = float(inputs["density"])
     albedo = [min(max(float(inputs["scatter"]) * float(c), 0.0), 1.0) for c in inputs["scatter_color"]]
     g = float(inputs["scatter_anisotropy"])
@@ -98,17 +105,27 @@ def medium_material(name, inputs, per_metre, warn):
         density = 0.0
     extinction = density * per_metre
     emission = [0.0, 0.0, 0.0]
+    blackbody = None
     strength = float(inputs["emission"])
-    if strength > 0.0:
-        if inputs["emission_mode"] in ("density", "constant"):
-            emission = [max(strength * float(c), 0.0) * per_metre for c in inputs["emission_color"]]
-            if inputs["emission_mode"] == "constant":
-                warn(name, "emission_mode 'constant' is rendered scaled by the density, as 'density'")
-        else:
-            warn(name, f"emission_mode {inputs['emission_mode']!r} (a temperature or emission field "
-                       "through a blackbody) is not rendered yet: the volume does not glow")
-    return default_material(
-        name, model="interface", metallic=0.0, ior=1.0,
-        volume={"absorption": [extinction * (1.0 - a) for a in albedo],
-                "scattering": [extinction * a for a in albedo],
-                "anisotropy": g, "emission": emission})
+    weight = [max(strength * float(c), 0.0) for c in inputs["emission_color"]]
+    mode = inputs["emission_mode"]
+    if mode in ("density", "constant"):
+        emission = [w * per_metre for w in weight]
+        if mode == "constant" and strength > 0.0:
+            warn(name, "emission_mode 'constant' is rendered scaled by the density, as 'density'")
+    elif mode == "blackbody":
+        kelvin = float(inputs["temperature"]) * float(inputs["blackbody_kelvin"])
+        intensity = float(inputs["blackbody_intensity"])
+        if glowing and kelvin > 0.0 and intensity > 0.0 and max(weight) > 0.0:
+            blackbody = {"kelvin": kelvin, "intensity": intensity, "tint": [w * per_metre for w in weight]}
+        elif glowing:
+            warn(name, f"blackbody emission is off (temperature x blackbody_kelvin {kelvin}, "
+                       f"blackbody_intensity {intensity}, emission {strength})")
+    elif mode != "none":
+        warn(name, f"emission_mode {mode!r} is not read: the volume does not glow")
+    volume = {"absorption": [extinction * (1.0 - a) for a in albedo],
+              "scattering": [extinction * a for a in albedo],
+              "anisotropy": g, "emission": emission}
+    if blackbody is not None:
+        volume["blackbody"] = blackbody
+    return default_material(name, model="interface", metallic=0.0, ior=1.0, volume=volume)

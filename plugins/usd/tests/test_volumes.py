@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 PLUME = Path(__file__).resolve().parents[3] / "tests" / "assets" / "vdb" / "plume.vdb"
+FIRE = PLUME.parent / "fire.vdb"
 
 SHADED = '''
 def Xform "World" {
@@ -32,6 +33,7 @@ def Xform "World" {
                 float inputs:scatter_anisotropy = 0.3
                 float inputs:emission = 2
                 color3f inputs:emission_color = (1, 0.5, 0)
+                token inputs:emission_mode = "density"
                 token outputs:out
             }
         }
@@ -113,21 +115,52 @@ def Xform "World" {
     assert s.warnings_about("/World/Empty: Volume skipped: it has no field 'density' (fields: none)")
 
 
-def test_blackbody_emission_is_reported(stage_file, converted, tmp_path):
+def test_blackbody_emission_reads_the_temperature_field(stage_file, converted, tmp_path):
+    """standard_volume's default emission_mode is blackbody: the field temperature_channel
+    names glows, at temperature x blackbody_kelvin kelvin per unit, scaled by emission x
+    emission_color x blackbody_intensity per stage unit."""
     shutil.copy(PLUME, tmp_path / "smoke.vdb")
-    text = SHADED.replace("float inputs:emission = 2", 'float inputs:emission = 2\n'
-                          '                token inputs:emission_mode = "blackbody"')
+    text = SHADED.replace('                token inputs:emission_mode = "density"\n',
+                          '                float inputs:temperature = 0.5\n'
+                          '                float inputs:blackbody_kelvin = 4000\n'
+                          '                float inputs:blackbody_intensity = 3\n')
+    text = text.replace('        rel field:density = </World/Smoke/density>\n',
+                        '        rel field:density = </World/Smoke/density>\n'
+                        '        rel field:temperature = </World/Smoke/heat>\n'
+                        '        def OpenVDBAsset "heat" {\n'
+                        '            asset filePath = @./smoke.vdb@\n'
+                        '            token fieldName = "temperature"\n'
+                        '        }\n')
+    s = converted(stage_file('#usda 1.0\n(\n    defaultPrim = "World"\n    metersPerUnit = 0.01\n'
+                             '    upAxis = "Y"\n)\n' + text), no_validate=True)
+    [volume] = s["volumes"]
+    assert volume["temperature"] == {"file": str(tmp_path / "smoke.vdb"), "grid": "temperature"}
+    medium = s["materials"][volume["material"]]["volume"]
+    assert medium["emission"] == [0.0, 0.0, 0.0]
+    blackbody = medium["blackbody"]
+    assert blackbody["kelvin"] == pytest.approx(2000.0) and blackbody["intensity"] == pytest.approx(3.0)
+    assert np.allclose(blackbody["tint"], np.array([2.0, 1.0, 0.0]) / 0.01)
+    assert not s.warnings_about("Smoke")
+
+
+def test_blackbody_without_a_temperature_field_is_reported(stage_file, converted, tmp_path):
+    shutil.copy(PLUME, tmp_path / "smoke.vdb")
+    text = SHADED.replace('token inputs:emission_mode = "density"', 'token inputs:emission_mode = "blackbody"')
     s = converted(stage_file(text), no_validate=True)
-    assert s["materials"][s["volumes"][0]["material"]]["volume"]["emission"] == [0.0, 0.0, 0.0]
-    assert s.warnings_about("/World/Smoke (/World/Looks/Smoke): emission_mode 'blackbody'")
+    [volume] = s["volumes"]
+    assert "temperature" not in volume
+    medium = s["materials"][volume["material"]]["volume"]
+    assert "blackbody" not in medium and medium["emission"] == [0.0, 0.0, 0.0]
+    assert s.warnings_about("/World/Smoke: blackbody emission needs a temperature field: it has no field "
+                            "'temperature'")
 
 
-def _render(scene, out, *args):
+def _render(scene, out, *args, env="1,1,1"):
     import subprocess
     import OpenImageIO as oiio
     from conftest import lucerna_bin
     result = subprocess.run([lucerna_bin(), "render", str(scene), "-o", str(out), "--resolution", "48x48",
-                             "--spp", "64", "--env", "1,1,1", *args], capture_output=True, text=True)
+                             "--spp", "64", "--env", env, *args], capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     return oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[:, :, :3]
 
@@ -206,6 +239,88 @@ def Material "Smoke" {
     # the other, so hit points differ in their last bits, and with them the seeds of the
     # walks through the grid: the renders differ by noise, and the mean difference stays
     # within 4 standard errors of the pixels'.
+    difference = (usd - gltf).mean(axis=2).ravel()
+    error = difference.std() / np.sqrt(difference.size)
+    assert abs(difference.mean()) < 4 * error, (difference.mean(), error)
+
+
+FIRE_STAGE = '''
+def Camera "Camera" {
+    float focalLength = 50
+    float horizontalAperture = 20.955
+    float verticalAperture = 20.955
+    float2 clippingRange = (0.01, 100)
+    double3 xformOp:translate = (0, 0.2, 1.0)
+    uniform token[] xformOpOrder = ["xformOp:translate"]
+}
+def Volume "Fire" (prepend apiSchemas = ["MaterialBindingAPI"]) {
+    rel field:density = </Fire/density>
+    rel field:temperature = </Fire/temperature>
+    rel material:binding = </Flame>
+    def OpenVDBAsset "density" {
+        asset filePath = @./fire.vdb@
+        token fieldName = "density"
+    }
+    def OpenVDBAsset "temperature" {
+        asset filePath = @./fire.vdb@
+        token fieldName = "temperature"
+    }
+}
+def Material "Flame" {
+    token outputs:volume.connect = </Flame/V.outputs:out>
+    def Shader "V" {
+        uniform token info:id = "arnold:standard_volume"
+        float inputs:density = 20
+        color3f inputs:scatter_color = (0.3, 0.3, 0.3)
+        float inputs:blackbody_kelvin = 3000
+        token outputs:out
+    }
+}
+'''
+
+
+def test_a_fire_renders_as_its_gltf_twin(stage_file, tmp_path):
+    """A fire (tests/assets/vdb/fire.vdb: smoke, and a temperature grid reaching below it)
+    as a USD Volume with standard_volume blackbody emission renders as its glTF twin, whose
+    interface box holds both grids: the box the renderer puts around a Volume covers the
+    temperature grid too, so the flame's foot is not cut off."""
+    import json
+    shutil.copy(FIRE, tmp_path / "fire.vdb")
+    stage = stage_file(FIRE_STAGE)
+    # The union of the grids' padded boxes (index -1.5 to 32.5, 56.5 in y: the density's
+    # active voxels 0..31, 11..55, 0..31, the temperature's 8..23, 0..39, 8..23), 1 cm voxels.
+    origin = np.array([-0.16, 0.0, -0.16])
+    lo, hi = origin + 0.01 * np.array([-1.5, -1.5, -1.5]), origin + 0.01 * np.array([32.5, 56.5, 32.5])
+    corners = [[(lo, hi)[i & 1][0], (lo, hi)[i >> 1 & 1][1], (lo, hi)[i >> 2 & 1][2]] for i in range(8)]
+    triangles = [0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2,
+                 1, 3, 7, 1, 7, 5]
+    positions = np.asarray(corners, dtype="<f4").tobytes()
+    indices = np.asarray(triangles, dtype="<u4").tobytes()
+    (tmp_path / "box.bin").write_bytes(positions + indices)
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"camera": 0, "translation": [0.0, 0.2, 1.0]}],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": float(2 * np.arctan(20.955 / 100)),
+                                                              "aspectRatio": 1.0, "znear": 0.01}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"extras": {"lucerna": {"bsdf": "interface", "medium": {
+            "scattering": [6.0, 6.0, 6.0], "absorption": [14.0, 14.0, 14.0], "density": "fire.vdb",
+            "density_grid": "density", "blackbody": {"temperature": "fire.vdb", "kelvin": 3000.0}}}}}],
+        "buffers": [{"uri": "box.bin", "byteLength": len(positions) + len(indices)}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
+                       "min": [float(v) for v in lo], "max": [float(v) for v in hi]},
+                      {"bufferView": 1, "componentType": 5125, "count": 36, "type": "SCALAR"}],
+    }
+    (tmp_path / "twin.gltf").write_text(json.dumps(doc))
+    usd = _render(stage, tmp_path / "usd.exr", "--no-validate", env="0.02,0.02,0.02")
+    gltf = _render(tmp_path / "twin.gltf", tmp_path / "gltf.exr", env="0.02,0.02,0.02")
+    # The flame glows orange against the dim sky, down to its foot below the smoke.
+    assert usd.max() > 0.2 and (usd[..., 0] > 2 * usd[..., 2]).any()
+    foot = usd[34:44, 20:28].mean(axis=(0, 1))
+    assert foot[0] > 0.05, foot
     difference = (usd - gltf).mean(axis=2).ravel()
     error = difference.std() / np.sqrt(difference.size)
     assert abs(difference.mean()) < 4 * error, (difference.mean(), error)

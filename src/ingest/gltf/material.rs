@@ -210,8 +210,40 @@ impl<'a> Importer<'a> {
             // The extension's absorption stays where the medium gives none.
             let absorption = material.volume.map_or(Vec3::ZERO, |v| v.absorption);
             let density = match &medium.density {
-                Some(uri) => {
-                    Some(self.density_grid(uri, medium.density_grid.as_deref(), element)?)
+                Some(uri) => Some(self.density_grid(
+                    uri,
+                    (medium.density_grid.as_deref(), None),
+                    element,
+                    "density",
+                )?),
+                None => None,
+            };
+            let blackbody = match &medium.blackbody {
+                Some(b) => {
+                    let g = self.density_grid(
+                        &b.temperature,
+                        (b.temperature_grid.as_deref(), Some("temperature")),
+                        element,
+                        "blackbody.temperature",
+                    )?;
+                    let hottest =
+                        f64::from(self.scene.grids[g as usize].max_density()) * f64::from(b.kelvin);
+                    if hottest > scene::Blackbody::HOTTEST {
+                        return Err(self.err(
+                            format!("{element}.extras.lucerna.medium.blackbody"),
+                            format!(
+                                "the temperature grid reaches {hottest:e} K (its largest value \
+                                 times kelvin), beyond {:e} K",
+                                scene::Blackbody::HOTTEST
+                            ),
+                        ));
+                    }
+                    Some(scene::Blackbody {
+                        temperature: Some(g),
+                        kelvin: b.kelvin,
+                        intensity: b.intensity,
+                        tint: b.tint.as_ref().map_or(Vec3::ONE, SpecularValue::rgb),
+                    })
                 }
                 None => None,
             };
@@ -221,6 +253,7 @@ impl<'a> Importer<'a> {
                 anisotropy: medium.anisotropy,
                 density,
                 emission: medium.emission.map_or(Vec3::ZERO, |e| e.rgb()),
+                blackbody,
             });
         } else if model == BsdfModel::Interface && material.volume.is_none() {
             self.warn(
@@ -445,18 +478,25 @@ impl<'a> Importer<'a> {
         }
     }
 
-    /// The scene grid of the density file at `uri` (a `.vol` file, or grid `name` of a
-    /// `.vdb` file; read once however many materials use it); `element` is the material's,
-    /// for messages.
-    fn density_grid(&mut self, uri: &str, name: Option<&str>, element: &str) -> Result<u32> {
-        let key = format!("{uri}\u{1e}{}", name.unwrap_or_default());
+    /// The scene grid of the file at `uri` (a `.vol` file, or grid `name` of a `.vdb`
+    /// file, by default `vdb_default` or else its `density` or only grid; read once however
+    /// many materials use it); `element` is the material's and `field` the medium's
+    /// property that names the file, for messages.
+    fn density_grid(
+        &mut self,
+        uri: &str,
+        (name, vdb_default): (Option<&str>, Option<&str>),
+        element: &str,
+        field: &str,
+    ) -> Result<u32> {
+        let key = format!("{uri}\u{1e}{}", name.or(vdb_default).unwrap_or_default());
         if let Some(&g) = self.grids.get(&key) {
             return Ok(g);
         }
-        let e = format!("{element}.extras.lucerna.medium.density");
+        let e = format!("{element}.extras.lucerna.medium.{field}");
         let bytes = crate::ingest::uri::read(uri, self.base).map_err(|r| self.err(&e, r))?;
         let grid = if crate::ingest::vdb::is_vdb(&bytes) {
-            let read = crate::ingest::vdb::parse(&bytes, uri, name)
+            let read = crate::ingest::vdb::parse(&bytes, uri, name.or(vdb_default))
                 .map_err(|r| self.err(&e, format!("{uri}: {r}")))?;
             for warning in &read.warnings {
                 self.warn(&e, warning);
@@ -464,7 +504,7 @@ impl<'a> Importer<'a> {
             read.grid
         } else if name.is_some() {
             return Err(self.err(
-                format!("{element}.extras.lucerna.medium.density_grid"),
+                format!("{element}.extras.lucerna.medium.{field}_grid"),
                 format!("{uri} is not an OpenVDB file, whose grids could be named"),
             ));
         } else {
@@ -526,6 +566,29 @@ impl<'a> Importer<'a> {
                     format!("{e}.medium.anisotropy"),
                     format!("{} must be in (-1, 1)", medium.anisotropy),
                 ));
+            }
+            if let Some(b) = &medium.blackbody {
+                let eb = format!("{e}.medium.blackbody");
+                if medium.density.is_none() {
+                    return Err(self.err(
+                        eb,
+                        "a blackbody needs the medium's density grid (medium.density)",
+                    ));
+                }
+                if !(b.kelvin.is_finite() && b.kelvin > 0.0) {
+                    return Err(self.err(
+                        format!("{eb}.kelvin"),
+                        format!("{} must be positive and finite", b.kelvin),
+                    ));
+                }
+                let intensity_ok =
+                    b.intensity.is_finite() && (0.0..=MAX_COEFFICIENT).contains(&b.intensity);
+                if !(intensity_ok && coefficient(&b.tint)) {
+                    return Err(self.err(
+                        eb,
+                        format!("intensity and tint must be in [0, {MAX_COEFFICIENT:e}]"),
+                    ));
+                }
             }
         }
         Ok(Extras {

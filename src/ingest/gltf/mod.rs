@@ -193,6 +193,34 @@ pub(super) struct MediumExtras {
     density_grid: Option<String>,
     /// Radiance emitted per metre (scaled by the density grid, if any).
     emission: Option<SpecularValue>,
+    /// Light from a temperature grid through Planck's law (needs `density`).
+    #[serde(default)]
+    pub(super) blackbody: Option<BlackbodyExtras>,
+}
+
+/// `extras.lucerna.medium.blackbody`: fire from a temperature grid, as Cycles' Principled
+/// Volume renders it (`scene::Blackbody`).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct BlackbodyExtras {
+    /// The temperature grid's file (`.vol` or `.vdb`).
+    pub(super) temperature: String,
+    /// The grid of a `.vdb` file (default: `temperature`, or the file's only grid).
+    #[serde(default)]
+    pub(super) temperature_grid: Option<String>,
+    /// Kelvin per unit of the grid's values.
+    #[serde(default = "one")]
+    pub(super) kelvin: f32,
+    /// Scales the radiance (1: the physical brightness).
+    #[serde(default = "one")]
+    pub(super) intensity: f32,
+    /// Multiplies the radiance per channel.
+    #[serde(default)]
+    pub(super) tint: Option<SpecularValue>,
+}
+
+fn one() -> f32 {
+    1.0
 }
 
 impl SpecularValue {

@@ -5,14 +5,18 @@ NanoVDB), so that the grid's placement (index space, voxel centres, transform), 
 interpolation and the medium's coefficients are compared end to end:
 
     BLENDER=/path/to/bpy-venv/bin/python .venv/bin/python tools/compare/cycles/vdb_volume.py \\
-        [--case plume|cloud] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
+        [--case plume|cloud|fire] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
 
 The smoke plume of tests/assets/vdb/plume.vdb (36 x 36 x 31 active voxels of 9 mm, Blosc)
 with extinction 90 per metre at density 1, albedo (0.9, 0.8, 0.65) and Henyey-Greenstein
 g = 0.3, over a grey Lambertian floor under a uniform sky, seen from 1.2 m (`--case plume`);
 or Walt Disney Animation Studios' cloud (scenes/media/wdas-cloud-sixteenth.vdb, an older,
 uncompressed file) with extinction 0.1 per metre, albedo 0.99 and g = 0.8 under a sky of
-0.5 (`--case cloud`). lucerna: a glTF
+0.5 (`--case cloud`); or a small fire (tests/assets/vdb/fire.vdb: smoke of extinction 20 per
+metre at density 1 and albedo 0.3 over a flame whose `temperature` grid, read as 3000 K per
+unit, glows by Cycles' blackbody with intensity 1, under a dim sky: `--case fire`, lucerna's
+`medium.blackbody` against the Principled Volume's Temperature and Blackbody Intensity).
+lucerna: a glTF
 interface box around the grid with `extras.lucerna.medium.density` naming the file. Cycles:
 a Volume object of the same file (turned from glTF's Y up to Blender's Z up) with a
 Principled Volume of Density the extinction (times the grid's `density`), Color the albedo (Cycles
@@ -47,6 +51,10 @@ CASES = {
               "albedo": (0.99, 0.99, 0.99), "anisotropy": 0.8, "sky": 0.5, "camera": (-8.0, 70.0, 900.0),
               "vfov": 0.6, "box": ((-230.0, -80.0, -310.0), (205.0, 222.0, 220.0)), "floor_y": -300.0,
               "floor_half": 2e4, "near": 1.0},
+    "fire": {"vdb": lt.ROOT / "tests" / "assets" / "vdb" / "fire.vdb", "extinction": 20.0,
+             "albedo": (0.3, 0.3, 0.3), "anisotropy": 0.0, "sky": 0.05, "camera": (0.0, 0.28, 1.2),
+             "vfov": 0.55, "box": ((-0.18, -0.015, -0.18), (0.17, 0.57, 0.17)), "floor_y": -0.02,
+             "floor_half": 20.0, "near": 0.01, "kelvin": 3000.0, "blackbody_intensity": 1.0},
 }
 FLOOR = 0.5
 
@@ -62,6 +70,9 @@ pv = smoke.node_tree.nodes.new("ShaderNodeVolumePrincipled")
 pv.inputs["Color"].default_value = tuple(job["albedo"]) + (1,)
 pv.inputs["Density"].default_value = job["extinction"]
 pv.inputs["Anisotropy"].default_value = job["anisotropy"]
+if job["kelvin"]:
+    pv.inputs["Temperature"].default_value = job["kelvin"]
+    pv.inputs["Blackbody Intensity"].default_value = job["blackbody_intensity"]
 smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
 volume.materials.append(smoke)
 grey_floor(job["floor_half"], job["floor_y"], job["floor"])
@@ -76,9 +87,13 @@ def write_gltf(path, width, height, case):
     w.node(name="floor", mesh=w.mesh("floor", [(-h, y, -h), (-h, y, h), (h, y, h), (h, y, -h)],
                                      [(0, 1, 2), (0, 2, 3)], floor))
     e, albedo = case["extinction"], case["albedo"]
-    smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": {
-        "scattering": [e * a for a in albedo], "absorption": [e * (1 - a) for a in albedo],
-        "anisotropy": case["anisotropy"], "density": case["vdb"].name}}})
+    medium = {"scattering": [e * a for a in albedo], "absorption": [e * (1 - a) for a in albedo],
+              "anisotropy": case["anisotropy"], "density": case["vdb"].name}
+    if case.get("kelvin"):
+        medium["density_grid"] = "density"
+        medium["blackbody"] = {"temperature": case["vdb"].name, "temperature_grid": "temperature",
+                               "kelvin": case["kelvin"], "intensity": case["blackbody_intensity"]}
+    smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": medium}})
     positions, triangles = box(*case["box"])
     w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, smoke))
     cam = w._list("cameras", {"name": "camera", "type": "perspective",
@@ -93,7 +108,8 @@ def cycles_job(work, width, height, spp, case):
     return {"width": width, "height": height, "spp": spp, "sky": case["sky"], "vdb": str(work / case["vdb"].name),
             "extinction": case["extinction"], "albedo": case["albedo"], "anisotropy": case["anisotropy"],
             "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "vfov": case["vfov"],
-            "camera": case["camera"], "near": case["near"]}
+            "camera": case["camera"], "near": case["near"], "kelvin": case.get("kelvin", 0.0),
+            "blackbody_intensity": case.get("blackbody_intensity", 0.0)}
 
 
 def main():
@@ -122,11 +138,16 @@ def main():
         background, _, _ = lt.render(empty, work / "e.exr", (width, height), spp=16, seed=1, filter="box", env=env)
         job = cycles_job(work, width, height, args.spp, case)
         cycles_a, cycles_b = (cycles.render(work, "vdb_volume", SCENE_SCRIPT, job, seed) for seed in (1, 2))
-    volume = np.abs((ours - background) @ cycles.LUMINANCE) > 0.01 * np.maximum(background @ cycles.LUMINANCE, 1e-3)
+    change = (ours - background) @ cycles.LUMINANCE
+    volume = np.abs(change) > 0.01 * np.maximum(background @ cycles.LUMINANCE, 1e-3)
+    regions = {"image": np.ones(volume.shape, dtype=bool), "volume": volume}
+    if case.get("kelvin"):
+        # Where the fire's own light outshines what the sky and floor give.
+        regions["flame"] = change > background @ cycles.LUMINANCE
     figures = {"case": args.case, "spp": args.spp, "resolution": [width, height],
                "volume_pixels": int(volume.sum())}
-    figures.update(cycles.figures(ours, ours_b, cycles_a, cycles_b,
-                                  {"image": np.ones(volume.shape, dtype=bool), "volume": volume}))
+    figures.update({f"{name}_pixels": int(mask.sum()) for name, mask in regions.items() if name == "flame"})
+    figures.update(cycles.figures(ours, ours_b, cycles_a, cycles_b, regions))
     figures["seconds_lucerna"] = header["lucerna/render_seconds"]
     (out / f"{args.case}.json").write_text(json.dumps(figures, indent=1) + "\n")
     print(json.dumps(figures, indent=1))

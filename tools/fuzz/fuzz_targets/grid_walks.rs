@@ -5,6 +5,7 @@
 //! panicking (a finding) where a walk returns a value that is not finite or is negative.
 
 use glam::{DMat4, Vec3};
+use lucerna::medium::grid::Temperature;
 use lucerna::medium::{Flight, Heterogeneous};
 
 /// The most bytes a fuzzed VDB file's dense grid may take.
@@ -35,7 +36,15 @@ fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
         Vec3::new(3.0, 1.0, 0.2),
         Vec3::new(1.0, 0.5, 0.1),
     ];
-    let Some(medium) = Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY) else {
+    // The grid glows by its own values too, as a temperature grid as hot as a scene allows.
+    let temperature = Temperature {
+        grid,
+        kelvin_per_unit: (1e6 / grid.max_density().max(1.0)).min(3000.0),
+        scale: Vec3::ONE,
+    };
+    let Some(medium) =
+        Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY, Some(temperature))
+    else {
         return Ok(());
     };
     // Rays from outside the grid's box through its centre, and one starting inside it.
