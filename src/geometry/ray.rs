@@ -77,12 +77,12 @@ impl Ray {
         self.origin + t * self.dir
     }
 
-    /// The ray continued through the surface it met at `p` (geometric normal `ng`): from
-    /// just beyond it towards the same end, the point at `tmax` of a bounded ray (then with
-    /// `tmax` 1) or infinity.
+    /// The ray continued through the surface it met at `p` (geometric normal `ng`, computed
+    /// from data of `magnitude`): from just beyond it towards the same end, the point at
+    /// `tmax` of a bounded ray (then with `tmax` 1) or infinity.
     #[inline]
-    pub fn continued_past(&self, p: Vec3, ng: Vec3) -> Self {
-        let origin = offset_past(p, ng, self.dir);
+    pub fn continued_past(&self, p: Vec3, ng: Vec3, magnitude: f32) -> Self {
+        let origin = offset_past(p, ng, self.dir, magnitude);
         if self.tmax.is_finite() {
             let end = self.at(self.tmax);
             Self {
@@ -96,15 +96,17 @@ impl Ray {
     }
 }
 
-/// Where a ray of direction `dir` that crosses the surface at `p` (geometric normal `ng`)
-/// goes on from: [`offset_ray_origin`] to the far side.
+/// Where a ray of direction `dir` that crosses the surface at `p` (geometric normal `ng`,
+/// computed from data of `magnitude`) goes on from: [`offset_ray_origin_within`] to the far
+/// side.
 #[inline]
-pub fn offset_past(p: Vec3, ng: Vec3, dir: Vec3) -> Vec3 {
-    offset_ray_origin(p, if dir.dot(ng) > 0.0 { ng } else { -ng })
+pub fn offset_past(p: Vec3, ng: Vec3, dir: Vec3, magnitude: f32) -> Vec3 {
+    offset_ray_origin_within(p, if dir.dot(ng) > 0.0 { ng } else { -ng }, magnitude)
 }
 
 /// [`offset_ray_origin`]'s constants: coordinates below `ORIGIN` move by `FLOAT_SCALE`
-/// times the normal, larger ones by `INT_SCALE` times the normal in ulps.
+/// times the normal, larger ones by `INT_SCALE` times the normal in ulps (both of the first
+/// two scaled by the magnitude of the point's data in [`offset_ray_origin_within`]).
 const ORIGIN: f32 = 1.0 / 32.0;
 const FLOAT_SCALE: f32 = 1.0 / 65536.0;
 const INT_SCALE: f32 = 256.0;
@@ -116,12 +118,35 @@ const INT_SCALE: f32 = 256.0;
 /// Gems, ch. 6): the offset is a fixed number of ulps of the coordinate, so it scales with the
 /// magnitude of the point, with an absolute offset near the origin where ulps vanish. Render
 /// space is normalised to the scene's size (see `geometry::space::RenderSpace`), which makes the absolute
-/// part relative to the scene too.
+/// part relative to the scene too: this is the offset of a point whose data may be as large
+/// as the scene.
 #[inline]
 pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
+    offset_ray_origin_within(p, n, 1.0)
+}
+
+/// The smallest magnitude [`offset_ray_origin_within`] scales to (a primitive at the origin
+/// with no extent still gets an offset of normal numbers).
+const MIN_MAGNITUDE: f32 = 1.0 / 1048576.0;
+
+/// [`offset_ray_origin`] for a point computed from data (a primitive's corners, a sphere's
+/// centre and radius) whose coordinates are at most `magnitude` (render space, at most 1):
+/// its rounding error is relative to that, so the absolute offset near the origin and the
+/// region where it applies shrink with it. An object small against the scene's bounds and
+/// near their centre (a 9 cm shader ball in a room, a millimetre subsurface walk) is then
+/// offset by its own precision, not by the room's; at magnitude 1 it is
+/// [`offset_ray_origin`] exactly.
+#[inline]
+pub fn offset_ray_origin_within(p: Vec3, n: Vec3, magnitude: f32) -> Vec3 {
+    let m = if magnitude > MIN_MAGNITUDE {
+        magnitude.min(1.0)
+    } else {
+        MIN_MAGNITUDE
+    };
+    let (origin, float_scale) = (ORIGIN * m, FLOAT_SCALE * m);
     let offset_axis = |p: f32, n: f32| -> f32 {
-        if p.abs() < ORIGIN {
-            p + FLOAT_SCALE * n
+        if p.abs() < origin {
+            p + float_scale * n
         } else {
             // `n` is a unit normal; a degenerate one (huge components from a scene's broken
             // data) is held to it, so that negating the offset cannot overflow.
@@ -142,19 +167,41 @@ pub fn offset_ray_origin(p: Vec3, n: Vec3) -> Vec3 {
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 pub(crate) fn offset_ray_origin_lanes(p: crate::simd::V3, n: crate::simd::V3) -> crate::simd::V3 {
+    offset_ray_origin_lanes_within(p, n, crate::simd::F8::ONE)
+}
+
+/// [`offset_ray_origin_within`] in eight lanes, to the bit (the packet kernel's bounces).
+/// Only for code compiled with AVX2 (see `crate::simd`).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub(crate) fn offset_ray_origin_lanes_within(
+    p: crate::simd::V3,
+    n: crate::simd::V3,
+    magnitude: crate::simd::F8,
+) -> crate::simd::V3 {
     use crate::simd::{F8, U8, V3};
+    let least = F8::splat(MIN_MAGNITUDE);
+    // NaN fails the comparison and takes the least, as in the scalar offset.
+    let m = F8::select(magnitude.gt(least), magnitude.min(F8::ONE), least);
+    let (origin, float_scale) = (F8::splat(ORIGIN) * m, F8::splat(FLOAT_SCALE) * m);
+    // A function, not a closure: closures do not inherit the caller's target features, and
+    // their intrinsics would not be inlined.
     #[inline(always)]
-    fn axis(p: F8, n: F8) -> F8 {
-        let near = p + F8::splat(FLOAT_SCALE) * n;
+    fn axis(p: F8, n: F8, origin: F8, float_scale: F8) -> F8 {
+        let near = p + float_scale * n;
         // `as i32` truncates, as the conversion does; NaN gives 0 there, i32::MIN here. The
         // normal is held to [-1, 1] as in the scalar offset.
         let held = n.max(F8::splat(-1.0)).min(F8::splat(1.0));
         let of_i = (F8::splat(INT_SCALE) * held).to_i32() & n.eq(n).as_u8();
         let of_i = U8::select(p.lt(F8::ZERO), U8::splat(0) - of_i, of_i);
         let far = F8::from_bits(p.to_bits() + of_i);
-        F8::select(p.abs().lt(F8::splat(ORIGIN)), near, far)
+        F8::select(p.abs().lt(origin), near, far)
     }
-    V3::new(axis(p.x, n.x), axis(p.y, n.y), axis(p.z, n.z))
+    V3::new(
+        axis(p.x, n.x, origin, float_scale),
+        axis(p.y, n.y, origin, float_scale),
+        axis(p.z, n.z, origin, float_scale),
+    )
 }
 
 #[cfg(test)]
@@ -191,6 +238,70 @@ mod tests {
                 let q = offset_ray_origin(p, n);
                 assert!((q - p).dot(n) > 0.0, "scale {scale} n {n}");
                 assert!((q - p).length() < 1e-3 * scale.max(1.0));
+            }
+        }
+    }
+
+    /// Every other triangle, by its first corner's bits.
+    fn rng_half(corners: &[Vec3; 3]) -> bool {
+        corners[0].x.to_bits() & 1 == 0
+    }
+
+    /// The barycentrics (b1, b2) of the point of the triangle's plane nearest the origin,
+    /// where it lies inside the triangle.
+    fn nearest_to_origin(c: &[Vec3; 3]) -> Option<(f32, f32)> {
+        let d = c.map(|v| v.as_dvec3());
+        let (e1, e2) = (d[1] - d[0], d[2] - d[0]);
+        let n = e1.cross(e2);
+        let q = n * (d[0].dot(n) / n.length_squared());
+        let w = q - d[0];
+        let (a, b, cc) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let (x, y) = (w.dot(e1), w.dot(e2));
+        let det = a * cc - b * b;
+        let (b1, b2) = ((cc * x - b * y) / det, (a * y - b * x) / det);
+        (b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0).then_some((b1 as f32, b2 as f32))
+    }
+
+    /// A point computed in single precision from a triangle's corners, offset within the
+    /// corners' magnitude, lies on the normal's side of the exact plane (the offset clears
+    /// the rounding error), for triangles of every size around the origin and away from it.
+    #[test]
+    fn offsets_within_a_magnitude_clear_the_points_rounding() {
+        let mut rng = crate::sampling::pcg::Pcg32::new(7, 11);
+        let mut u = || rng.next_f32() * 2.0 - 1.0;
+        for m in [1e-5f32, 1e-3, 0.03, 0.3, 1.0] {
+            for _ in 0..20_000 {
+                let shift = Vec3::new(u(), u(), u()) * m * 0.05;
+                let corners: [Vec3; 3] =
+                    std::array::from_fn(|_| shift + Vec3::new(u(), u(), u()) * m * 0.5);
+                let magnitude = corners
+                    .iter()
+                    .map(|c| c.abs().max_element())
+                    .fold(0.0f32, f32::max);
+                let (b1, b2) = (u().abs(), u().abs());
+                let (b1, b2) = if b1 + b2 > 1.0 {
+                    (1.0 - b1, 1.0 - b2)
+                } else {
+                    (b1, b2)
+                };
+                // Half the points where the plane passes the origin closest: coordinates far
+                // below the corners', where the offset's absolute part must clear them.
+                let (b1, b2) = if rng_half(&corners) {
+                    nearest_to_origin(&corners).unwrap_or((b1, b2))
+                } else {
+                    (b1, b2)
+                };
+                let b0 = 1.0 - b1 - b2;
+                let p = corners[0] * b0 + corners[1] * b1 + corners[2] * b2;
+                let n = (corners[1] - corners[0]).cross(corners[2] - corners[0]);
+                let Some(n) = n.try_normalize() else { continue };
+                let d = corners.map(|c| c.as_dvec3());
+                let exact_n = (d[1] - d[0]).cross(d[2] - d[0]).normalize();
+                for side in [n, -n] {
+                    let q = offset_ray_origin_within(p, side, magnitude).as_dvec3();
+                    let distance = (q - d[0]).dot(exact_n) * side.as_dvec3().dot(exact_n).signum();
+                    assert!(distance > 0.0, "m {m}: {p} offset to {q}, {distance}");
+                }
             }
         }
     }
@@ -251,6 +362,18 @@ mod tests {
                 }
             });
             let lanes = offset_ray_origin_lanes(V3::from_lanes(&ps), V3::from_lanes(&ns));
+            // Magnitudes of every size, beyond 1, below the least, NaN.
+            let ms: [f32; 8] = std::array::from_fn(|l| match (round + l) % 13 {
+                0 => f32::NAN,
+                1 => 3.0,
+                2 => 0.0,
+                k => (0.5 + (round % 7) as f32) / 8.0 * 10f32.powi(-((k % 8) as i32)),
+            });
+            let within = offset_ray_origin_lanes_within(
+                V3::from_lanes(&ps),
+                V3::from_lanes(&ns),
+                crate::simd::F8::from_array(ms),
+            );
             for l in 0..8 {
                 let (got, want) = (lanes.lane(l), offset_ray_origin(ps[l], ns[l]));
                 assert_eq!(
@@ -259,6 +382,18 @@ mod tests {
                     "p {} n {}",
                     ps[l],
                     ns[l]
+                );
+                let (got, want) = (
+                    within.lane(l),
+                    offset_ray_origin_within(ps[l], ns[l], ms[l]),
+                );
+                assert_eq!(
+                    got.to_array().map(f32::to_bits),
+                    want.to_array().map(f32::to_bits),
+                    "p {} n {} magnitude {}",
+                    ps[l],
+                    ns[l],
+                    ms[l]
                 );
             }
         }

@@ -178,7 +178,7 @@ impl Media {
                     inside.push(it.material);
                 }
             }
-            ray = ray.continued_past(it.p, it.ng);
+            ray = ray.continued_past(it.p, it.ng, it.magnitude);
         }
         // The first boundary left is the innermost volume.
         inside
@@ -264,7 +264,7 @@ impl Media {
                 }
             }
             // On from the far side, towards the same end (a target point or infinity).
-            ray = ray.continued_past(it.p, it.ng);
+            ray = ray.continued_past(it.p, it.ng, it.magnitude);
         }
         Vec3::ZERO
     }

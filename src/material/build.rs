@@ -247,7 +247,19 @@ fn layered_params(
         None => (Vec2::splat(alpha), Vec2::X),
     };
     let ior = if m.ior > 0.0 { m.ior } else { f32::INFINITY };
-    let relative = ior / ctx.outside_ior;
+    let mut specular_weight =
+        m.specular.weight * at.read(m.specular.weight_texture.as_ref(), false).w;
+    let mut relative = ior / ctx.outside_ior;
+    if m.volume.is_some() && m.transmits() && specular_weight != 1.0 && relative.is_finite() {
+        // A refracting boundary weakened by its specular weight: OpenPBR's effective IOR,
+        // whose F0 is the weight times the IOR's, so that refraction and total internal
+        // reflection follow the weaker reflection. Scaling the reflection alone would lose
+        // the rest of what total internal reflection returns (a subsurface walk meets the
+        // boundary from inside many times: the usd-wg shader ball's bubblegum, specular
+        // weight 0.383, rendered at 0.63 of Cycles' brightness that way).
+        relative = fresnel::weighted_ior(relative, specular_weight);
+        specular_weight = 1.0;
+    }
     let eta = match (m.volume, ctx.front) {
         (Some(_), false) => 1.0 / relative,
         _ => relative,
@@ -265,7 +277,6 @@ fn layered_params(
             (color * f0_ior).min(Vec3::ONE)
         }
     };
-    let specular_weight = m.specular.weight * at.read(m.specular.weight_texture.as_ref(), false).w;
     let sheen = m.sheen.map(|s| {
         sheen::Sheen::new(
             s.color * at.read(s.color_texture.as_ref(), true).truncate(),

@@ -27,6 +27,22 @@ pub fn normal_reflectance(eta: f32) -> f32 {
     ((eta - 1.0) / (eta + 1.0)).powi(2)
 }
 
+/// The relative IOR whose reflectance at normal incidence is `weight` times `eta`'s, on the
+/// same side of 1 (OpenPBR's modulation of a dielectric by its specular weight: weight 0 is
+/// an interface that neither reflects nor bends light). Weights that would make the
+/// reflectance reach 1 are held just below it.
+#[inline]
+pub fn weighted_ior(eta: f32, weight: f32) -> f32 {
+    let s = (weight.max(0.0) * normal_reflectance(eta))
+        .sqrt()
+        .min(0.999);
+    if eta >= 1.0 {
+        (1.0 + s) / (1.0 - s)
+    } else {
+        (1.0 - s) / (1.0 + s)
+    }
+}
+
 /// Reflectance and transmittance of a thin slab whose two faces each reflect `r` (light
 /// bouncing inside it any number of times, none absorbed): R = r + (1-r)² r / (1 - r²) =
 /// 2r / (1 + r), T = 1 - R, as Mitsuba 3's `thindielectric` computes them.
@@ -113,5 +129,22 @@ mod tests {
         assert!((reflected - series).abs() < 1e-6);
         assert!((reflected + transmitted - 1.0).abs() < 1e-6);
         assert_eq!(thin_slab(1.0), (1.0, 0.0));
+    }
+
+    #[test]
+    fn weighted_ior_scales_the_normal_reflectance() {
+        for eta in [1.584f32, 1.33, 1.0 / 1.5, 2.4] {
+            for w in [0.0f32, 0.383, 0.7, 1.0] {
+                let e = weighted_ior(eta, w);
+                let want = w * normal_reflectance(eta);
+                assert!(
+                    (normal_reflectance(e) - want).abs() < 1e-6,
+                    "{eta} {w}: {e}"
+                );
+                assert!(w == 0.0 || (e > 1.0) == (eta > 1.0), "{eta} {w}: {e}");
+            }
+        }
+        assert_eq!(weighted_ior(1.5, 0.0), 1.0);
+        assert!((weighted_ior(1.5, 1.0) - 1.5).abs() < 1e-5);
     }
 }

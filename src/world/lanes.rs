@@ -18,12 +18,20 @@ use glam::{Vec3, Vec4};
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShadingLanes {
     pub p: V3,
+    /// The magnitude `p`'s rounding error is relative to (`Interaction::magnitude`).
+    pub magnitude: F8,
     pub ng: V3,
     pub frame: [V3; 3],
 }
 
 /// Triangle hits gathered lane by lane for [`TriangleHits::shading`]: the triangles' vertex
 /// positions and shading normals, and the hits' barycentrics.
+/// The largest absolute coordinate of each lane's point.
+#[inline(always)]
+fn largest_coordinate(v: V3) -> F8 {
+    v.x.abs().max(v.y.abs()).max(v.z.abs())
+}
+
 pub(crate) struct TriangleHits {
     p: [[Vec3; LANES]; 3],
     n: [[Vec3; LANES]; 3],
@@ -72,6 +80,9 @@ impl TriangleHits {
         let [p0, p1, p2] = &self.p;
         let (p0, p1, p2) = (V3::from_lanes(p0), V3::from_lanes(p1), V3::from_lanes(p2));
         let p = p0 * b0 + p1 * b1 + p2 * b2;
+        let magnitude = largest_coordinate(p0)
+            .max(largest_coordinate(p1))
+            .max(largest_coordinate(p2));
         let n_front = (p1 - p0).cross_in_f64(p2 - p0).normalize();
         let [n0, n1, n2] = &self.n;
         let (n0, n1, n2) = (V3::from_lanes(n0), V3::from_lanes(n1), V3::from_lanes(n2));
@@ -108,6 +119,7 @@ impl TriangleHits {
         }
         ShadingLanes {
             p,
+            magnitude,
             ng,
             frame: frame_from_normal_lanes(ns),
         }

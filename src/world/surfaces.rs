@@ -88,6 +88,13 @@ pub const NO_LIGHT: u32 = u32::MAX;
 #[derive(Clone, Copy, Debug)]
 pub struct Interaction {
     pub p: Vec3,
+    /// The largest coordinate (render space) of the data `p` was computed from: the
+    /// primitive's corners, or a sphere's centre and radius. Its rounding error is relative
+    /// to this, so rays leaving `p` are offset by it (`geometry::ray::offset_ray_origin`)
+    /// rather than by the scene's size: a small object far from the scene's bounds keeps
+    /// offsets as small as its own precision allows (subsurface walks of a millimetre's
+    /// mean free path in a room-sized scene).
+    pub magnitude: f32,
     /// Unit geometric normal on the side the ray came from.
     pub ng: Vec3,
     /// Shading frame; `frame.n` is on the same side as `ng` and sees the ray's origin.
@@ -131,7 +138,17 @@ struct Cone {
 
 /// What a surface hit yields before it is turned to the ray's side: point, front geometric
 /// normal, front shading normal, attributes, material and tangent frame.
-type SurfacePoint = (Vec3, Vec3, Vec3, SurfaceAttributes, u32, Option<[Vec3; 3]>);
+/// Position, front geometric normal, front shading normal, attributes, material, tangent
+/// frame and the magnitude the position's rounding error is relative to.
+type SurfacePoint = (
+    Vec3,
+    Vec3,
+    Vec3,
+    SurfaceAttributes,
+    u32,
+    Option<[Vec3; 3]>,
+    f32,
+);
 
 #[cfg(test)]
 impl Surfaces {
@@ -387,34 +404,37 @@ impl Surfaces {
             width,
             isotropic,
         });
-        let (p, n_front, ns_front, attrs, material, tangents) = if hit.instance != NOT_PLACED {
-            self.placed_surface(hit, cone)
-        } else {
-            match self.prims[hit.prim as usize] {
-                PrimRef::Triangle { mesh, tri } => {
-                    self.triangle_surface(&self.meshes[mesh as usize], tri, hit, cone, None)
+        let (p, n_front, ns_front, attrs, material, tangents, magnitude) =
+            if hit.instance != NOT_PLACED {
+                self.placed_surface(hit, cone)
+            } else {
+                match self.prims[hit.prim as usize] {
+                    PrimRef::Triangle { mesh, tri } => {
+                        self.triangle_surface(&self.meshes[mesh as usize], tri, hit, cone, None)
+                    }
+                    PrimRef::Sphere(s) => {
+                        let s = &self.spheres[s as usize];
+                        // Back onto the sphere: the hit point along the ray carries t's rounding.
+                        let n = (ray.at(hit.t) - s.centre).normalize_or(Vec3::Y);
+                        (
+                            s.centre + s.radius * n,
+                            n,
+                            n,
+                            Self::shape_attributes(sphere::uv(n)),
+                            s.material,
+                            None,
+                            s.centre.abs().max_element() + s.radius,
+                        )
+                    }
+                    PrimRef::Quadric(q) => {
+                        let q = &self.quadrics[q as usize];
+                        let (p, n) = q.quadric.surface(ray.at(hit.t));
+                        let attrs = Self::shape_attributes(q.quadric.uv(p));
+                        // Quadrics keep the offsets relative to the scene's size.
+                        (p, n, n, attrs, q.material, None, 1.0)
+                    }
                 }
-                PrimRef::Sphere(s) => {
-                    let s = &self.spheres[s as usize];
-                    // Back onto the sphere: the hit point along the ray carries t's rounding.
-                    let n = (ray.at(hit.t) - s.centre).normalize_or(Vec3::Y);
-                    (
-                        s.centre + s.radius * n,
-                        n,
-                        n,
-                        Self::shape_attributes(sphere::uv(n)),
-                        s.material,
-                        None,
-                    )
-                }
-                PrimRef::Quadric(q) => {
-                    let q = &self.quadrics[q as usize];
-                    let (p, n) = q.quadric.surface(ray.at(hit.t));
-                    let attrs = Self::shape_attributes(q.quadric.uv(p));
-                    (p, n, n, attrs, q.material, None)
-                }
-            }
-        };
+            };
         let front = n_front.dot(wo) > 0.0;
         let ng = if front { n_front } else { -n_front };
         // Onto the side the ray came from; normals that disagree with the winding are
@@ -434,6 +454,7 @@ impl Surfaces {
         };
         Interaction {
             p,
+            magnitude,
             ng,
             frame: Frame::from_normal(ns),
             attrs,
@@ -450,7 +471,7 @@ impl Surfaces {
     fn placed_surface(&self, hit: &Hit, cone: Option<Cone>) -> SurfacePoint {
         let placed = &self.placements[hit.instance as usize];
         let mesh = &self.shared_meshes[placed.mesh as usize];
-        let (p, n, ns, attrs, material, tangents) =
+        let (p, n, ns, attrs, material, tangents, magnitude) =
             self.triangle_surface(mesh, hit.prim, hit, cone, Some(&placed.to_render));
         let n = (placed.normal_matrix * n).normalize_or_zero();
         let tangents = tangents.map(|[t, b, normal]| {
@@ -468,6 +489,7 @@ impl Surfaces {
             attrs,
             material,
             tangents,
+            magnitude,
         )
     }
 
@@ -486,6 +508,13 @@ impl Surfaces {
     ) -> SurfacePoint {
         let tri = mesh.triangles[tri as usize];
         let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
+        // In render space: placed corners as the placement moves them.
+        let magnitude = match to_render {
+            Some(m) => [p0, p1, p2].map(|p| m.transform_point3(p).abs().max_element()),
+            None => [p0, p1, p2].map(|p| p.abs().max_element()),
+        }
+        .into_iter()
+        .fold(0.0f32, f32::max);
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = p0 * b0 + p1 * b1 + p2 * b2;
@@ -530,7 +559,7 @@ impl Surfaces {
                 ns = mapped.normalize_or(n_front);
             }
         }
-        (p, n_front, ns, attrs, mesh.material, frame)
+        (p, n_front, ns, attrs, mesh.material, frame, magnitude)
     }
 
     /// Radiance emitted from `it` back along the ray that found it (zero for the back of

@@ -78,6 +78,12 @@ fn spp_factor(scene: &str, configuration: &[(&str, &str)]) -> u32 {
         && configuration.contains(&("mis", "bsdf-only"))
     {
         16
+    } else if scene == "glass-box" && configuration == [("guiding", "on")] {
+        // Guided samples find caustics through the glass that unguided ones rarely do: the
+        // block means are heavy-tailed at 1024 samples (one block 16 % low, |z| 5.5 by its
+        // sample variance), while 16384 samples of two seeds agree with the unguided image
+        // within 2.4 % (0.2118 and 0.2060 against 0.2110 and 0.2109).
+        4
     } else {
         1
     }

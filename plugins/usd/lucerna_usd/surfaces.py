@@ -604,6 +604,10 @@ def _multiple_scattering_albedo(albedo, g, eta):
     return matched * _dipole_reflectance(reduced, eta) / _dipole_reflectance(reduced, 1.0)
 
 
+#: The shortest mean free path of a subsurface channel, relative to the longest channel's.
+SHORTEST_MFP = 0.05
+
+
 def subsurface_medium(colour, mfp, anisotropy, ior=1.0):
     """(absorption, scattering, g) per unit length of OpenPBR's subsurface medium:
     extinction 1 / mean free path per channel, and the single-scattering albedo whose
@@ -613,6 +617,12 @@ def subsurface_medium(colour, mfp, anisotropy, ior=1.0):
     g = min(max(float(anisotropy), -0.99), 0.99)
     eta = max(float(ior), 1.0)
     absorption, scattering = [], []
+    # A channel of (nearly) no mean free path scatters right at the surface, as a diffuse
+    # reflection of its colour would (Cycles turns such channels into one): held at
+    # SHORTEST_MFP of the longest channel's, dense enough to be that and long enough for a
+    # walk to step through in single precision.
+    longest = max(float(r) for r in mfp)
+    mfp = [max(float(r), SHORTEST_MFP * longest) for r in mfp]
     for c, r in zip(colour, mfp):
         c = min(max(float(c), 0.0), 1.0)
         lo, hi = 0.0, 1.0

@@ -8,7 +8,7 @@ use super::shading::{Dim, NO_BSDF, Shading, Vertices};
 use super::state::{LaneState, PacketBuffers, Path, PathLanes};
 use super::weights::roulette_survival;
 use crate::geometry::cone::RayCone;
-use crate::geometry::ray::{Ray, offset_ray_origin_lanes};
+use crate::geometry::ray::{Ray, offset_ray_origin_lanes_within};
 use crate::geometry::triangle::Lanes;
 use crate::material::lanes::BsdfLanes;
 use crate::material::{self, Bsdf, BsdfStorage};
@@ -171,7 +171,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         // The other lanes' directions as +z (never read, but finite).
         let dir = V3::select(M8::from_bits(mask), lanes.ray.dir, V3::splat(Vec3::Z));
         let points = shading.lanes(mask, dir);
-        let origin = offset_ray_origin_lanes(points.p, points.ng);
+        let origin = offset_ray_origin_lanes_within(points.p, points.ng, points.magnitude);
         let mut v = Vertices {
             mask,
             first,

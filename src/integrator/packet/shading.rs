@@ -18,6 +18,7 @@ pub(super) const NO_BSDF: Bsdf<'static> = Bsdf::Lambert(Lambert { albedo: Vec3::
 /// Shading points that the scalar code computed, lane by lane.
 pub(super) struct ScalarShading {
     pub(super) p: [Vec3; LANES],
+    pub(super) magnitude: [f32; LANES],
     pub(super) ng: [Vec3; LANES],
     pub(super) frame: [[Vec3; LANES]; 3],
 }
@@ -27,6 +28,7 @@ impl ScalarShading {
     pub(super) fn new() -> Self {
         Self {
             p: [Vec3::ZERO; LANES],
+            magnitude: [1.0; LANES],
             ng: [Vec3::Z; LANES],
             frame: [[Vec3::X; LANES], [Vec3::Y; LANES], [Vec3::Z; LANES]],
         }
@@ -35,6 +37,7 @@ impl ScalarShading {
     #[inline(always)]
     pub(super) fn set(&mut self, lane: usize, it: &Interaction) {
         (self.p[lane], self.ng[lane]) = (it.p, it.ng);
+        self.magnitude[lane] = it.magnitude;
         let [s, t, n] = &mut self.frame;
         (s[lane], t[lane], n[lane]) = (it.frame.s, it.frame.t, it.frame.n);
     }
@@ -44,6 +47,7 @@ impl ScalarShading {
         let [s, t, n] = &self.frame;
         ShadingLanes {
             p: V3::from_lanes(&self.p),
+            magnitude: F8::from_array(self.magnitude),
             ng: V3::from_lanes(&self.ng),
             frame: [V3::from_lanes(s), V3::from_lanes(t), V3::from_lanes(n)],
         }
@@ -83,6 +87,7 @@ impl Shading {
         let [s, t, n] = computed.frame;
         ShadingLanes {
             p: V3::select(m, computed.p, scalar.p),
+            magnitude: F8::select(m, computed.magnitude, scalar.magnitude),
             ng: V3::select(m, computed.ng, scalar.ng),
             frame: [
                 V3::select(m, s, scalar.frame[0]),

@@ -25,6 +25,10 @@ use crate::medium::Flight;
 use crate::sampling::sampler::{Sampler, VertexSample};
 use glam::Vec3;
 
+/// Bounces a path may take at medium vertices before throughput roulette caps its survival
+/// (`roulette::ROULETTE_CAP_DEPTH` counts from there).
+const MEDIUM_UNCAPPED_BOUNCES: u32 = 1024;
+
 /// The lobe shares of light first scattered in a medium: none of a surface's, which the
 /// film reads as the medium's (the `volume_direct` and `volume_indirect` layers).
 const MEDIUM_LOBES: PerLobe = [Vec3::ZERO; 3];
@@ -117,7 +121,12 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
             rr => rr,
         };
         let throughput = luminance(beta) * path.media.radiance_scale(&self.world.surfaces);
-        let survival = rr.survival(throughput, depth);
+        // A walk through a dense medium of albedo near 1 (subsurface scattering of a bright
+        // colour) takes hundreds of steps before it leaves; the roulette's cap on survival
+        // after a few bounces would end nearly all of them and weigh the rare survivors by
+        // 0.95^-n (fireflies). Medium vertices count towards the cap only after
+        // MEDIUM_UNCAPPED_BOUNCES; throughput still ends absorbing walks.
+        let survival = rr.survival(throughput, depth.saturating_sub(MEDIUM_UNCAPPED_BOUNCES));
         if survival < 1.0 {
             if !(vs.rr < survival) {
                 return None;

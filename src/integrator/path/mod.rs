@@ -47,7 +47,7 @@ use super::split::{FirstSplit, SampleParts, SamplePoints};
 use crate::color::luminance;
 use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
-use crate::geometry::ray::{Ray, offset_past, offset_ray_origin};
+use crate::geometry::ray::{Ray, offset_past, offset_ray_origin_within};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::medium::Medium;
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
@@ -119,7 +119,7 @@ impl Vertex<'_> {
     #[inline]
     fn origin(&self, below: bool) -> Vec3 {
         if below {
-            offset_ray_origin(self.it.p, -self.it.ng)
+            offset_ray_origin_within(self.it.p, -self.it.ng, self.it.magnitude)
         } else {
             self.origin
         }
@@ -456,7 +456,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     media: path.media.beyond(&it, m, true),
                     ..path.past_filter(arrived)
                 };
-                ray = Ray::new(offset_past(it.p, it.ng, ray.dir), ray.dir);
+                ray = Ray::new(offset_past(it.p, it.ng, ray.dir, it.magnitude), ray.dir);
                 continue;
             }
             let ctx = it.shading_context(path.media.outside_ior(surfaces, &it));
@@ -516,7 +516,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 material: m,
                 bsdf: &bsdf,
                 wo,
-                origin: offset_ray_origin(it.p, it.ng),
+                origin: offset_ray_origin_within(it.p, it.ng, it.magnitude),
                 arrived,
                 guide: guide_cell.and_then(|c| self.guide.and_then(|g| g.at(c))),
                 cell: guide_cell,
