@@ -165,11 +165,48 @@ def _render(scene, out, *args, env="1,1,1"):
     return oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[:, :, :3]
 
 
+def _box_twin(folder, lo, hi, camera, medium):
+    """Writes folder/twin.gltf: an interface box from `lo` to `hi` holding `medium`
+    (extras.lucerna.medium), seen by the 50 mm camera of the stages here at `camera`."""
+    import json
+    corners = [[(lo, hi)[i & 1][0], (lo, hi)[i >> 1 & 1][1], (lo, hi)[i >> 2 & 1][2]] for i in range(8)]
+    triangles = [0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2,
+                 1, 3, 7, 1, 7, 5]
+    positions = np.asarray(corners, dtype="<f4").tobytes()
+    indices = np.asarray(triangles, dtype="<u4").tobytes()
+    (folder / "box.bin").write_bytes(positions + indices)
+    doc = {
+        "asset": {"version": "2.0"},
+        "scene": 0, "scenes": [{"nodes": [0, 1]}],
+        "nodes": [{"mesh": 0}, {"camera": 0, "translation": list(camera)}],
+        "cameras": [{"type": "perspective", "perspective": {"yfov": float(2 * np.arctan(20.955 / 100)),
+                                                              "aspectRatio": 1.0, "znear": 0.01}}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
+        "materials": [{"extras": {"lucerna": {"bsdf": "interface", "medium": medium}}}],
+        "buffers": [{"uri": "box.bin", "byteLength": len(positions) + len(indices)}],
+        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
+                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
+        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
+                       "min": [float(v) for v in lo], "max": [float(v) for v in hi]},
+                      {"bufferView": 1, "componentType": 5125, "count": 36, "type": "SCALAR"}],
+    }
+    (folder / "twin.gltf").write_text(json.dumps(doc))
+
+
+def _agree_within_noise(usd, gltf):
+    """The box is placed by an instance's transform in one and baked into the positions in
+    the other, so hit points differ in their last bits, and with them the seeds of the
+    walks through the grid: the renders differ by noise, and the mean difference stays
+    within 4 standard errors of the pixels'."""
+    difference = (usd - gltf).mean(axis=2).ravel()
+    error = difference.std() / np.sqrt(difference.size)
+    assert abs(difference.mean()) < 4 * error, (difference.mean(), error)
+
+
 def test_a_volume_renders_as_its_gltf_twin(stage_file, tmp_path):
     """The plume as a USD Volume (standard_volume: density 90, albedo (0.9, 0.8, 0.65),
     g 0.3) renders as the same grid inside the same box in glTF: the box the renderer puts
     around a Volume is the grid's padded box, so both follow the same paths."""
-    import json
     shutil.copy(PLUME, tmp_path / "plume.vdb")
     camera = '''
 def Camera "Camera" {
@@ -206,42 +243,15 @@ def Material "Smoke" {
     lo_index, hi_index = np.array([1, -1, 2]) - 0.5, np.array([36, 36, 34]) + 0.5
     voxel, origin = 0.009, np.array([0.1045, 0.0045, 0.1245])
     lo, hi = origin + voxel * lo_index, origin + voxel * hi_index
-    corners = [[(lo, hi)[i & 1][0], (lo, hi)[i >> 1 & 1][1], (lo, hi)[i >> 2 & 1][2]] for i in range(8)]
-    triangles = [0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2,
-                 1, 3, 7, 1, 7, 5]
-    positions = np.asarray(corners, dtype="<f4").tobytes()
-    indices = np.asarray(triangles, dtype="<u4").tobytes()
-    (tmp_path / "box.bin").write_bytes(positions + indices)
     extinction, albedo = 90.0, np.array([0.9, 0.8, 0.65])
-    doc = {
-        "asset": {"version": "2.0"},
-        "scene": 0, "scenes": [{"nodes": [0, 1]}],
-        "nodes": [{"mesh": 0}, {"camera": 0, "translation": [0.28, 0.18, 1.2]}],
-        "cameras": [{"type": "perspective", "perspective": {"yfov": float(2 * np.arctan(20.955 / 100)),
-                                                              "aspectRatio": 1.0, "znear": 0.01}}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
-        "materials": [{"extras": {"lucerna": {"bsdf": "interface", "medium": {
-            "scattering": list(extinction * albedo), "absorption": list(extinction * (1 - albedo)),
-            "anisotropy": 0.3, "density": "plume.vdb"}}}}],
-        "buffers": [{"uri": "box.bin", "byteLength": len(positions) + len(indices)}],
-        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
-                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
-                       "min": [float(v) for v in lo], "max": [float(v) for v in hi]},
-                      {"bufferView": 1, "componentType": 5125, "count": 36, "type": "SCALAR"}],
-    }
-    (tmp_path / "twin.gltf").write_text(json.dumps(doc))
+    _box_twin(tmp_path, lo, hi, (0.28, 0.18, 1.2), {
+        "scattering": list(extinction * albedo), "absorption": list(extinction * (1 - albedo)),
+        "anisotropy": 0.3, "density": "plume.vdb"})
     usd = _render(stage, tmp_path / "usd.exr", "--no-validate")
     gltf = _render(tmp_path / "twin.gltf", tmp_path / "gltf.exr")
     # The plume is there: its pixels are darker than the white environment behind it.
     assert usd.min() < 0.5 and usd.max() > 0.9
-    # The box is placed by an instance's transform in one and baked into the positions in
-    # the other, so hit points differ in their last bits, and with them the seeds of the
-    # walks through the grid: the renders differ by noise, and the mean difference stays
-    # within 4 standard errors of the pixels'.
-    difference = (usd - gltf).mean(axis=2).ravel()
-    error = difference.std() / np.sqrt(difference.size)
-    assert abs(difference.mean()) < 4 * error, (difference.mean(), error)
+    _agree_within_noise(usd, gltf)
 
 
 FIRE_STAGE = '''
@@ -284,43 +294,19 @@ def test_a_fire_renders_as_its_gltf_twin(stage_file, tmp_path):
     as a USD Volume with standard_volume blackbody emission renders as its glTF twin, whose
     interface box holds both grids: the box the renderer puts around a Volume covers the
     temperature grid too, so the flame's foot is not cut off."""
-    import json
     shutil.copy(FIRE, tmp_path / "fire.vdb")
     stage = stage_file(FIRE_STAGE)
     # The union of the grids' padded boxes (index -1.5 to 32.5, 56.5 in y: the density's
     # active voxels 0..31, 11..55, 0..31, the temperature's 8..23, 0..39, 8..23), 1 cm voxels.
     origin = np.array([-0.16, 0.0, -0.16])
     lo, hi = origin + 0.01 * np.array([-1.5, -1.5, -1.5]), origin + 0.01 * np.array([32.5, 56.5, 32.5])
-    corners = [[(lo, hi)[i & 1][0], (lo, hi)[i >> 1 & 1][1], (lo, hi)[i >> 2 & 1][2]] for i in range(8)]
-    triangles = [0, 2, 3, 0, 3, 1, 4, 5, 7, 4, 7, 6, 0, 1, 5, 0, 5, 4, 2, 6, 7, 2, 7, 3, 0, 4, 6, 0, 6, 2,
-                 1, 3, 7, 1, 7, 5]
-    positions = np.asarray(corners, dtype="<f4").tobytes()
-    indices = np.asarray(triangles, dtype="<u4").tobytes()
-    (tmp_path / "box.bin").write_bytes(positions + indices)
-    doc = {
-        "asset": {"version": "2.0"},
-        "scene": 0, "scenes": [{"nodes": [0, 1]}],
-        "nodes": [{"mesh": 0}, {"camera": 0, "translation": [0.0, 0.2, 1.0]}],
-        "cameras": [{"type": "perspective", "perspective": {"yfov": float(2 * np.arctan(20.955 / 100)),
-                                                              "aspectRatio": 1.0, "znear": 0.01}}],
-        "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "material": 0}]}],
-        "materials": [{"extras": {"lucerna": {"bsdf": "interface", "medium": {
-            "scattering": [6.0, 6.0, 6.0], "absorption": [14.0, 14.0, 14.0], "density": "fire.vdb",
-            "density_grid": "density", "blackbody": {"temperature": "fire.vdb", "kelvin": 3000.0}}}}}],
-        "buffers": [{"uri": "box.bin", "byteLength": len(positions) + len(indices)}],
-        "bufferViews": [{"buffer": 0, "byteLength": len(positions)},
-                        {"buffer": 0, "byteOffset": len(positions), "byteLength": len(indices)}],
-        "accessors": [{"bufferView": 0, "componentType": 5126, "count": 8, "type": "VEC3",
-                       "min": [float(v) for v in lo], "max": [float(v) for v in hi]},
-                      {"bufferView": 1, "componentType": 5125, "count": 36, "type": "SCALAR"}],
-    }
-    (tmp_path / "twin.gltf").write_text(json.dumps(doc))
+    _box_twin(tmp_path, lo, hi, (0.0, 0.2, 1.0), {
+        "scattering": [6.0, 6.0, 6.0], "absorption": [14.0, 14.0, 14.0], "density": "fire.vdb",
+        "density_grid": "density", "blackbody": {"temperature": "fire.vdb", "kelvin": 3000.0}})
     usd = _render(stage, tmp_path / "usd.exr", "--no-validate", env="0.02,0.02,0.02")
     gltf = _render(tmp_path / "twin.gltf", tmp_path / "gltf.exr", env="0.02,0.02,0.02")
     # The flame glows orange against the dim sky, down to its foot below the smoke.
     assert usd.max() > 0.2 and (usd[..., 0] > 2 * usd[..., 2]).any()
     foot = usd[34:44, 20:28].mean(axis=(0, 1))
     assert foot[0] > 0.05, foot
-    difference = (usd - gltf).mean(axis=2).ravel()
-    error = difference.std() / np.sqrt(difference.size)
-    assert abs(difference.mean()) < 4 * error, (difference.mean(), error)
+    _agree_within_noise(usd, gltf)
