@@ -254,9 +254,8 @@ fn layered_params(
         // A refracting boundary weakened by its specular weight: OpenPBR's effective IOR,
         // whose F0 is the weight times the IOR's, so that refraction and total internal
         // reflection follow the weaker reflection. Scaling the reflection alone would lose
-        // the rest of what total internal reflection returns (a subsurface walk meets the
-        // boundary from inside many times: the usd-wg shader ball's bubblegum, specular
-        // weight 0.383, rendered at 0.63 of Cycles' brightness that way).
+        // the rest of what total internal reflection returns, at every hit from inside (a
+        // subsurface walk meets its boundary many times).
         relative = fresnel::weighted_ior(relative, specular_weight);
         specular_weight = 1.0;
     }
