@@ -94,7 +94,8 @@ impl Heterogeneous {
         let sigma_t = sigma_a + sigma_s;
         let sigma_max = sigma_t.max_element();
         let density = Lattice::new(grid, world_to_render);
-        let densest = grid.max_density();
+        // The largest cell majorant is the largest density.
+        let densest = density.largest_majorant();
         let emission_rate = if densest > 0.0 {
             sigma_max.max(EMISSION_SAMPLES * density.voxels_per_unit() / densest)
         } else {
@@ -306,8 +307,9 @@ impl Heterogeneous {
 
 impl Fire {
     fn new(t: Temperature, world_to_render: DMat4) -> Option<Self> {
-        let glow = Glow::new(t.grid.max_density(), t.kelvin_per_unit, t.scale)?;
         let mut temperature = Lattice::new(t.grid, world_to_render);
+        // The largest cell majorant is the hottest value, before it becomes a radiance bound.
+        let glow = Glow::new(temperature.largest_majorant(), t.kelvin_per_unit, t.scale)?;
         temperature.map_majorants(|m| glow.bound(m));
         let rate =
             EMISSION_SAMPLES * temperature.voxels_per_unit() / temperature.largest_majorant();

@@ -713,16 +713,8 @@ fn read_volume(
                 read,
             )
             .map_err(|(field, reason)| (format!(".temperature{field}"), reason))?;
-            let hottest = f64::from(grid.max_density()) * f64::from(blackbody.kelvin);
-            if hottest > super::Blackbody::HOTTEST {
-                return Err((
-                    ".temperature".into(),
-                    format!(
-                        "the grid reaches {hottest:e} K (its largest value times the blackbody's \
-                         kelvin), beyond {:e} K",
-                        super::Blackbody::HOTTEST
-                    ),
-                ));
+            if let Some(reason) = blackbody.too_hot(&grid) {
+                return Err((".temperature".into(), reason));
             }
             Some(grid)
         }
@@ -1260,10 +1252,10 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                             && b.intensity >= 0.0
                             && colour(b.tint)
                             && b.temperature.is_none_or(|g| {
-                                scene.grids.get(g as usize).is_some_and(|t| {
-                                    f64::from(t.max_density()) * f64::from(b.kelvin)
-                                        <= super::Blackbody::HOTTEST
-                                })
+                                scene
+                                    .grids
+                                    .get(g as usize)
+                                    .is_some_and(|t| b.too_hot(t).is_none())
                             })
                     })
             })

@@ -159,6 +159,19 @@ impl Blackbody {
     /// The hottest temperature a grid may reach, in kelvin: the radiance of hotter gas
     /// (10⁻¹⁴ T⁴ per metre) overflows single precision within a few voxels.
     pub const HOTTEST: f64 = 1e6;
+
+    /// Why `temperature` cannot be this blackbody's grid (its largest value times `kelvin`
+    /// is hotter than [`Self::HOTTEST`]); `None` where it can.
+    pub fn too_hot(&self, temperature: &super::DensityGrid) -> Option<String> {
+        let hottest = f64::from(temperature.max_density()) * f64::from(self.kelvin);
+        (hottest > Self::HOTTEST).then(|| {
+            format!(
+                "the temperature grid reaches {hottest:e} K (its largest value times kelvin), \
+                 beyond {:e} K",
+                Self::HOTTEST
+            )
+        })
+    }
 }
 
 fn white() -> Vec3 {

@@ -508,13 +508,16 @@ impl Surfaces {
     ) -> SurfacePoint {
         let tri = mesh.triangles[tri as usize];
         let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
-        // In render space: placed corners as the placement moves them.
-        let magnitude = match to_render {
-            Some(m) => [p0, p1, p2].map(|p| m.transform_point3(p).abs().max_element()),
-            None => [p0, p1, p2].map(|p| p.abs().max_element()),
-        }
-        .into_iter()
-        .fold(0.0f32, f32::max);
+        // The corners in render space (where the placement moves them): the magnitude of
+        // the point's data, and the footprint's triangle.
+        let corners = match to_render {
+            Some(m) => [p0, p1, p2].map(|p| m.transform_point3(p)),
+            None => [p0, p1, p2],
+        };
+        let magnitude = corners
+            .iter()
+            .map(|c| c.abs().max_element())
+            .fold(0.0f32, f32::max);
         let (b1, b2) = (hit.b1, hit.b2);
         let b0 = 1.0 - b1 - b2;
         let p = p0 * b0 + p1 * b1 + p2 * b2;
@@ -523,10 +526,6 @@ impl Surfaces {
         let mat = &self.materials[mesh.material as usize];
         let [i0, i1, i2] = tri.map(|i| i as usize);
         if let Some(cone) = cone {
-            let corners = match to_render {
-                Some(m) => [p0, p1, p2].map(|p| m.transform_point3(p)),
-                None => [p0, p1, p2],
-            };
             for (set, uvs) in mesh.uvs.iter().enumerate() {
                 if let Some(uvs) = uvs {
                     let uv = [uvs[i0], uvs[i1], uvs[i2]];

@@ -226,24 +226,18 @@ impl<'a> Importer<'a> {
                         element,
                         "blackbody.temperature",
                     )?;
-                    let hottest =
-                        f64::from(self.scene.grids[g as usize].max_density()) * f64::from(b.kelvin);
-                    if hottest > scene::Blackbody::HOTTEST {
-                        return Err(self.err(
-                            format!("{element}.extras.lucerna.medium.blackbody"),
-                            format!(
-                                "the temperature grid reaches {hottest:e} K (its largest value \
-                                 times kelvin), beyond {:e} K",
-                                scene::Blackbody::HOTTEST
-                            ),
-                        ));
-                    }
-                    Some(scene::Blackbody {
+                    let blackbody = scene::Blackbody {
                         temperature: Some(g),
                         kelvin: b.kelvin,
                         intensity: b.intensity,
                         tint: b.tint.as_ref().map_or(Vec3::ONE, SpecularValue::rgb),
-                    })
+                    };
+                    if let Some(reason) = blackbody.too_hot(&self.scene.grids[g as usize]) {
+                        return Err(
+                            self.err(format!("{element}.extras.lucerna.medium.blackbody"), reason)
+                        );
+                    }
+                    Some(blackbody)
                 }
                 None => None,
             };
