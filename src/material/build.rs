@@ -104,7 +104,7 @@ fn build(
                 roughness *= mr.y;
                 metallic *= mr.z;
             }
-            let transmission = if m.transmits() {
+            let transmission = if m.transmits_specularly() {
                 m.transmission * slot(textures, m.transmission_texture.as_ref(), attrs).x
             } else {
                 0.0
@@ -112,7 +112,7 @@ fn build(
             if let Some(b) = reduced_bsdf(m, base, metallic, roughness, transmission) {
                 return Built::Compact(b);
             }
-            if m.transmits()
+            if m.transmits_specularly()
                 && let Some(b) = dielectric_bsdf(m, base, metallic, roughness, transmission, ctx)
             {
                 return Built::Compact(b);
@@ -144,8 +144,8 @@ fn build(
 
 /// The simpler BSDF a glTF material is at a point where its other lobes weigh nothing, or
 /// `None`: where the specular layer's weight is zero (KHR_materials_specular
-/// `specularFactor` 0) and the point is neither metal nor transmitting nor coated nor
-/// sheened, the layered model is exactly Lambert's (its diffuse base, under a layer that
+/// `specularFactor` 0) and the point is neither metal nor transmitting (specularly or
+/// diffusely) nor coated nor sheened, the layered model is exactly Lambert's (its diffuse base, under a layer that
 /// reflects nothing); where the point is all metal, uncoated, without sheen, iridescence or
 /// anisotropy, it is exactly `gltf_pbr`'s conductor (the specular extension does not apply
 /// to metals). Factors multiply their textures, so a zero factor is zero everywhere; the
@@ -165,6 +165,7 @@ fn reduced_bsdf(
     if m.specular.weight == 0.0
         && metallic <= 0.0
         && transmission <= 0.0
+        && !m.translucent()
         && m.diffuse_roughness == 0.0
     {
         return Some(Bsdf::Lambert(Lambert {
@@ -250,7 +251,11 @@ fn layered_params(
     let mut specular_weight =
         m.specular.weight * at.read(m.specular.weight_texture.as_ref(), false).w;
     let mut relative = ior / ctx.outside_ior;
-    if m.volume.is_some() && m.transmits() && specular_weight != 1.0 && relative.is_finite() {
+    if m.volume.is_some()
+        && m.transmits_specularly()
+        && specular_weight != 1.0
+        && relative.is_finite()
+    {
         // A refracting boundary weakened by its specular weight: OpenPBR's effective IOR,
         // whose F0 is the weight times the IOR's, so that refraction and total internal
         // reflection follow the weaker reflection. Scaling the reflection alone would lose
@@ -310,7 +315,7 @@ fn layered_params(
         transmission_tint: m.transmission_color.unwrap_or(base),
         thin: m.volume.is_none(),
         eta,
-        exact: m.transmits(),
+        exact: m.transmits_specularly(),
         f0,
         specular_weight,
         sheen,
@@ -320,6 +325,12 @@ fn layered_params(
         film: film.filter(|f| f.factor > 0.0),
         multiscatter: m.multiscatter,
         diffuse_roughness: m.diffuse_roughness,
+        translucency: m
+            .diffuse_transmission
+            .map_or(0.0, |d| d.factor * at.read(d.texture.as_ref(), false).w),
+        translucency_color: m.diffuse_transmission.map_or(Vec3::ONE, |d| {
+            d.color * at.read(d.color_texture.as_ref(), true).truncate()
+        }),
     }
 }
 

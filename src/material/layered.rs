@@ -8,6 +8,7 @@
 //! material = mix(dielectric, metal, metallic)
 //! metal      = F_m(v·h) specular_brdf,                  F_m = schlick(base) (iridescent: mixed)
 //! dielectric = F_d(v·h) specular_brdf + (1 - max F_d) mix(diffuse, base btdf, transmission)
+//! diffuse    = mix(diffuse_brdf(base), diffuse_btdf(translucency colour), translucency)
 //! F_d = weight (f0 + (1 - f0) s(v·h)),  f0 = min(F0(ior) specular_colour, 1)
 //! ```
 //!
@@ -32,9 +33,16 @@
 //! blended from the opaque one's by the transmitting share (1 - metallic) transmission.
 //! Iridescence's and the sheen's effect on the average Fresnel are not counted.
 //!
-//! Sampling picks one lobe (coat, sheen, specular reflection, transmission, diffuse) with
-//! probabilities proportional to their albedo estimates at `wo`; a direction's density is
-//! the mixture's. The sheen counts as diffuse in the lobe layers (Cycles does the same).
+//! Diffuse transmission (KHR_materials_diffuse_transmission) is a Lambertian lobe on the
+//! other side (colour / π · |cos θi|), weighted as the diffuse reflection it replaces; its
+//! Fresnel weight is taken at the half vector of `wo` and `wi` mirrored to `wo`'s side, as
+//! a thin wall's rough transmission does. It counts as diffuse in the lobe layers, where
+//! Cycles puts its Translucent BSDF.
+//!
+//! Sampling picks one lobe (coat, sheen, specular reflection, transmission, diffuse,
+//! diffuse transmission) with probabilities proportional to their albedo estimates at `wo`;
+//! a direction's density is the mixture's. The sheen counts as diffuse in the lobe layers
+//! (Cycles does the same).
 
 use super::dielectric::{flip, reflection_pdf, rough_reflection, rough_refraction};
 use super::energy::{self, Masking};
@@ -98,6 +106,10 @@ pub struct LayeredParams {
     pub multiscatter: bool,
     /// Diffuse roughness in [0, 1] (0: Lambert; above, OpenPBR's EON).
     pub diffuse_roughness: f32,
+    /// Share of the diffuse base that is Lambertian transmission, in [0, 1].
+    pub translucency: f32,
+    /// The colour of the diffuse transmission.
+    pub translucency_color: Vec3,
 }
 
 /// The layered glTF BSDF at one surface point.
@@ -112,13 +124,15 @@ pub struct Layered {
     f0_interface: f32,
 }
 
-/// Lobe selection probabilities at `wo`: coat, sheen, specular, transmission, diffuse.
-type Probabilities = [f32; 5];
+/// Lobe selection probabilities at `wo`: coat, sheen, specular, transmission, diffuse,
+/// diffuse transmission.
+type Probabilities = [f32; 6];
 const COAT: usize = 0;
 const SHEEN: usize = 1;
 const SPECULAR: usize = 2;
 const TRANSMISSION: usize = 3;
 const DIFFUSE: usize = 4;
+const TRANSLUCENT: usize = 5;
 
 impl Layered {
     pub fn new(p: LayeredParams) -> Self {
@@ -127,6 +141,12 @@ impl Layered {
         p.metallic = p.metallic.clamp(0.0, 1.0);
         p.transmission = p.transmission.clamp(0.0, 1.0);
         p.transmission_tint = p.transmission_tint.clamp(Vec3::ZERO, Vec3::ONE);
+        p.translucency = if p.translucency.is_finite() {
+            p.translucency.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        p.translucency_color = p.translucency_color.clamp(Vec3::ZERO, Vec3::ONE);
         p.coat = p.coat.clamp(0.0, 1.0);
         p.diffuse_roughness = if p.diffuse_roughness.is_finite() {
             p.diffuse_roughness.clamp(0.0, 1.0)
@@ -320,16 +340,18 @@ impl Layered {
         let fm = self.metal_fresnel(cos);
         let specular = below * (luminance(fd) * (1.0 - p.metallic) + luminance(fm) * p.metallic);
         let rest = below * (1.0 - p.metallic) * (1.0 - fd.max_element());
+        let diffuse = rest * (1.0 - p.transmission);
         let mut w = [
             c,
             under * sheen,
             specular,
             rest * p.transmission * luminance(p.transmission_tint),
-            rest * (1.0 - p.transmission) * luminance(p.base),
+            diffuse * (1.0 - p.translucency) * luminance(p.base),
+            diffuse * p.translucency * luminance(p.translucency_color),
         ];
         let total: f32 = w.iter().sum();
         if !(total > 0.0) {
-            return [0.0, 0.0, 1.0, 0.0, 0.0];
+            return [0.0, 0.0, 1.0, 0.0, 0.0, 0.0];
         }
         w.iter_mut().for_each(|x| *x /= total);
         w
@@ -360,8 +382,10 @@ impl Layered {
                 let f = fd * (1.0 - p.metallic) + self.metal_fresnel(v_h) * p.metallic;
                 lobes[1] += f * self.specular_energy(wo).0 * (dg * under);
             }
-            let diffuse_weight =
-                (1.0 - p.metallic) * (1.0 - p.transmission) * (1.0 - fd.max_element());
+            let diffuse_weight = (1.0 - p.metallic)
+                * (1.0 - p.transmission)
+                * (1.0 - p.translucency)
+                * (1.0 - fd.max_element());
             let diffuse_brdf = if p.diffuse_roughness > 0.0 {
                 oren_nayar::eval(p.base, p.diffuse_roughness, wo, wi)
             } else {
@@ -383,20 +407,36 @@ impl Layered {
                     lobes[1] += Vec3::splat(f_cos);
                 }
             }
-        } else if p.transmission > 0.0 && p.metallic < 1.0 && !self.specular_smooth() {
-            let (wo_a, wi_a) = (self.to_aniso(wo), self.to_aniso(wi));
-            let weight = (1.0 - p.metallic) * p.transmission * under * self.specular_energy(wo).1;
-            if p.thin {
-                if let Some((h_a, value)) = rough_reflection(&self.ggx, wo_a, flip(wi_a)) {
-                    let fd = self.dielectric_fresnel(wo_a.dot(h_a));
-                    lobes[2] = p.transmission_tint * ((1.0 - fd.max_element()) * value * weight);
-                }
-            } else if let Some(r) = rough_refraction(&self.ggx, wo_a, wi_a, p.eta) {
-                let fd = self.dielectric_fresnel(wo_a.dot(r.wm));
-                lobes[2] = p.transmission_tint * ((1.0 - fd.max_element()) * r.value * weight);
+        } else {
+            if p.translucency > 0.0 && p.metallic < 1.0 {
+                let fd = self.dielectric_fresnel(wo.dot((wo + flip(wi)).normalize()));
+                let weight = (1.0 - p.metallic)
+                    * (1.0 - p.transmission)
+                    * p.translucency
+                    * (1.0 - fd.max_element());
+                lobes[0] += p.translucency_color * (FRAC_1_PI * weight * -wi.z * under);
+            }
+            if p.transmission > 0.0 && p.metallic < 1.0 && !self.specular_smooth() {
+                lobes[2] = self.rough_transmission(wo, wi, under);
             }
         }
         lobes
+    }
+
+    /// f · |cos θi| of the rough specular transmission towards `wi` below the surface,
+    /// `under` the share the layers above let through.
+    fn rough_transmission(&self, wo: Vec3, wi: Vec3, under: f32) -> Vec3 {
+        let p = &self.p;
+        let (wo_a, wi_a) = (self.to_aniso(wo), self.to_aniso(wi));
+        let weight = (1.0 - p.metallic) * p.transmission * under * self.specular_energy(wo).1;
+        let (h_a, value) = if p.thin {
+            rough_reflection(&self.ggx, wo_a, flip(wi_a))
+        } else {
+            rough_refraction(&self.ggx, wo_a, wi_a, p.eta).map(|r| (r.wm, r.value))
+        }
+        .unwrap_or((Vec3::Z, 0.0));
+        let fd = self.dielectric_fresnel(wo_a.dot(h_a));
+        p.transmission_tint * ((1.0 - fd.max_element()) * value * weight)
     }
 
     /// f · |cos θi| of the non-delta lobes.
@@ -430,7 +470,10 @@ impl Layered {
                         * reflection_pdf(&self.coat_ggx, wo_c, (wo_c + wi_c).normalize());
                 }
             }
-        } else if prob[TRANSMISSION] > 0.0 && !self.specular_smooth() {
+        } else {
+            pdf += prob[TRANSLUCENT] * cosine_hemisphere_pdf(flip(wi));
+        }
+        if wi.z < 0.0 && prob[TRANSMISSION] > 0.0 && !self.specular_smooth() {
             let (wo_a, wi_a) = (self.to_aniso(wo), self.to_aniso(wi));
             pdf += prob[TRANSMISSION]
                 * if p.thin {
@@ -519,10 +562,14 @@ impl Layered {
                 };
                 (self.aniso_to_local(wi_a), Lobe::GlossyTransmission)
             }
+            TRANSLUCENT => (
+                flip(square_to_cosine_hemisphere(u)),
+                Lobe::DiffuseTransmission,
+            ),
             // The sheen and the diffuse base are both sampled by the cosine.
             _ => (square_to_cosine_hemisphere(u), Lobe::Diffuse),
         };
-        let transmitted = kind == Lobe::GlossyTransmission;
+        let transmitted = matches!(kind, Lobe::GlossyTransmission | Lobe::DiffuseTransmission);
         if wi.z == 0.0 || (wi.z < 0.0) != transmitted {
             return None;
         }
@@ -540,7 +587,7 @@ impl Layered {
 
     /// True if some lobe transmits.
     pub fn transmits(&self) -> bool {
-        self.p.transmission > 0.0 && self.p.metallic < 1.0
+        (self.p.transmission > 0.0 || self.p.translucency > 0.0) && self.p.metallic < 1.0
     }
 
     /// The weight of the straight-through delta lobe (a smooth thin wall) for light
@@ -574,8 +621,11 @@ impl Layered {
         let fd = self.dielectric_fresnel(cos);
         let specular = (fd * (1.0 - p.metallic) + self.metal_fresnel(cos) * p.metallic) * below;
         let rest = (1.0 - p.metallic) * (1.0 - fd.max_element()) * below;
+        let diffuse = rest * (1.0 - p.transmission);
         [
-            p.base * (rest * (1.0 - p.transmission)) + sheen * under,
+            p.base * (diffuse * (1.0 - p.translucency))
+                + p.translucency_color * (diffuse * p.translucency)
+                + sheen * under,
             specular + Vec3::splat(c),
             p.transmission_tint * (rest * p.transmission),
         ]

@@ -58,6 +58,9 @@ pub enum Lobe {
     Specular,
     /// Rough transmission (refraction through a rough interface, or a rough thin slab).
     GlossyTransmission,
+    /// Lambertian transmission to the other side (KHR_materials_diffuse_transmission): it
+    /// crosses the surface but counts as diffuse in the lobe layers.
+    DiffuseTransmission,
     /// Delta transmission bent by refraction (a smooth volume boundary).
     SpecularTransmission,
     /// Delta transmission straight through (a smooth thin wall): the surface is a filter
@@ -71,7 +74,7 @@ impl Lobe {
     #[inline]
     pub fn kind(self) -> usize {
         match self {
-            Self::Diffuse => 0,
+            Self::Diffuse | Self::DiffuseTransmission => 0,
             Self::Glossy | Self::Specular => 1,
             Self::GlossyTransmission | Self::SpecularTransmission | Self::StraightTransmission => 2,
         }
@@ -116,7 +119,10 @@ impl BsdfSample {
     pub fn is_transmission(&self) -> bool {
         matches!(
             self.lobe,
-            Lobe::GlossyTransmission | Lobe::SpecularTransmission | Lobe::StraightTransmission
+            Lobe::GlossyTransmission
+                | Lobe::DiffuseTransmission
+                | Lobe::SpecularTransmission
+                | Lobe::StraightTransmission
         )
     }
 }

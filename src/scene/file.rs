@@ -1262,6 +1262,8 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
             && unit(m.specular.weight)
             && colour(m.specular.color)
             && m.sheen.is_none_or(|s| colour(s.color) && unit(s.roughness))
+            && m.diffuse_transmission
+                .is_none_or(|d| unit(d.factor) && colour(d.color) && d.color.max_element() <= 1.0)
             && m.iridescence.is_none_or(|i| {
                 unit(i.factor)
                     && i.ior.is_finite()

@@ -68,6 +68,11 @@ pub struct Material {
     /// into it and is absorbed inside. `None`: a thin wall, which transmits without bending.
     #[serde(default)]
     pub volume: Option<Volume>,
+    /// KHR_materials_diffuse_transmission: a share of the diffuse base transmits as a
+    /// Lambertian lobe to the other side (leaves, paper, lampshades; on a volume's boundary
+    /// a translucent entrance). `None`: no diffuse transmission.
+    #[serde(default)]
+    pub diffuse_transmission: Option<DiffuseTransmission>,
     /// KHR_materials_specular: the strength and F0 colour of the dielectric's reflection.
     #[serde(default)]
     pub specular: Specular,
@@ -249,6 +254,21 @@ pub enum Reduced {
     Conductor,
 }
 
+/// KHR_materials_diffuse_transmission: the diffuse base becomes
+/// `mix(diffuse_brdf(base colour), diffuse_btdf(color), factor)`, under the same Fresnel
+/// weight; a specular transmission (KHR_materials_transmission) takes precedence over it.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DiffuseTransmission {
+    /// diffuseTransmissionFactor in [0, 1], times `texture`'s A.
+    pub factor: f32,
+    pub texture: Option<TextureRef>,
+    /// diffuseTransmissionColorFactor, times `color_texture`'s RGB (sRGB).
+    #[serde(default = "white")]
+    pub color: Vec3,
+    #[serde(default)]
+    pub color_texture: Option<TextureRef>,
+}
+
 /// KHR_materials_sheen: a retro-reflective layer of fibres over the base.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Sheen {
@@ -315,6 +335,7 @@ impl Default for Material {
             transmission_texture: None,
             transmission_color: None,
             volume: None,
+            diffuse_transmission: None,
             specular: Specular::default(),
             sheen: None,
             iridescence: None,
@@ -363,12 +384,35 @@ impl Material {
     }
 
     /// True if some point of the material can transmit light (its glTF BSDF has a
-    /// transmission lobe, or it is an interface): such surfaces are seen from both sides.
+    /// specular or diffuse transmission lobe, or it is an interface): such surfaces are
+    /// seen from both sides.
     pub fn transmits(&self) -> bool {
-        self.model == BsdfModel::Interface
-            || self.model == BsdfModel::GltfPbr
-                && (self.transmission > 0.0 || self.transmission_texture.is_some())
-                && (self.metallic < 1.0 || self.metallic_roughness_texture.is_some())
+        self.model == BsdfModel::Interface || self.transmits_specularly() || self.translucent()
+    }
+
+    /// True if some point of the glTF BSDF has a specular transmission lobe
+    /// (KHR_materials_transmission): refraction through a volume's boundary or straight
+    /// through a thin wall.
+    pub fn transmits_specularly(&self) -> bool {
+        self.model == BsdfModel::GltfPbr
+            && (self.transmission > 0.0 || self.transmission_texture.is_some())
+            && self.dielectric_somewhere()
+    }
+
+    /// True if some point of the glTF BSDF has a diffuse transmission lobe
+    /// (KHR_materials_diffuse_transmission) that a specular transmission of 1 does not
+    /// replace.
+    pub fn translucent(&self) -> bool {
+        let all_glass = self.transmission >= 1.0 && self.transmission_texture.is_none();
+        self.model == BsdfModel::GltfPbr
+            && self.diffuse_transmission.is_some_and(|d| d.factor > 0.0)
+            && self.dielectric_somewhere()
+            && !all_glass
+    }
+
+    /// True if the glTF material is not all metal at some point.
+    fn dielectric_somewhere(&self) -> bool {
+        self.metallic < 1.0 || self.metallic_roughness_texture.is_some()
     }
 
     /// True if some point of the material can be a filter that light crosses in a straight
@@ -377,7 +421,7 @@ impl Material {
     pub fn can_filter(&self) -> bool {
         self.unlit
             || self.model == BsdfModel::Interface
-            || (self.transmits()
+            || (self.transmits_specularly()
                 && self.volume.is_none()
                 && (self.roughness * self.roughness < SMOOTH_ALPHA
                     || self.metallic_roughness_texture.is_some()
@@ -406,6 +450,7 @@ impl Material {
                 | "emissive_texture"
                 | "specular.color_texture"
                 | "sheen.color_texture"
+                | "diffuse_transmission.color_texture"
         )
     }
 
@@ -414,6 +459,7 @@ impl Material {
         let specular = &self.specular;
         let sheen = self.sheen.as_ref();
         let iridescence = self.iridescence.as_ref();
+        let translucency = self.diffuse_transmission.as_ref();
         [
             ("base_color_texture", self.base_color_texture.as_ref()),
             (
@@ -432,6 +478,14 @@ impl Material {
                 self.clearcoat_normal_texture.as_ref(),
             ),
             ("transmission_texture", self.transmission_texture.as_ref()),
+            (
+                "diffuse_transmission.texture",
+                translucency.and_then(|d| d.texture.as_ref()),
+            ),
+            (
+                "diffuse_transmission.color_texture",
+                translucency.and_then(|d| d.color_texture.as_ref()),
+            ),
             ("specular.weight_texture", specular.weight_texture.as_ref()),
             ("specular.color_texture", specular.color_texture.as_ref()),
             (

@@ -4,7 +4,7 @@
 use crate::common;
 
 use common::scenes::{icosphere, material, mean_and_error, ortho_camera, quad, render, scene};
-use glam::{DMat4, DVec3, Vec3};
+use glam::{DMat4, DVec3, Vec3, Vec4};
 use lucerna::film::Film;
 use lucerna::film::aov::Aov;
 use lucerna::integrator::Settings;
@@ -286,6 +286,43 @@ fn rough_glass_disappears() {
                 }
             }
         }
+    }
+}
+
+/// Diffuse transmission (KHR_materials_diffuse_transmission) moves light from the diffuse
+/// reflection to the other side and loses none: a white ball whose diffuse base transmits
+/// part of what it does not reflect, as a thin shell and as the boundary of a clear volume,
+/// without a specular layer (KHR_materials_specular 0, so no Fresnel weighting enters), is
+/// white in a white furnace.
+#[test]
+fn diffusely_transmitting_ball_disappears() {
+    for (name, volume, share) in [
+        ("thin translucent shell", None, 0.5f32),
+        ("thin shell transmitting all", None, 1.0),
+        (
+            "translucent boundary of a clear volume",
+            Some(lucerna::scene::Volume::absorbing(Vec3::ZERO)),
+            0.7,
+        ),
+    ] {
+        let m = lucerna::scene::Material {
+            base_color: Vec4::ONE,
+            metallic: 0.0,
+            roughness: 0.5,
+            specular: lucerna::scene::Specular {
+                weight: 0.0,
+                ..Default::default()
+            },
+            volume,
+            diffuse_transmission: Some(lucerna::scene::DiffuseTransmission {
+                factor: share,
+                texture: None,
+                color: Vec3::ONE,
+                color_texture: None,
+            }),
+            ..Default::default()
+        };
+        assert_ball_in_furnace_is_white(name, m);
     }
 }
 

@@ -482,6 +482,71 @@ fn punctual_lights_follow_the_specification() {
     }
 }
 
+/// KHR_materials_diffuse_transmission: a leaf lit by the sun from behind shows
+/// diffuseTransmission × colour / π × E on its front (factor × texture A, colour factor ×
+/// sRGB texture), and lit from the front the diffuse reflection it keeps, (1 −
+/// diffuseTransmission) × base / π × E (no specular layer: KHR_materials_specular 0).
+#[test]
+fn diffuse_transmission_lights_a_leaf_from_behind() {
+    let dir = temp();
+    let mut b = Builder::new();
+    let texel: &[[u8; 4]] = &[[188, 188, 188, 128]];
+    b.png_texture(&png_rgba(1, 1, texel), json!({"magFilter": 9728}));
+    let m = b.add(
+        "materials",
+        json!({
+            "pbrMetallicRoughness": {"baseColorFactor": [0.8, 0.8, 0.8, 1], "metallicFactor": 0},
+            "extensions": {
+                "KHR_materials_specular": {"specularFactor": 0},
+                "KHR_materials_diffuse_transmission": {
+                    "diffuseTransmissionFactor": 0.6,
+                    "diffuseTransmissionTexture": {"index": 0},
+                    "diffuseTransmissionColorFactor": [1.0, 0.5, 0.25],
+                    "diffuseTransmissionColorTexture": {"index": 0}
+                }
+            }
+        }),
+    );
+    let prim = b.quad_primitive(Some(m));
+    let mesh = b.mesh(json!([prim]));
+    b.root(json!({"mesh": mesh, "scale": [10, 10, 1]}));
+    b.add("cameras", json!({"type": "orthographic", "orthographic": {"xmag": 0.05, "ymag": 0.05, "znear": 0.01, "zfar": 100}}));
+    b.root(json!({"camera": 0, "translation": [0, 0, 3]}));
+    b.json["extensionsUsed"] = json!([
+        "KHR_lights_punctual",
+        "KHR_materials_specular",
+        "KHR_materials_diffuse_transmission"
+    ]);
+    b.json["extensions"] = json!({"KHR_lights_punctual": {"lights": [
+        {"type": "directional", "intensity": 2.0}
+    ]}});
+    // Turned half a turn about y: the light shines along +z, through the quad's back.
+    b.root(json!({"extensions": {"KHR_lights_punctual": {"light": 0}}, "rotation": [0, 1, 0, 0]}));
+    let scene = load(&b.write_embedded(dir.path(), "leaf"));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let d = scene.materials[0].diffuse_transmission.unwrap();
+    assert_eq!((d.factor, d.color), (0.6, Vec3::new(1.0, 0.5, 0.25)));
+    let share = 0.6 * 128.0 / 255.0;
+    let colour = [1.0, 0.5, 0.25].map(|c| c * 0.5029 * share);
+    let kept = [0.8 * (1.0 - share); 3];
+    let mut front = scene.clone();
+    if let LightKind::Directional { direction, .. } = &mut front.lights[0].kind {
+        *direction = -*direction;
+    }
+    for (name, scene, expected) in [("behind", scene, colour), ("front", front, kept)] {
+        let (film, _) = render(scene, (4, 4), 4, Settings::default(), 1);
+        let beauty = film.planes(Aov::Beauty);
+        for c in 0..3 {
+            let centre = (beauty[c][5] + beauty[c][6] + beauty[c][9] + beauty[c][10]) as f64 / 4.0;
+            let e = expected[c] as f64 * 2.0 / std::f64::consts::PI;
+            assert!(
+                (centre - e).abs() <= 2e-3 * e,
+                "lit from the {name}, channel {c}: {centre} vs {e}"
+            );
+        }
+    }
+}
+
 #[test]
 fn extras_select_lambert_phong_and_diffuse_roughness() {
     let dir = temp();

@@ -283,6 +283,15 @@ def cases():
     yield ("base-color-above-one.gltf",
            with_material({"pbrMetallicRoughness": {"baseColorFactor": [2, 0.5, 0.5, 1]}}),
            "materials[0]", "baseColorFactor is outside its range")
+    def translucent(extension):
+        return {"extensions": {"KHR_materials_diffuse_transmission": extension}}
+    yield ("diffuse-transmission-above-one.gltf",
+           with_material(translucent({"diffuseTransmissionFactor": 1.5})),
+           "materials[0]", "diffuseTransmissionFactor = 1.5 is outside [0, 1]")
+    yield ("diffuse-transmission-negative-color.gltf",
+           with_material(translucent({"diffuseTransmissionFactor": 0.5,
+                                      "diffuseTransmissionColorFactor": [1, -0.2, 0.5]})),
+           "materials[0]", "diffuseTransmissionColorFactor")
 
     def with_camera(perspective):
         def apply(d):

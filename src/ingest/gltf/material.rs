@@ -318,6 +318,27 @@ impl<'a> Importer<'a> {
                 material.volume = Some(scene::Volume::absorbing(absorption.max(Vec3::ZERO)));
             }
         }
+        if let Some(e) = ext.get("KHR_materials_diffuse_transmission") {
+            let name = "KHR_materials_diffuse_transmission";
+            let factor = self.unit_factor(ext, name, e, "diffuseTransmissionFactor", 0.0)?;
+            let color = ext.color(self, name, e, "diffuseTransmissionColorFactor", Vec3::ONE)?;
+            if color.min_element() < 0.0 || color.max_element() > 1.0 {
+                return Err(self.err(
+                    ext.element,
+                    format!("{name}.diffuseTransmissionColorFactor = {color} is outside [0, 1]"),
+                ));
+            }
+            let texture = self.json_texture(ext, e, "diffuseTransmissionTexture")?;
+            let color_texture = self.json_texture(ext, e, "diffuseTransmissionColorTexture")?;
+            if factor > 0.0 {
+                material.diffuse_transmission = Some(scene::DiffuseTransmission {
+                    factor,
+                    texture,
+                    color,
+                    color_texture,
+                });
+            }
+        }
         if let Some(e) = ext.get("KHR_materials_specular") {
             let name = "KHR_materials_specular";
             let weight = ext.number(self, name, e, "specularFactor", 1.0)?;
