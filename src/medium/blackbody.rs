@@ -11,8 +11,8 @@
 //! gamut) clamped to 0. Below 800 K the colour is held at 800 K's, where the light is
 //! invisible anyway, as Cycles and OSL do.
 //!
-//! Grids are sampled at every tentative collision, so [`Glow`] tabulates the radiance by
-//! temperature once per medium.
+//! Grids are sampled at every tentative collision, so `glow::Glow` tabulates the radiance
+//! by temperature once per medium.
 
 use glam::{DVec3, Vec3};
 
@@ -21,9 +21,6 @@ const SIGMA_OVER_PI: f64 = 5.670_374_419e-8 * 1e-6 / std::f64::consts::PI;
 
 /// The coldest temperature whose colour is computed (colder ones take its colour).
 const COLDEST: f64 = 800.0;
-
-/// Entries of a [`Glow`] table.
-const TABLE: usize = 2048;
 
 /// The colour of a blackbody at `kelvin`: linear Rec.709 of luminance 1 (channels clamped
 /// to non-negative, so the luminance of deep reds is a little above 1).
@@ -69,62 +66,6 @@ pub fn radiance(kelvin: f64) -> Vec3 {
     colour(kelvin) * (SIGMA_OVER_PI * kelvin.powi(4)) as f32
 }
 
-/// The emission of a medium by the value of its temperature grid: radiance per render-space
-/// unit of length, tabulated over the grid's values and interpolated linearly.
-#[derive(Clone, Debug)]
-pub struct Glow {
-    /// Radiance at values `i × step`, `i` in 0..TABLE.
-    table: Vec<Vec3>,
-    /// The largest channel of any entry up to `i`: a bound of the radiance at values up to
-    /// `i × step` that never decreases, for majorants.
-    envelope: Vec<f32>,
-    step: f32,
-}
-
-impl Glow {
-    /// The glow of values up to `largest` (at least the grid's largest value), each
-    /// `kelvin_per_unit` kelvin, scaled by `scale` (intensity × tint × metres per
-    /// render-space unit); `None` where it gives no light.
-    pub fn new(largest: f32, kelvin_per_unit: f32, scale: Vec3) -> Option<Self> {
-        if !(largest > 0.0 && kelvin_per_unit > 0.0 && scale.max_element() > 0.0) {
-            return None;
-        }
-        let step = largest / (TABLE - 1) as f32;
-        let table: Vec<Vec3> = (0..TABLE)
-            .map(|i| radiance(f64::from(i as f32 * step * kelvin_per_unit)) * scale)
-            .collect();
-        let envelope = table
-            .iter()
-            .scan(0.0f32, |m, v| {
-                *m = m.max(v.max_element());
-                Some(*m)
-            })
-            .collect();
-        let glow = Self {
-            table,
-            envelope,
-            step,
-        };
-        (glow.bound(largest) > 0.0 && glow.bound(largest).is_finite()).then_some(glow)
-    }
-
-    /// The radiance per unit length at grid value `v`.
-    #[inline]
-    pub fn at(&self, v: f32) -> Vec3 {
-        let x = (v / self.step).clamp(0.0, (TABLE - 1) as f32);
-        let i = (x as usize).min(TABLE - 2);
-        let f = x - i as f32;
-        self.table[i] * (1.0 - f) + self.table[i + 1] * f
-    }
-
-    /// A bound of the largest channel of [`Self::at`] over values up to `v`.
-    #[inline]
-    pub fn bound(&self, v: f32) -> f32 {
-        let x = (v / self.step).clamp(0.0, (TABLE - 1) as f32);
-        self.envelope[(x.ceil() as usize).min(TABLE - 1)]
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -160,27 +101,13 @@ mod tests {
         assert_eq!(colour(300.0), colour(800.0));
     }
 
-    /// The radiance follows T⁴ at Cycles' scale, and the table interpolates it and bounds it.
+    /// The radiance follows T⁴ at Cycles' scale.
     #[test]
-    fn the_table_interpolates_and_bounds_the_radiance() {
+    fn the_radiance_follows_stefan_boltzmann() {
         let l = crate::color::luminance(radiance(1000.0));
         assert!(
             (f64::from(l) / (SIGMA_OVER_PI * 1e12) - 1.0).abs() < 0.05,
             "{l}"
         );
-        let glow = Glow::new(3.0, 1000.0, Vec3::ONE).unwrap();
-        for v in [0.0f32, 0.37, 1.0, 1.91, 2.5, 3.0] {
-            let exact = radiance(f64::from(v) * 1000.0);
-            let table = glow.at(v);
-            assert!(
-                (table - exact).abs().max_element() <= 2e-3 * exact.max_element() + 1e-9,
-                "{v}: {table} against {exact}"
-            );
-            for w in [0.0, v * 0.5, v] {
-                assert!(glow.at(w).max_element() <= glow.bound(v) * (1.0 + 1e-6));
-            }
-        }
-        assert!(Glow::new(3.0, 0.0, Vec3::ONE).is_none());
-        assert!(Glow::new(0.0, 1000.0, Vec3::ONE).is_none());
     }
 }

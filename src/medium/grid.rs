@@ -16,12 +16,12 @@
 //! The random numbers of a walk come from a generator seeded by the ray and the sample
 //! number that drives it, so renders stay deterministic.
 //!
-//! A medium may also glow by a temperature grid of its own (fire: [`Temperature`], the
-//! radiance of `blackbody`), on its own lattice: flames reach where smoke is thin, and
-//! simulations write the two fields over different voxels.
+//! A medium may also glow by a field of its own ([`GlowField`]: a temperature grid through
+//! Planck's law, fire, or an emission grid), on its own lattice: flames reach where smoke is
+//! thin, and simulations write the fields over different voxels.
 
-use super::blackbody::Glow;
 use super::flight::Flight;
+use super::glow::Glow;
 use super::lattice::{Collision, Lattice, walk_rng};
 use super::phase::HenyeyGreenstein;
 use crate::sampling::pcg::Pcg32;
@@ -54,42 +54,50 @@ pub struct Heterogeneous {
     /// emission: `sigma_max`, or more where it leaves fewer than [`EMISSION_SAMPLES`] to a
     /// voxel of the densest part (a flame that barely absorbs).
     emission_rate: f32,
-    /// Emission by a temperature grid, independent of the density.
-    fire: Option<Fire>,
+    /// Emission by a field of its own, independent of the density.
+    glowing: Option<Glowing>,
     phase: HenyeyGreenstein,
 }
 
-/// A temperature grid and the radiance it emits ([`Glow`]). Its lattice's majorants are
+/// A glowing field and the radiance it emits ([`Glow`]). Its lattice's majorants are
 /// bounds of the radiance over each cell, so that the walks gathering its emission place
-/// their collisions where the fire is bright.
+/// their collisions where it is bright.
 #[derive(Clone, Debug)]
-struct Fire {
-    temperature: Lattice,
+struct Glowing {
+    field: Lattice,
     glow: Glow,
     /// Collisions per unit length and unit radiance bound: [`EMISSION_SAMPLES`] per voxel
-    /// where the fire is brightest.
+    /// where the field is brightest.
     rate: f32,
 }
 
-/// A temperature grid that makes a medium glow: its values, their kelvin per unit, and the
-/// radiance scale (blackbody intensity × tint × metres per render-space unit).
-pub struct Temperature<'g> {
+/// A grid that makes a medium glow, and how its values become radiance.
+pub struct GlowField<'g> {
     pub grid: &'g DensityGrid,
-    pub kelvin_per_unit: f32,
-    pub scale: Vec3,
+    pub radiance: FieldRadiance,
+}
+
+/// How a glowing field's values become radiance per render-space unit of length.
+#[derive(Clone, Copy, Debug)]
+pub enum FieldRadiance {
+    /// Temperatures of `kelvin_per_unit` per unit value, glowing by Planck's law times
+    /// `scale` (blackbody intensity × tint × metres per render-space unit).
+    Blackbody { kelvin_per_unit: f32, scale: Vec3 },
+    /// The value times `scale` (emission × colour × metres per render-space unit).
+    Linear { scale: Vec3 },
 }
 
 impl Heterogeneous {
     /// The medium of `grid` (its unit cube to world space) scaled by coefficients at density
     /// 1, per render-space unit (absorption, scattering, emitted radiance), glowing by
-    /// `temperature` if given, in a render space that `world_to_render` maps world space
+    /// `glow` if given, in a render space that `world_to_render` maps world space
     /// to; `None` where it neither absorbs, scatters nor emits anywhere.
     pub fn new(
         grid: &DensityGrid,
         [sigma_a, sigma_s, emission]: [Vec3; 3],
         g: f32,
         world_to_render: DMat4,
-        temperature: Option<Temperature>,
+        glow: Option<GlowField>,
     ) -> Option<Self> {
         let sigma_t = sigma_a + sigma_s;
         let sigma_max = sigma_t.max_element();
@@ -101,16 +109,16 @@ impl Heterogeneous {
         } else {
             sigma_max
         };
-        let fire = temperature.and_then(|t| Fire::new(t, world_to_render));
+        let glowing = glow.and_then(|g| Glowing::new(g, world_to_render));
         let active = densest > 0.0 && (sigma_max > 0.0 || emission.max_element() > 0.0);
-        ((active || fire.is_some()) && emission_rate.is_finite()).then(|| Self {
+        ((active || glowing.is_some()) && emission_rate.is_finite()).then(|| Self {
             density,
             sigma_s,
             sigma_t,
             sigma_max,
             emission,
             emission_rate,
-            fire,
+            glowing,
             phase: HenyeyGreenstein::new(g),
         })
     }
@@ -118,15 +126,15 @@ impl Heterogeneous {
     /// True where it emits light.
     #[inline]
     pub fn emits(&self) -> bool {
-        self.emission.max_element() > 0.0 || self.fire.is_some()
+        self.emission.max_element() > 0.0 || self.glowing.is_some()
     }
 
     /// The radiance its emission along the ray from `origin` in unit direction `dir` over
     /// `length` sends to the ray's origin, ∫ T(s) σe(s) ds, estimated over tentative
     /// collisions: each adds the ratio-tracked transmittance up to it times σe over the
     /// majorant there (the collisions are a Poisson process of that rate, so the sum is
-    /// unbiased), with the same roulette as shadow rays. A fire's emission is gathered over
-    /// collisions of its own lattice, each weighted by the transmittance that the density
+    /// unbiased), with the same roulette as shadow rays. A glowing field's emission is gathered
+    /// over collisions of its own lattice, each weighted by the transmittance that the density
     /// walk has estimated up to it: the two walks are independent, so each product is an
     /// unbiased estimate of T(s) σe(s) at its point.
     pub fn emitted(&self, origin: Vec3, dir: Vec3, length: f32) -> Vec3 {
@@ -136,11 +144,10 @@ impl Heterogeneous {
 
     fn emitted_with(&self, origin: Vec3, dir: Vec3, length: f32, rng: &mut Pcg32) -> Vec3 {
         let mut walk = self.density.walk(origin, dir, length, self.emission_rate);
-        let mut fire = self.fire.as_ref().and_then(|f| {
-            f.temperature
-                .walk(origin, dir, length, f.rate)
-                .map(|w| (f, w))
-        });
+        let mut fire = self
+            .glowing
+            .as_ref()
+            .and_then(|f| f.field.walk(origin, dir, length, f.rate).map(|w| (f, w)));
         if walk.is_none() && fire.is_none() {
             return Vec3::ZERO;
         }
@@ -305,19 +312,21 @@ impl Heterogeneous {
     }
 }
 
-impl Fire {
-    fn new(t: Temperature, world_to_render: DMat4) -> Option<Self> {
-        let mut temperature = Lattice::new(t.grid, world_to_render);
-        // The largest cell majorant is the hottest value, before it becomes a radiance bound.
-        let glow = Glow::new(temperature.largest_majorant(), t.kelvin_per_unit, t.scale)?;
-        temperature.map_majorants(|m| glow.bound(m));
-        let rate =
-            EMISSION_SAMPLES * temperature.voxels_per_unit() / temperature.largest_majorant();
-        (rate.is_finite() && rate > 0.0).then_some(Self {
-            temperature,
-            glow,
-            rate,
-        })
+impl Glowing {
+    fn new(g: GlowField, world_to_render: DMat4) -> Option<Self> {
+        let mut field = Lattice::new(g.grid, world_to_render);
+        // The largest cell majorant is the largest value, before it becomes a radiance bound.
+        let largest = field.largest_majorant();
+        let glow = match g.radiance {
+            FieldRadiance::Blackbody {
+                kelvin_per_unit,
+                scale,
+            } => Glow::blackbody(largest, kelvin_per_unit, scale)?,
+            FieldRadiance::Linear { scale } => Glow::linear(largest, scale)?,
+        };
+        field.map_majorants(|m| glow.bound(m));
+        let rate = EMISSION_SAMPLES * field.voxels_per_unit() / field.largest_majorant();
+        (rate.is_finite() && rate > 0.0).then_some(Self { field, glow, rate })
     }
 }
 
@@ -513,11 +522,29 @@ mod tests {
         }
     }
 
-    /// A fire on a lattice of its own (another resolution, shifted so that part of it lies
-    /// outside the smoke's box, with a hot spot) glows by the unbiased integral of the
-    /// smoke's transmittance times the blackbody radiance of the interpolated temperature.
+    /// A glowing field on a lattice of its own (another resolution, shifted so that part of
+    /// it lies outside the smoke's box, with a hot spot) glows by the unbiased integral of
+    /// the smoke's transmittance times the radiance of the interpolated value: a fire's
+    /// blackbody radiance of its temperature, an emission grid's value times its tint.
     #[test]
-    fn fire_on_its_own_lattice_emits_the_transmitted_blackbody_integral() {
+    fn glowing_field_on_its_own_lattice_emits_the_transmitted_integral() {
+        let kelvin = 1000.0;
+        let scale = Vec3::new(1.0, 0.8, 1.2);
+        let blackbody = FieldRadiance::Blackbody {
+            kelvin_per_unit: kelvin,
+            scale,
+        };
+        let planck =
+            |v: f64| (crate::medium::blackbody::radiance(v * kelvin as f64) * scale).as_dvec3();
+        glowing_field_emits_the_transmitted_integral(blackbody, &planck);
+        let linear = FieldRadiance::Linear { scale };
+        glowing_field_emits_the_transmitted_integral(linear, &|v| scale.as_dvec3() * v);
+    }
+
+    fn glowing_field_emits_the_transmitted_integral(
+        radiance: FieldRadiance,
+        exact_glow: &dyn Fn(f64) -> glam::DVec3,
+    ) {
         let (origin, dir) = ray();
         let length = 1.5;
         let res = [12u32, 5, 4];
@@ -538,21 +565,19 @@ mod tests {
             values: values.into(),
         };
         let (sigma_a, sigma_s) = (Vec3::new(0.05, 0.15, 0.3), Vec3::new(0.1, 0.02, 0.05));
-        let (kelvin, scale) = (1000.0, Vec3::new(1.0, 0.8, 1.2));
         let m = Heterogeneous::new(
             &grid(),
             [sigma_a, sigma_s, Vec3::ZERO],
             0.0,
             DMat4::IDENTITY,
-            Some(Temperature {
+            Some(GlowField {
                 grid: &temperature,
-                kelvin_per_unit: kelvin,
-                scale,
+                radiance,
             }),
         )
         .unwrap();
         assert!(m.emits());
-        let fire = m.fire.as_ref().unwrap();
+        let fire = m.glowing.as_ref().unwrap();
         let steps = 200_000;
         let h = f64::from(length) / f64::from(steps);
         let sigma_t = (sigma_a + sigma_s).as_dvec3();
@@ -568,10 +593,9 @@ mod tests {
             } else {
                 0.0
             };
-            let qt = fire.temperature.to_voxel(p);
+            let qt = fire.field.to_voxel(p);
             let glow = if in_box(qt, res) {
-                let t = f64::from(fire.temperature.value(qt)) * f64::from(kelvin);
-                (crate::medium::blackbody::radiance(t) * scale).as_dvec3()
+                exact_glow(f64::from(fire.field.value(qt)))
             } else {
                 glam::DVec3::ZERO
             };
@@ -585,7 +609,7 @@ mod tests {
             // The table's interpolation of the radiance is within 0.2 % of Planck's.
             assert!(
                 (mean[c] - exact[c]).abs() < 4.5 * se[c] + 2e-3 * exact[c],
-                "emission {mean} ± {se}, exact {exact}"
+                "{radiance:?}: emission {mean} ± {se}, exact {exact}"
             );
             assert!(se[c] < 0.02 * exact[c], "{se} against {exact}");
         }

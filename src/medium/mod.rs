@@ -29,6 +29,7 @@
 
 pub mod blackbody;
 pub mod flight;
+pub mod glow;
 pub mod grid;
 pub mod homogeneous;
 mod lattice;
@@ -50,6 +51,32 @@ pub enum Medium {
     Heterogeneous(Box<Heterogeneous>),
 }
 
+/// The field that makes volume `v` glow (a blackbody's temperature grid or an emission
+/// grid), with radiance per render-space unit (`per_unit` world units per render-space
+/// unit inverted).
+fn glow_field<'g>(
+    v: &crate::scene::Volume,
+    grids: &'g [DensityGrid],
+    per_unit: f32,
+) -> Option<grid::GlowField<'g>> {
+    if let Some(b) = v.blackbody {
+        return Some(grid::GlowField {
+            grid: grids.get(b.temperature? as usize)?,
+            radiance: grid::FieldRadiance::Blackbody {
+                kelvin_per_unit: b.kelvin,
+                scale: b.tint * b.intensity * per_unit,
+            },
+        });
+    }
+    let e = v.emission_field?;
+    Some(grid::GlowField {
+        grid: grids.get(e.grid? as usize)?,
+        radiance: grid::FieldRadiance::Linear {
+            scale: e.tint * per_unit,
+        },
+    })
+}
+
 impl Medium {
     /// The medium inside material `m`'s volume, in render space `space` (coefficients per
     /// render-space unit, grids placed in it); `None` without one or where it is clear.
@@ -66,13 +93,7 @@ impl Medium {
                 [sigma_a, sigma_s, emission],
                 v.anisotropy,
                 space.matrix(),
-                v.blackbody.and_then(|b| {
-                    Some(grid::Temperature {
-                        grid: grids.get(b.temperature? as usize)?,
-                        kelvin_per_unit: b.kelvin,
-                        scale: b.tint * b.intensity * per_unit,
-                    })
-                }),
+                glow_field(&v, grids, per_unit),
             )
             .map(|h| Self::Heterogeneous(Box::new(h))),
         }

@@ -89,6 +89,10 @@ struct VolumeEntry {
     /// the same transform).
     #[serde(default)]
     temperature: Option<FieldEntry>,
+    /// The grid of the material's emission field (an OpenVDB file's grid, under the same
+    /// transform).
+    #[serde(default)]
+    emission: Option<FieldEntry>,
 }
 
 /// A grid of an OpenVDB file beside the scene file.
@@ -694,9 +698,16 @@ fn read_volume(
         read,
     )
     .map_err(|(field, reason)| (field.to_string(), reason))?;
-    let temperature = match &v.temperature {
-        None => None,
-        Some(t) => {
+    // The field the medium glows by: a blackbody's temperature or an emission grid.
+    let glow = match (&v.temperature, &v.emission) {
+        (None, None) => None,
+        (Some(_), Some(_)) => {
+            return Err((
+                ".emission".into(),
+                "a volume glows by one field: a temperature or an emission grid".into(),
+            ));
+        }
+        (Some(t), None) => {
             let Some(blackbody) = volume.blackbody else {
                 return Err((
                     ".temperature".into(),
@@ -718,6 +729,25 @@ fn read_volume(
             }
             Some(grid)
         }
+        (None, Some(e)) => {
+            if volume.emission_field.is_none() {
+                return Err((
+                    ".emission".into(),
+                    format!("material {} has no emission_field for it", v.material),
+                ));
+            }
+            let grid = field_grid(
+                scene,
+                path,
+                &v.name,
+                &e.file,
+                e.grid.as_deref(),
+                to_world,
+                read,
+            )
+            .map_err(|(field, reason)| (format!(".emission{field}"), reason))?;
+            Some(grid)
+        }
     };
     let density = Some(scene.grids.len() as u32);
     let material = if volume.density.is_none() {
@@ -728,19 +758,22 @@ fn read_volume(
             .push(scene.materials[v.material as usize].clone());
         scene.materials.len() as u32 - 1
     };
-    let (mesh, mut instance) = enclosure(covering(&grid, temperature.as_ref()), &v.name, material);
+    let (mesh, mut instance) = enclosure(covering(&grid, glow.as_ref()), &v.name, material);
     instance.mesh = scene.meshes.len() as u32;
     scene.meshes.push(mesh);
     scene.instances.push(instance);
     scene.grids.push(grid);
-    let temperature = temperature.map(|t| {
+    let glow = glow.map(|t| {
         scene.grids.push(t);
         scene.grids.len() as u32 - 1
     });
     if let Some(volume) = scene.materials[material as usize].volume.as_mut() {
         volume.density = density;
         if let Some(b) = volume.blackbody.as_mut() {
-            b.temperature = temperature;
+            b.temperature = glow;
+        }
+        if let Some(e) = volume.emission_field.as_mut() {
+            e.grid = glow;
         }
     }
     Ok(())
@@ -782,7 +815,7 @@ fn field_grid(
 }
 
 /// The unit cube to world transform of a box around `density`'s cube and `other`'s (a
-/// temperature grid, whose flames may reach beyond the smoke): the density's cube widened,
+/// temperature or emission grid, whose flames may reach beyond the smoke): the density's cube widened,
 /// in its own axes, to hold the other's corners.
 fn covering(density: &super::DensityGrid, other: Option<&super::DensityGrid>) -> glam::DMat4 {
     let Some(other) = other else {
@@ -1257,6 +1290,12 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                                     .get(g as usize)
                                     .is_some_and(|t| b.too_hot(t).is_none())
                             })
+                    })
+                    && v.emission_field.is_none_or(|e| {
+                        v.density.is_some()
+                            && v.blackbody.is_none()
+                            && colour(e.tint)
+                            && e.grid.is_none_or(|g| (g as usize) < scene.grids.len())
                     })
             })
             && unit(m.specular.weight)

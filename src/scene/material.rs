@@ -136,6 +136,24 @@ pub struct Volume {
     /// `emission`; only with a density grid.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub blackbody: Option<Blackbody>,
+    /// Light emitted by an emission grid, besides `emission`; only with a density grid and
+    /// without a `blackbody` (one glowing field a medium).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub emission_field: Option<EmissionField>,
+}
+
+/// Emission of a medium by a grid of its own (Arnold standard_volume's emission_mode
+/// "channel"): radiance per metre = the grid's value × `tint`; not scaled by the density.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmissionField {
+    /// The emission grid (an index into `Scene::grids`); a scene file's `volumes` entry
+    /// names it by its field instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub grid: Option<u32>,
+    /// Radiance per metre per unit of the grid's value, per channel.
+    #[serde(default = "white")]
+    pub tint: Vec3,
 }
 
 /// Blackbody emission of a medium from a temperature grid, as Cycles' Principled Volume
@@ -197,6 +215,7 @@ impl Volume {
             density: None,
             emission: Vec3::ZERO,
             blackbody: None,
+            emission_field: None,
         }
     }
 
@@ -211,6 +230,9 @@ impl Volume {
             || self
                 .blackbody
                 .is_some_and(|b| b.intensity > 0.0 && b.tint.max_element() > 0.0)
+            || self
+                .emission_field
+                .is_some_and(|e| e.tint.max_element() > 0.0)
     }
 }
 

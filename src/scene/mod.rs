@@ -13,8 +13,8 @@ pub mod udim;
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 pub use grid::DensityGrid;
 pub use material::{
-    AlphaMode, Anisotropy, Blackbody, BsdfModel, DiffuseTransmission, Iridescence, Material,
-    Reduced, Sheen, Specular, TextureRef, UvTransform, Volume,
+    AlphaMode, Anisotropy, Blackbody, BsdfModel, DiffuseTransmission, EmissionField, Iridescence,
+    Material, Reduced, Sheen, Specular, TextureRef, UvTransform, Volume,
 };
 use serde::{Deserialize, Serialize};
 use std::sync::Arc;

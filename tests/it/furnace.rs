@@ -371,6 +371,7 @@ fn medium(absorption: Vec3, scattering: Vec3, g: f32) -> lucerna::scene::Materia
             density: None,
             emission: Vec3::ZERO,
             blackbody: None,
+            emission_field: None,
         }),
         ..material(BsdfModel::Interface, Vec3::ONE, 0.0, 0.0)
     }
@@ -445,6 +446,7 @@ fn scattering_media_disappear() {
                     density: None,
                     emission: Vec3::ZERO,
                     blackbody: None,
+                    emission_field: None,
                 }),
                 ..glass(Some(Vec3::ZERO), 1.5)
             },

@@ -538,7 +538,7 @@ fn diffuse_transmission_lights_a_leaf_from_behind() {
         let beauty = film.planes(Aov::Beauty);
         for c in 0..3 {
             let centre = (beauty[c][5] + beauty[c][6] + beauty[c][9] + beauty[c][10]) as f64 / 4.0;
-            let e = expected[c] as f64 * 2.0 / std::f64::consts::PI;
+            let e = expected[c] * 2.0 / std::f64::consts::PI;
             assert!(
                 (centre - e).abs() <= 2e-3 * e,
                 "lit from the {name}, channel {c}: {centre} vs {e}"

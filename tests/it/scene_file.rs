@@ -543,10 +543,46 @@ fn volumes_read_their_grids_and_get_a_box() {
     }
 }
 
+/// An emission field named by a volume entry is read under the volume's transform and set on
+/// its material, and the box around the volume holds it.
+#[test]
+fn volumes_read_their_emission_field() {
+    let scene = with_volumes("volumes-emission", |m| {
+        let smoke = m["materials"].as_array().unwrap().len() - 1;
+        m["materials"][smoke]["volume"]["emission_field"] = json!({"tint": [2.0, 1.0, 0.5]});
+        m["volumes"] = json!([{"name": "/Smoke", "file": plume_vdb(), "grid": "density",
+            "emission": {"file": plume_vdb(), "grid": "temperature"},
+            "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": smoke}]);
+    })
+    .unwrap();
+    let instance = scene.instances.last().unwrap();
+    let mesh = &scene.meshes[instance.mesh as usize];
+    let volume = scene.materials[mesh.material as usize].volume.unwrap();
+    let field = volume.emission_field.unwrap();
+    assert_eq!(field.tint, glam::Vec3::new(2.0, 1.0, 0.5));
+    let grid = &scene.grids[field.grid.unwrap() as usize];
+    assert!(grid.source.ends_with("[temperature]"), "{}", grid.source);
+    assert!(grid.max_density() > 1000.0);
+    assert!(volume.emits());
+}
+
 #[test]
 fn volumes_that_cannot_be_read_are_errors() {
     type Edit = Box<dyn FnOnce(&mut Value)>;
-    let cases: [(&str, Edit, &str); 3] = [
+    // A volume entry for the smoke material (with `glow` set on it) and `fields` added.
+    fn glowing(m: &mut Value, glow: Value, fields: Value) {
+        let smoke = m["materials"].as_array().unwrap().len() - 1;
+        for (k, v) in glow.as_object().unwrap() {
+            m["materials"][smoke]["volume"][k] = v.clone();
+        }
+        let mut entry = json!({"name": "/V", "file": plume_vdb(), "grid": "density",
+            "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": smoke});
+        for (k, v) in fields.as_object().unwrap() {
+            entry[k] = v.clone();
+        }
+        m["volumes"] = json!([entry]);
+    }
+    let cases: [(&str, Edit, &str); 6] = [
         (
             "volume-no-medium",
             Box::new(|m| {
@@ -572,6 +608,38 @@ fn volumes_that_cannot_be_read_are_errors() {
                     "to_world": [1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1], "material": smoke}])
             }),
             "volumes[0].to_world: its transform is not finite or flattens the grid",
+        ),
+        (
+            "volume-emission-without-field",
+            Box::new(|m| {
+                let grid = json!({"file": plume_vdb(), "grid": "temperature"});
+                glowing(m, json!({}), json!({"emission": grid}));
+            }),
+            "has no emission_field for it",
+        ),
+        (
+            "volume-two-glowing-fields",
+            Box::new(|m| {
+                let grid = json!({"file": plume_vdb(), "grid": "temperature"});
+                glowing(
+                    m,
+                    json!({"emission_field": {"tint": [1, 1, 1]}, "blackbody": {}}),
+                    json!({"emission": grid.clone(), "temperature": grid}),
+                );
+            }),
+            "volumes[0].emission: a volume glows by one field",
+        ),
+        (
+            "volume-emission-missing-grid",
+            Box::new(|m| {
+                let grid = json!({"file": plume_vdb(), "grid": "heat"});
+                glowing(
+                    m,
+                    json!({"emission_field": {"tint": [1, 1, 1]}}),
+                    json!({"emission": grid}),
+                );
+            }),
+            "volumes[0].emission.file",
         ),
     ];
     for (name, volumes, fragment) in cases {

@@ -251,6 +251,21 @@ def cases():
                                       + base64.b64encode(vdb()).decode()}),
            "materials[0].extras.lucerna.medium.blackbody.temperature",
            "it has no grid \"temperature\" (grids: density (Tree_float_5_4_3))")
+    yield ("medium-emission-field-without-density.gltf",
+           with_vdb(vdb(), density=None, emission_field={"file": one_voxel_uri}),
+           "materials[0].extras.lucerna.medium.emission_field",
+           "an emission field needs the medium's density grid")
+    yield ("medium-emission-field-and-blackbody.gltf",
+           with_vdb(vdb(), blackbody={"temperature": one_voxel_uri}, emission_field={"file": one_voxel_uri}),
+           "materials[0].extras.lucerna.medium.emission_field", "a medium glows by one field")
+    yield ("medium-emission-field-negative-tint.gltf",
+           with_vdb(vdb(), emission_field={"file": one_voxel_uri, "tint": [1, -1, 1]}),
+           "materials[0].extras.lucerna.medium.emission_field.tint", "must be in [0, 1e8]")
+    yield ("medium-emission-field-missing-grid.gltf",
+           with_vdb(one_voxel, emission_field={"file": "data:application/octet-stream;base64,"
+                                               + base64.b64encode(vdb()).decode(), "grid": "heat"}),
+           "materials[0].extras.lucerna.medium.emission_field.file",
+           "it has no grid \"heat\" (grids: density (Tree_float_5_4_3))")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

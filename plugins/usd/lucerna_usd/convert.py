@@ -161,10 +161,10 @@ class Converter:
                             "centre": [float(x) for x in centre],
                             "radius": float(radius * scale), "material": material})
             elif g.kind == "volume":
-                file, grid, material, name, temperature = g.payload
+                file, grid, material, name, glow = g.payload
                 for k, m in enumerate(world):
                     self.writer.add_volume(name if len(world) == 1 else f"{name}[{k}]", file, grid,
-                                           matrix(m), material, temperature)
+                                           matrix(m), material, glow)
             elif g.kind == "camera":
                 for m in world:
                     self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
@@ -284,17 +284,23 @@ class Converter:
             self.warn(path, f"Volume skipped: {reason} ({_fields(prim)})")
             return []
         name = f"{path} ({bound})" if shader else path
-        temperature = None
-        if inputs["emission_mode"] == "blackbody":
-            temperature, missing = volumes.density_field(prim, str(inputs["temperature_channel"]), self.time)
-            if temperature is None and shader is not None and _authored(shader, "emission_mode"):
-                self.warn(path, f"blackbody emission needs a temperature field: {missing}")
+        glow = None
+        channel = volumes.glow_channel(inputs)
+        if channel is not None:
+            kind, field_name = channel
+            glow_field, missing = volumes.density_field(prim, field_name, self.time)
+            if glow_field is not None:
+                glow = (kind, glow_field)
+            elif kind == "emission" or (shader is not None and _authored(shader, "emission_mode")):
+                what = "blackbody emission needs a temperature field" if kind == "temperature" \
+                    else "the emission channel needs its field"
+                self.warn(path, f"{what}: {missing}")
         material = volumes.medium_material(name, inputs, 1.0 / self.meters_per_unit, self.warn,
-                                           glowing=temperature is not None)
-        if "blackbody" not in material["volume"]:
-            temperature = None
+                                           glowing=glow is not None)
+        if not {"blackbody", "emission_field"} & set(material["volume"]):
+            glow = None
         index = self.writer.add_material(material)
-        return [Group("volume", (field[0], field[1], index, path, temperature))]
+        return [Group("volume", (field[0], field[1], index, path, glow))]
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

@@ -151,15 +151,17 @@ class SceneWriter:
                 "transform": matrix(m),
             })
 
-    def add_volume(self, name, file, grid, to_world, material, temperature=None):
+    def add_volume(self, name, file, grid, to_world, material, glow=None):
         """Adds a volume: grid `grid` of the OpenVDB `file` (an absolute path), its index
         space placed by `to_world` (the scene file's 16 numbers) after the grid's own
         transform, filling an interface box of `material` (whose medium the grid's
-        densities scale); `temperature`: (file, grid) of the field its material's blackbody
-        reads, under the same transform."""
+        densities scale); `glow`: (kind, (file, grid)) of the field its material glows by,
+        under the same transform: kind "temperature" for its blackbody, "emission" for its
+        emission field."""
         entry = {"name": name, "file": file, "grid": grid, "to_world": to_world, "material": material}
-        if temperature is not None:
-            entry["temperature"] = {"file": temperature[0], "grid": temperature[1]}
+        if glow is not None:
+            kind, (glow_file, glow_grid) = glow
+            entry[kind] = {"file": glow_file, "grid": glow_grid}
         self.volumes.append(entry)
 
     def add_to_light_group(self, group, member):

@@ -13,11 +13,14 @@ Arnold's `standard_volume`, the volume shader that Houdini, Maya and MtoA users 
 `density` (extinction per stage unit at grid density 1), `scatter` and `scatter_color`
 (the single-scattering albedo is their product), `scatter_anisotropy` (Henyey-Greenstein
 g), and emission by `emission_mode`: "density" (`emission` x `emission_color`, radiance per
-stage unit at density 1) or "blackbody" (the default): the field `temperature_channel`
-names (default `temperature`) read as kelvin = value x `temperature` x `blackbody_kelvin`,
-glowing as Cycles' Principled Volume does (radiance per stage unit sigma T^4 / pi x 1e-6 in
-Planck's colour: docs/media.md), times `blackbody_intensity` x `emission` x
-`emission_color`. Arnold does not publish its blackbody's brightness, so a fire tuned in
+stage unit at density 1), "channel" (the field `emission_channel` names, default `heat`:
+radiance per stage unit = its value x `emission` x `emission_color`, not scaled by the
+density) or "blackbody" (the default): the field `temperature_channel` names (default
+`temperature`) read as kelvin = value x `temperature` x `blackbody_kelvin`, glowing as
+Cycles' Principled Volume does (radiance per stage unit sigma T^4 / pi x 1e-6 in Planck's
+colour: docs/media.md), times `blackbody_intensity` x `emission` x `emission_color`. The
+renderer reads scalar (float or double) grids: a vector emission field is an error naming
+the volume and its field. Arnold does not publish its blackbody's brightness, so a fire tuned in
 Arnold may render brighter or darker; `blackbody_intensity` scales it. A Volume without
 such a shader renders as standard_volume with its defaults (density 1, albedo 0.5 grey,
 g 0; blackbody emission where it has a temperature field), as Arnold and Karma render an
@@ -32,6 +35,7 @@ from .scene_file import default_material
 DEFAULTS = {"density": 1.0, "scatter": 1.0, "scatter_color": (0.5, 0.5, 0.5), "scatter_anisotropy": 0.0,
             "emission": 1.0, "emission_color": (1.0, 1.0, 1.0), "emission_mode": "blackbody",
             "density_channel": "density", "temperature": 1.0, "temperature_channel": "temperature",
+            "emission_channel": "heat",
             "blackbody_kelvin": 5000.0, "blackbody_intensity": 1.0}
 
 
@@ -91,9 +95,21 @@ def density_field(volume, channel, time):
     return (path.resolvedPath, str(grid)), None
 
 
+def glow_channel(inputs):
+    """The field that makes the medium `inputs` describe glow, by its emission mode:
+    ("temperature", channel) for blackbody emission, ("emission", channel) for an emission
+    channel, or None."""
+    mode = inputs["emission_mode"]
+    if mode == "blackbody":
+        return "temperature", str(inputs["temperature_channel"])
+    if mode == "channel":
+        return "emission", str(inputs["emission_channel"])
+    return None
+
+
 def medium_material(name, inputs, per_metre, warn, glowing=False):
     """The scene-file material of an interface around the medium `inputs` describe;
-    `glowing`: the volume has the temperature field that blackbody emission reads."""
+    `glowing`: the volume has the field that its emission mode reads (`glow_channel`)."""
     density = float(inputs["density"])
     albedo = [min(max(float(inputs["scatter"]) * float(c), 0.0), 1.0) for c in inputs["scatter_color"]]
     g = float(inputs["scatter_anisotropy"])
@@ -106,6 +122,7 @@ def medium_material(name, inputs, per_metre, warn, glowing=False):
     extinction = density * per_metre
     emission = [0.0, 0.0, 0.0]
     blackbody = None
+    emission_field = None
     strength = float(inputs["emission"])
     weight = [max(strength * float(c), 0.0) for c in inputs["emission_color"]]
     mode = inputs["emission_mode"]
@@ -121,6 +138,12 @@ def medium_material(name, inputs, per_metre, warn, glowing=False):
         elif glowing:
             warn(name, f"blackbody emission is off (temperature x blackbody_kelvin {kelvin}, "
                        f"blackbody_intensity {intensity}, emission {strength})")
+    elif mode == "channel":
+        if glowing and max(weight) > 0.0:
+            emission_field = {"tint": [w * per_metre for w in weight]}
+        elif glowing:
+            warn(name, f"the emission channel is off (emission {strength}, emission_color "
+                       f"{tuple(inputs['emission_color'])})")
     elif mode != "none":
         warn(name, f"emission_mode {mode!r} is not read: the volume does not glow")
     volume = {"absorption": [extinction * (1.0 - a) for a in albedo],
@@ -128,4 +151,6 @@ def medium_material(name, inputs, per_metre, warn, glowing=False):
               "anisotropy": g, "emission": emission}
     if blackbody is not None:
         volume["blackbody"] = blackbody
+    if emission_field is not None:
+        volume["emission_field"] = emission_field
     return default_material(name, model="interface", metallic=0.0, ior=1.0, volume=volume)

@@ -155,6 +155,42 @@ def test_blackbody_without_a_temperature_field_is_reported(stage_file, converted
                             "'temperature'")
 
 
+def test_emission_channel_reads_its_field(stage_file, converted, tmp_path):
+    """emission_mode "channel": the field emission_channel names glows at its value x
+    emission x emission_color per stage unit, not scaled by the density."""
+    shutil.copy(FIRE, tmp_path / "smoke.vdb")
+    text = SHADED.replace('token inputs:emission_mode = "density"',
+                          'token inputs:emission_mode = "channel"\n'
+                          '                string inputs:emission_channel = "temperature"')
+    text = text.replace('        rel field:density = </World/Smoke/density>\n',
+                        '        rel field:density = </World/Smoke/density>\n'
+                        '        rel field:glow = </World/Smoke/glow>\n'
+                        '        def OpenVDBAsset "glow" {\n'
+                        '            asset filePath = @./smoke.vdb@\n'
+                        '            token fieldName = "temperature"\n'
+                        '        }\n')
+    s = converted(stage_file('#usda 1.0\n(\n    defaultPrim = "World"\n    metersPerUnit = 0.01\n'
+                             '    upAxis = "Y"\n)\n' + text), no_validate=True)
+    [volume] = s["volumes"]
+    assert volume["emission"] == {"file": str(tmp_path / "smoke.vdb"), "grid": "temperature"}
+    assert "temperature" not in volume
+    medium = s["materials"][volume["material"]]["volume"]
+    assert medium["emission"] == [0.0, 0.0, 0.0] and "blackbody" not in medium
+    assert np.allclose(medium["emission_field"]["tint"], np.array([2.0, 1.0, 0.0]) / 0.01)
+    assert not s.warnings_about("Smoke")
+
+
+def test_emission_channel_without_its_field_is_reported(stage_file, converted, tmp_path):
+    shutil.copy(PLUME, tmp_path / "smoke.vdb")
+    text = SHADED.replace('token inputs:emission_mode = "density"', 'token inputs:emission_mode = "channel"')
+    s = converted(stage_file(text), no_validate=True)
+    [volume] = s["volumes"]
+    assert "emission" not in volume
+    medium = s["materials"][volume["material"]]["volume"]
+    assert "emission_field" not in medium and medium["emission"] == [0.0, 0.0, 0.0]
+    assert s.warnings_about("/World/Smoke: the emission channel needs its field: it has no field 'heat'")
+
+
 def _render(scene, out, *args, env="1,1,1"):
     import subprocess
     import OpenImageIO as oiio
@@ -307,6 +343,36 @@ def test_a_fire_renders_as_its_gltf_twin(stage_file, tmp_path):
     gltf = _render(tmp_path / "twin.gltf", tmp_path / "gltf.exr", env="0.02,0.02,0.02")
     # The flame glows orange against the dim sky, down to its foot below the smoke.
     assert usd.max() > 0.2 and (usd[..., 0] > 2 * usd[..., 2]).any()
+    foot = usd[34:44, 20:28].mean(axis=(0, 1))
+    assert foot[0] > 0.05, foot
+    _agree_within_noise(usd, gltf)
+
+
+def test_an_emission_channel_renders_as_its_gltf_twin(stage_file, tmp_path):
+    """The fire's `temperature` grid read as an emission channel (standard_volume
+    emission_mode "channel": radiance per metre = value x emission x emission_color) renders
+    as its glTF twin's emission field, and glows where the grid does, below the smoke too."""
+    shutil.copy(FIRE, tmp_path / "fire.vdb")
+    text = FIRE_STAGE.replace('        float inputs:blackbody_kelvin = 3000\n',
+                              '        token inputs:emission_mode = "channel"\n'
+                              '        string inputs:emission_channel = "temperature"\n'
+                              '        float inputs:emission = 2\n'
+                              '        color3f inputs:emission_color = (1, 0.5, 0.2)\n')
+    stage = stage_file(text)
+    origin = np.array([-0.16, 0.0, -0.16])
+    lo, hi = origin + 0.01 * np.array([-1.5, -1.5, -1.5]), origin + 0.01 * np.array([32.5, 56.5, 32.5])
+    _box_twin(tmp_path, lo, hi, (0.0, 0.2, 1.0), {
+        "scattering": [6.0, 6.0, 6.0], "absorption": [14.0, 14.0, 14.0], "density": "fire.vdb",
+        "density_grid": "density",
+        "emission_field": {"file": "fire.vdb", "grid": "temperature", "tint": [2.0, 1.0, 0.4]}})
+    usd = _render(stage, tmp_path / "usd.exr", "--no-validate", env="0.02,0.02,0.02")
+    gltf = _render(tmp_path / "twin.gltf", tmp_path / "gltf.exr", env="0.02,0.02,0.02")
+    # The glow has the emission colour's hue (red twice green, five times blue) where it is
+    # bright, down to the foot below the smoke.
+    bright = usd[..., 0] > 0.1
+    assert bright.any()
+    ratio = usd[bright].mean(axis=0)
+    assert 1.7 < ratio[0] / ratio[1] < 2.3 and ratio[0] / ratio[2] > 3.0, ratio
     foot = usd[34:44, 20:28].mean(axis=(0, 1))
     assert foot[0] > 0.05, foot
     _agree_within_noise(usd, gltf)

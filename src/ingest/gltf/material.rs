@@ -214,7 +214,7 @@ impl<'a> Importer<'a> {
                     uri,
                     (medium.density_grid.as_deref(), None),
                     element,
-                    "density",
+                    ("density", "density_grid"),
                 )?),
                 None => None,
             };
@@ -224,7 +224,7 @@ impl<'a> Importer<'a> {
                         &b.temperature,
                         (b.temperature_grid.as_deref(), Some("temperature")),
                         element,
-                        "blackbody.temperature",
+                        ("blackbody.temperature", "blackbody.temperature_grid"),
                     )?;
                     let blackbody = scene::Blackbody {
                         temperature: Some(g),
@@ -241,6 +241,18 @@ impl<'a> Importer<'a> {
                 }
                 None => None,
             };
+            let emission_field = match &medium.emission_field {
+                Some(f) => Some(scene::EmissionField {
+                    grid: Some(self.density_grid(
+                        &f.file,
+                        (f.grid.as_deref(), Some("emission")),
+                        element,
+                        ("emission_field.file", "emission_field.grid"),
+                    )?),
+                    tint: f.tint.as_ref().map_or(Vec3::ONE, SpecularValue::rgb),
+                }),
+                None => None,
+            };
             material.volume = Some(scene::Volume {
                 absorption: medium.absorption.map_or(absorption, |a| a.rgb()),
                 scattering: medium.scattering.map_or(Vec3::ZERO, |s| s.rgb()),
@@ -248,6 +260,7 @@ impl<'a> Importer<'a> {
                 density,
                 emission: medium.emission.map_or(Vec3::ZERO, |e| e.rgb()),
                 blackbody,
+                emission_field,
             });
         } else if model == BsdfModel::Interface && material.volume.is_none() {
             self.warn(
@@ -495,14 +508,14 @@ impl<'a> Importer<'a> {
 
     /// The scene grid of the file at `uri` (a `.vol` file, or grid `name` of a `.vdb`
     /// file, by default `vdb_default` or else its `density` or only grid; read once however
-    /// many materials use it); `element` is the material's and `field` the medium's
-    /// property that names the file, for messages.
+    /// many materials use it); `element` is the material's, `field` the medium's property
+    /// that names the file and `grid_field` the one that names the grid, for messages.
     fn density_grid(
         &mut self,
         uri: &str,
         (name, vdb_default): (Option<&str>, Option<&str>),
         element: &str,
-        field: &str,
+        (field, grid_field): (&str, &str),
     ) -> Result<u32> {
         let key = format!("{uri}\u{1e}{}", name.or(vdb_default).unwrap_or_default());
         if let Some(&g) = self.grids.get(&key) {
@@ -519,7 +532,7 @@ impl<'a> Importer<'a> {
             read.grid
         } else if name.is_some() {
             return Err(self.err(
-                format!("{element}.extras.lucerna.medium.{field}_grid"),
+                format!("{element}.extras.lucerna.medium.{grid_field}"),
                 format!("{uri} is not an OpenVDB file, whose grids could be named"),
             ));
         } else {
@@ -602,6 +615,27 @@ impl<'a> Importer<'a> {
                     return Err(self.err(
                         eb,
                         format!("intensity and tint must be in [0, {MAX_COEFFICIENT:e}]"),
+                    ));
+                }
+            }
+            if let Some(f) = &medium.emission_field {
+                let ef = format!("{e}.medium.emission_field");
+                if medium.density.is_none() {
+                    return Err(self.err(
+                        ef,
+                        "an emission field needs the medium's density grid (medium.density)",
+                    ));
+                }
+                if medium.blackbody.is_some() {
+                    return Err(self.err(
+                        ef,
+                        "a medium glows by one field: a blackbody or an emission field",
+                    ));
+                }
+                if !coefficient(&f.tint) {
+                    return Err(self.err(
+                        format!("{ef}.tint"),
+                        format!("must be in [0, {MAX_COEFFICIENT:e}]"),
                     ));
                 }
             }

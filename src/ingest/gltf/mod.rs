@@ -196,6 +196,24 @@ pub(super) struct MediumExtras {
     /// Light from a temperature grid through Planck's law (needs `density`).
     #[serde(default)]
     pub(super) blackbody: Option<BlackbodyExtras>,
+    /// Light from an emission grid: radiance per metre = value × tint (needs `density`).
+    #[serde(default)]
+    pub(super) emission_field: Option<EmissionFieldExtras>,
+}
+
+/// `extras.lucerna.medium.emission_field`: glow from a grid whose value is the radiance per
+/// metre, times a tint (`scene::EmissionField`).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct EmissionFieldExtras {
+    /// The emission grid's file (`.vol` or `.vdb`).
+    pub(super) file: String,
+    /// The grid of a `.vdb` file (default: `emission`, or the file's only grid).
+    #[serde(default)]
+    pub(super) grid: Option<String>,
+    /// Radiance per metre per unit value, per channel (default 1).
+    #[serde(default)]
+    pub(super) tint: Option<SpecularValue>,
 }
 
 /// `extras.lucerna.medium.blackbody`: fire from a temperature grid, as Cycles' Principled

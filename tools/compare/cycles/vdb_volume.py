@@ -5,7 +5,7 @@ NanoVDB), so that the grid's placement (index space, voxel centres, transform), 
 interpolation and the medium's coefficients are compared end to end:
 
     BLENDER=/path/to/bpy-venv/bin/python .venv/bin/python tools/compare/cycles/vdb_volume.py \\
-        [--case plume|cloud|fire] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
+        [--case plume|cloud|fire|glow] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
 
 The smoke plume of tests/assets/vdb/plume.vdb (36 x 36 x 31 active voxels of 9 mm, Blosc)
 with extinction 90 per metre at density 1, albedo (0.9, 0.8, 0.65) and Henyey-Greenstein
@@ -15,7 +15,11 @@ uncompressed file) with extinction 0.1 per metre, albedo 0.99 and g = 0.8 under 
 0.5 (`--case cloud`); or a small fire (tests/assets/vdb/fire.vdb: smoke of extinction 20 per
 metre at density 1 and albedo 0.3 over a flame whose `temperature` grid, read as 3000 K per
 unit, glows by Cycles' blackbody with intensity 1, under a dim sky: `--case fire`, lucerna's
-`medium.blackbody` against the Principled Volume's Temperature and Blackbody Intensity).
+`medium.blackbody` against the Principled Volume's Temperature and Blackbody Intensity); or
+the same fire's `temperature` grid read as an emission grid (`--case glow`: radiance per
+metre = value x (2, 1, 0.4), lucerna's `medium.emission_field`, USD standard_volume's
+emission channel, against the Principled Volume's Emission Strength driven by the grid's
+attribute, Emission Color the tint).
 lucerna: a glTF
 interface box around the grid with `extras.lucerna.medium.density` naming the file. Cycles:
 a Volume object of the same file (turned from glTF's Y up to Blender's Z up) with a
@@ -55,6 +59,10 @@ CASES = {
              "albedo": (0.3, 0.3, 0.3), "anisotropy": 0.0, "sky": 0.05, "camera": (0.0, 0.28, 1.2),
              "vfov": 0.55, "box": ((-0.18, -0.015, -0.18), (0.17, 0.57, 0.17)), "floor_y": -0.02,
              "floor_half": 20.0, "near": 0.01, "kelvin": 3000.0, "blackbody_intensity": 1.0},
+    "glow": {"vdb": lt.ROOT / "tests" / "assets" / "vdb" / "fire.vdb", "extinction": 20.0,
+             "albedo": (0.3, 0.3, 0.3), "anisotropy": 0.0, "sky": 0.05, "camera": (0.0, 0.28, 1.2),
+             "vfov": 0.55, "box": ((-0.18, -0.015, -0.18), (0.17, 0.57, 0.17)), "floor_y": -0.02,
+             "floor_half": 20.0, "near": 0.01, "emission_tint": (2.0, 1.0, 0.4)},
 }
 FLOOR = 0.5
 
@@ -73,6 +81,18 @@ pv.inputs["Anisotropy"].default_value = job["anisotropy"]
 if job["kelvin"]:
     pv.inputs["Temperature"].default_value = job["kelvin"]
     pv.inputs["Blackbody Intensity"].default_value = job["blackbody_intensity"]
+if job["emission_tint"]:
+    # Emission per metre: the grid's value x the tint (strength x colour, the colour's
+    # largest channel 1).
+    tint = job["emission_tint"]
+    field = smoke.node_tree.nodes.new("ShaderNodeAttribute")
+    field.attribute_name = "temperature"
+    scale = smoke.node_tree.nodes.new("ShaderNodeMath")
+    scale.operation = "MULTIPLY"
+    scale.inputs[1].default_value = max(tint)
+    smoke.node_tree.links.new(field.outputs["Fac"], scale.inputs[0])
+    smoke.node_tree.links.new(scale.outputs[0], pv.inputs["Emission Strength"])
+    pv.inputs["Emission Color"].default_value = tuple(c / max(tint) for c in tint) + (1,)
 smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
 volume.materials.append(smoke)
 grey_floor(job["floor_half"], job["floor_y"], job["floor"])
@@ -93,6 +113,10 @@ def write_gltf(path, width, height, case):
         medium["density_grid"] = "density"
         medium["blackbody"] = {"temperature": case["vdb"].name, "temperature_grid": "temperature",
                                "kelvin": case["kelvin"], "intensity": case["blackbody_intensity"]}
+    if case.get("emission_tint"):
+        medium["density_grid"] = "density"
+        medium["emission_field"] = {"file": case["vdb"].name, "grid": "temperature",
+                                    "tint": list(case["emission_tint"])}
     smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": medium}})
     positions, triangles = box(*case["box"])
     w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, smoke))
@@ -109,7 +133,8 @@ def cycles_job(work, width, height, spp, case):
             "extinction": case["extinction"], "albedo": case["albedo"], "anisotropy": case["anisotropy"],
             "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "vfov": case["vfov"],
             "camera": case["camera"], "near": case["near"], "kelvin": case.get("kelvin", 0.0),
-            "blackbody_intensity": case.get("blackbody_intensity", 0.0)}
+            "blackbody_intensity": case.get("blackbody_intensity", 0.0),
+            "emission_tint": case.get("emission_tint")}
 
 
 def main():
@@ -141,7 +166,7 @@ def main():
     change = (ours - background) @ cycles.LUMINANCE
     volume = np.abs(change) > 0.01 * np.maximum(background @ cycles.LUMINANCE, 1e-3)
     regions = {"image": np.ones(volume.shape, dtype=bool), "volume": volume}
-    if case.get("kelvin"):
+    if case.get("kelvin") or case.get("emission_tint"):
         # Where the fire's own light outshines what the sky and floor give.
         regions["flame"] = change > background @ cycles.LUMINANCE
     figures = {"case": args.case, "spp": args.spp, "resolution": [width, height],

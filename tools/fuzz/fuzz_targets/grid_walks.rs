@@ -5,7 +5,7 @@
 //! panicking (a finding) where a walk returns a value that is not finite or is negative.
 
 use glam::{DMat4, Vec3};
-use lucerna::medium::grid::Temperature;
+use lucerna::medium::grid::{FieldRadiance, GlowField};
 use lucerna::medium::{Flight, Heterogeneous};
 
 /// The most bytes a fuzzed VDB file's dense grid may take.
@@ -36,17 +36,29 @@ fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
         Vec3::new(3.0, 1.0, 0.2),
         Vec3::new(1.0, 0.5, 0.1),
     ];
-    // The grid glows by its own values too, as a temperature grid as hot as a scene allows.
-    let temperature = Temperature {
-        grid,
+    // The grid glows by its own values too: as a temperature grid as hot as a scene allows,
+    // and as an emission grid.
+    let blackbody = FieldRadiance::Blackbody {
         kelvin_per_unit: (1e6 / grid.max_density().max(1.0)).min(3000.0),
         scale: Vec3::ONE,
     };
-    let Some(medium) =
-        Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY, Some(temperature))
-    else {
-        return Ok(());
+    let linear = FieldRadiance::Linear {
+        scale: Vec3::new(2.0, 1.0, 0.5),
     };
+    for radiance in [blackbody, linear] {
+        let glow = GlowField { grid, radiance };
+        if let Some(medium) =
+            Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY, Some(glow))
+        {
+            walk_the_medium(grid, &medium);
+        }
+    }
+    Ok(())
+}
+
+/// Rays through `medium` (over `grid`), panicking where a walk's value is not finite or is
+/// negative.
+fn walk_the_medium(grid: &lucerna::scene::DensityGrid, medium: &Heterogeneous) {
     // Rays from outside the grid's box through its centre, and one starting inside it.
     let (lo, hi) = (
         grid.to_world.transform_point3(glam::DVec3::ZERO).as_vec3(),
@@ -96,5 +108,4 @@ fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
             }
         }
     }
-    Ok(())
 }
