@@ -284,6 +284,10 @@ class Converter:
             self.warn(path, f"Volume skipped: {reason} ({_fields(prim)})")
             return []
         name = f"{path} ({bound})" if shader else path
+        unread = volumes.unread_inputs(shader, self.time)
+        if unread:
+            self.warn(path, f"standard_volume inputs not read (lucerna reads scalar fields and a "
+                            f"uniform albedo): {', '.join(unread)}")
         glow = None
         channel = volumes.glow_channel(inputs)
         if channel is not None:

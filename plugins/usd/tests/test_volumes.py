@@ -191,6 +191,22 @@ def test_emission_channel_without_its_field_is_reported(stage_file, converted, t
     assert s.warnings_about("/World/Smoke: the emission channel needs its field: it has no field 'heat'")
 
 
+def test_unread_colour_and_transparency_channels_are_reported(stage_file, converted, tmp_path):
+    """A scatter colour or transparency field (vector grids) is not read: said on the prim;
+    an empty channel name or a black transparency is the default and says nothing."""
+    shutil.copy(PLUME, tmp_path / "smoke.vdb")
+    text = SHADED.replace('token inputs:emission_mode = "density"',
+                          'token inputs:emission_mode = "density"\n'
+                          '                string inputs:scatter_color_channel = "Cd"\n'
+                          '                string inputs:transparent_channel = ""\n'
+                          '                color3f inputs:transparent = (0.1, 0.1, 0.1)')
+    s = converted(stage_file(text), no_validate=True)
+    assert len(s["volumes"]) == 1
+    assert s.warnings_about("/World/Smoke: standard_volume inputs not read (lucerna reads scalar fields "
+                            "and a uniform albedo): scatter_color_channel = 'Cd', transparent = (0.1, 0.1, 0.1)")
+    assert not s.warnings_about("transparent_channel")
+
+
 def _render(scene, out, *args, env="1,1,1"):
     import subprocess
     import OpenImageIO as oiio
