@@ -238,6 +238,11 @@ class MaterialConverter:
                     out["volume"]["scattering"] = [max(float(c), 0.0) * per_metre for c in surface.scattering]
                     out["volume"]["anisotropy"] = float(surface.medium_anisotropy)
 
+        if surface.diffuse_transmission is not None:
+            share, colour = surface.diffuse_transmission
+            out["diffuse_transmission"] = {"factor": _clamp01(share),
+                                           "color": [_clamp01(c) for c in colour]}
+
         # Metallic and roughness: G and B of one texture.
         mk, metallic = scalar(surface.metallic, "metallic", 0.0)
         rk, roughness = scalar(surface.roughness, "roughness", 0.5)

@@ -27,8 +27,11 @@ EON diffuse (OpenPBR's energy-preserving Oren-Nayar).
 
 Subsurface scattering (standard_surface, OpenPBR, OmniSurface) is OpenPBR's subsurface
 slab: the dielectric over a dense medium (mean free path radius x scale, single-scattering
-albedo from the colour by van de Hulst's inversion) that paths random-walk through; with
-transmission or on a thin wall it stays approximated. Transmission scatter fills a
+albedo from the colour by van de Hulst's inversion) that paths random-walk through. On a
+thin wall it is translucency, as MaterialX's graphs define it (Standard Surface: a
+translucent BSDF of the subsurface colour; OpenPBR: half diffuse reflection, half
+translucency, weighted by 1 -/+ the anisotropy), lucerna's diffuse transmission; with
+transmission it stays approximated. Transmission scatter fills a
 transmissive volume with OpenPBR's medium.
 
 What does not map (subsurface with transmission, PxrSurface subsurface, coat colour and
@@ -79,6 +82,7 @@ class Surface:
         self.scattering = None            # per unit length inside a volume (a medium)
         self.medium_anisotropy = 0.0      # its Henyey-Greenstein mean cosine
         self.thin_walled = False
+        self.diffuse_transmission = None  # (share of the diffuse base, colour): translucency
         self.coat = 0.0
         self.coat_roughness = 0.0
         self.sheen_color = None
@@ -270,10 +274,28 @@ class Reader:
                 out.absorption, out.scattering, out.medium_anisotropy = subsurface_medium(
                     fit(color("subsurface_color"), 3), mfp, number("subsurface_anisotropy"),
                     number("specular_ior"))
+            elif out.transmission == ("value", 0.0):
+                # A thin wall's subsurface is translucency, as MaterialX's graphs define it:
+                # Standard Surface's is a translucent BSDF of the subsurface colour; OpenPBR's
+                # half a diffuse reflection (weighted 1 - g) and half a translucent BSDF
+                # (weighted 1 + g) of it. Both mix with the diffuse base by the weight: the
+                # diffuse transmission of glTF's extension, whose reflected part joins the
+                # base colour.
+                colour = np.clip(fit(color("subsurface_color"), 3), 0.0, 1.0)
+                if roles is _OPEN_PBR_ROLES:
+                    g = min(max(number("subsurface_anisotropy"), -1.0), 1.0)
+                    reflected, transmitted = 0.5 * (1.0 - g), 0.5 * (1.0 + g)
+                else:
+                    reflected, transmitted = 0.0, 1.0
+                share = subsurface * transmitted
+                if share > 0.0:
+                    out.diffuse_transmission = (share, tuple(float(c) for c in colour))
+                if reflected > 0.0 and share < 1.0:
+                    out.base_color = self._lerp_color(out.base_color, colour,
+                                                      subsurface * reflected / (1.0 - share))
             else:
-                why = "a thin wall" if out.thin_walled else "transmission"
                 self.warn(material, "subsurface scattering is approximated by diffuse reflection "
-                          f"of {name('subsurface_color')} ({why} holds no subsurface medium)")
+                          f"of {name('subsurface_color')} (transmission holds no subsurface medium)")
                 out.base_color = self._lerp_color(out.base_color, fit(color("subsurface_color"), 3),
                                                   subsurface)
         self._coat(out, source("coat"), source("coat_roughness"), source("coat_color"),

@@ -356,3 +356,38 @@ def Sphere "Ball" (prepend apiSchemas = ["MaterialBindingAPI"]) {
     assert len(s["spheres"]) == 1
     assert s.warnings_about("roughness read from primvar 'roughness' is not supported: 0.5 is used")
     assert s["materials"][s["spheres"][0]["material"]]["roughness"] == 0.5
+
+
+@pytest.mark.parametrize("node, inputs, base, share", [
+    # Standard Surface: a translucent BSDF of the subsurface colour, mixed by the weight.
+    ("ND_standard_surface_surfaceshader", """float inputs:subsurface = 0.6
+            float inputs:subsurface_anisotropy = 0.5
+            bool inputs:thin_walled = 1""", [0.8, 0.8, 0.8], 0.6),
+    # OpenPBR: half diffuse reflection (1 - g), half translucency (1 + g): g = 0.5 transmits
+    # 0.6 x 0.75 = 0.45 and reflects 0.6 x 0.25 = 0.15 of the colour, which joins the base:
+    # (0.4 x 0.8 + 0.15 x colour) / (1 - 0.45).
+    ("ND_open_pbr_surface_surfaceshader", """float inputs:subsurface_weight = 0.6
+            float inputs:subsurface_scatter_anisotropy = 0.5
+            bool inputs:geometry_thin_walled = 1""",
+     list((0.4 * 0.8 + 0.15 * np.array([0.9, 0.6, 0.2])) / 0.55), 0.45)])
+def test_thin_walled_subsurface_is_diffuse_transmission(stage_file, converted, node, inputs, base, share):
+    """On a thin wall, subsurface is translucency as MaterialX's graphs define it: lucerna's
+    diffuse transmission (KHR_materials_diffuse_transmission) of the subsurface colour; no
+    medium, no warning."""
+    s = converted(stage_file(stage(f'''
+        token outputs:mtlx:surface.connect = </World/M/S.outputs:out>
+        def Shader "S" {{
+            uniform token info:id = "{node}"
+            {inputs}
+            color3f inputs:base_color = (0.8, 0.8, 0.8)
+            float inputs:base = 1
+            float inputs:base_weight = 1
+            color3f inputs:subsurface_color = (0.9, 0.6, 0.2)
+            token outputs:out
+        }}'''), name=f"thin-{node}.usda"), no_validate=True)
+    m = material(s)
+    assert m["diffuse_transmission"]["factor"] == pytest.approx(share)
+    assert m["diffuse_transmission"]["color"] == pytest.approx([0.9, 0.6, 0.2])
+    assert m["base_color"][:3] == pytest.approx(base)
+    assert "volume" not in m and m.get("transmission", 0.0) == 0.0
+    assert not s.warnings_about("subsurface")
