@@ -698,7 +698,8 @@ fn read_volume(
         read,
     )
     .map_err(|(field, reason)| (field.to_string(), reason))?;
-    // The field the medium glows by: a blackbody's temperature or an emission grid.
+    // The field the medium glows by: a blackbody's temperature or an emission grid, each
+    // named by its own entry field and owned by its own part of the material's volume.
     let glow = match (&v.temperature, &v.emission) {
         (None, None) => None,
         (Some(_), Some(_)) => {
@@ -707,45 +708,38 @@ fn read_volume(
                 "a volume glows by one field: a temperature or an emission grid".into(),
             ));
         }
-        (Some(t), None) => {
-            let Some(blackbody) = volume.blackbody else {
+        (Some(t), None) => Some((".temperature", t, "blackbody", volume.blackbody.is_some())),
+        (None, Some(e)) => Some((
+            ".emission",
+            e,
+            "emission_field",
+            volume.emission_field.is_some(),
+        )),
+    };
+    let glow = match glow {
+        None => None,
+        Some((field, entry, owner, owned)) => {
+            if !owned {
                 return Err((
-                    ".temperature".into(),
-                    format!("material {} has no blackbody for it", v.material),
-                ));
-            };
-            let grid = field_grid(
-                scene,
-                path,
-                &v.name,
-                &t.file,
-                t.grid.as_deref(),
-                to_world,
-                read,
-            )
-            .map_err(|(field, reason)| (format!(".temperature{field}"), reason))?;
-            if let Some(reason) = blackbody.too_hot(&grid) {
-                return Err((".temperature".into(), reason));
-            }
-            Some(grid)
-        }
-        (None, Some(e)) => {
-            if volume.emission_field.is_none() {
-                return Err((
-                    ".emission".into(),
-                    format!("material {} has no emission_field for it", v.material),
+                    field.into(),
+                    format!("material {} has no {owner} for it", v.material),
                 ));
             }
             let grid = field_grid(
                 scene,
                 path,
                 &v.name,
-                &e.file,
-                e.grid.as_deref(),
+                &entry.file,
+                entry.grid.as_deref(),
                 to_world,
                 read,
             )
-            .map_err(|(field, reason)| (format!(".emission{field}"), reason))?;
+            .map_err(|(at, reason)| (format!("{field}{at}"), reason))?;
+            if field == ".temperature"
+                && let Some(reason) = volume.blackbody.and_then(|b| b.too_hot(&grid))
+            {
+                return Err((field.into(), reason));
+            }
             Some(grid)
         }
     };

@@ -105,6 +105,16 @@ def render(work, name, scene_script, job, seed):
     return lt.rgb(channels)
 
 
+def lucerna_seeds(scene, work, resolution, spp, sky):
+    """lucerna's two renders of `scene` that a comparison holds against Cycles' two: seeds 1
+    and 2, a 1-pixel box filter (as the Cycles prelude's), a uniform sky of radiance `sky`;
+    in folder `work`. Returns (seed 1 image, seed 2 image, seed 1 header)."""
+    env = ",".join([str(sky)] * 3)
+    ours, header, _ = lt.render(scene, work / "a.exr", resolution, spp=spp, seed=1, filter="box", env=env)
+    ours_b, _, _ = lt.render(scene, work / "b.exr", resolution, spp=spp, seed=2, filter="box", env=env)
+    return ours, ours_b, header
+
+
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 
 

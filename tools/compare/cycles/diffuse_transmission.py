@@ -157,9 +157,7 @@ def main():
         work = Path(tmp)
         gltf = work / "translucent.gltf"
         write_gltf(gltf, width, height)
-        env = ",".join([str(SKY)] * 3)
-        ours, header, _ = lt.render(gltf, work / "a.exr", (width, height), spp=args.spp, seed=1, filter="box", env=env)
-        ours_b, _, _ = lt.render(gltf, work / "b.exr", (width, height), spp=args.spp, seed=2, filter="box", env=env)
+        ours, ours_b, header = cycles.lucerna_seeds(gltf, work, (width, height), args.spp, SKY)
         job = {"width": width, "height": height, "spp": args.spp, "sky": SKY, "floor": FLOOR, "sun": SUN,
                "sun_direction": SUN_DIRECTION, "panel": PANEL, "panel_base": PANEL_BASE,
                "panel_share": PANEL_SHARE, "panel_colour": PANEL_COLOUR, "shade_centre": SHADE_CENTRE,

@@ -153,13 +153,12 @@ def main():
         shutil.copy(case["vdb"], work / case["vdb"].name)
         gltf = work / "scene.gltf"
         write_gltf(gltf, width, height, case)
-        env = ",".join([str(case["sky"])] * 3)
-        ours, header, _ = lt.render(gltf, work / "a.exr", (width, height), spp=args.spp, seed=1, filter="box", env=env)
-        ours_b, _, _ = lt.render(gltf, work / "b.exr", (width, height), spp=args.spp, seed=2, filter="box", env=env)
+        ours, ours_b, header = cycles.lucerna_seeds(gltf, work, (width, height), args.spp, case["sky"])
         empty = work / "empty.gltf"
         doc = json.loads(gltf.read_text())
         doc["scenes"][0]["nodes"] = [n for n in doc["scenes"][0]["nodes"] if doc["nodes"][n].get("name") != "smoke"]
         empty.write_text(json.dumps(doc))
+        env = ",".join([str(case["sky"])] * 3)
         background, _, _ = lt.render(empty, work / "e.exr", (width, height), spp=16, seed=1, filter="box", env=env)
         job = cycles_job(work, width, height, args.spp, case)
         cycles_a, cycles_b = (cycles.render(work, "vdb_volume", SCENE_SCRIPT, job, seed) for seed in (1, 2))
