@@ -145,8 +145,8 @@ fn build(
 /// The simpler BSDF a glTF material is at a point where its other lobes weigh nothing, or
 /// `None`: where the specular layer's weight is zero (KHR_materials_specular
 /// `specularFactor` 0) and the point is neither metal nor transmitting (specularly or
-/// diffusely) nor coated nor sheened, the layered model is exactly Lambert's (its diffuse base, under a layer that
-/// reflects nothing); where the point is all metal, uncoated, without sheen, iridescence or
+/// diffusely) nor coated nor sheened, the layered model is exactly Lambert's (its diffuse
+/// base, under a layer that reflects nothing); where the point is all metal, uncoated, without sheen, iridescence or
 /// anisotropy, it is exactly `gltf_pbr`'s conductor (the specular extension does not apply
 /// to metals). Factors multiply their textures, so a zero factor is zero everywhere; the
 /// unit tests compare each reduction with the model it replaces.

@@ -52,8 +52,9 @@ pub enum Medium {
 }
 
 /// The field that makes volume `v` glow (a blackbody's temperature grid or an emission
-/// grid), with radiance per render-space unit (`per_unit` world units per render-space
-/// unit inverted).
+/// grid), its radiance per render-space unit of length (`per_unit`: world units per
+/// render-space unit, which turns a per-world-unit coefficient into a per-render-space-unit
+/// one).
 fn glow_field<'g>(
     v: &crate::scene::Volume,
     grids: &'g [DensityGrid],
