@@ -69,6 +69,12 @@ impl Lattice {
         self.to_voxel.transform_point3(p)
     }
 
+    /// The value at render-space point `p` (the edge voxels' beyond the grid's box).
+    #[inline]
+    pub(super) fn value_at(&self, p: Vec3) -> f32 {
+        self.value(self.to_voxel.transform_point3(p))
+    }
+
     /// The largest majorant of any cell.
     pub(super) fn largest_majorant(&self) -> f32 {
         self.majorants.max.iter().copied().fold(0.0, f32::max)

@@ -95,6 +95,14 @@ impl Medium {
                 v.anisotropy,
                 space.matrix(),
                 glow_field(&v, grids, per_unit),
+                match v.scatter_color {
+                    None => None,
+                    Some(c) => Some([
+                        grids.get(c[0] as usize)?,
+                        grids.get(c[1] as usize)?,
+                        grids.get(c[2] as usize)?,
+                    ]),
+                },
             )
             .map(|h| Self::Heterogeneous(Box::new(h))),
         }

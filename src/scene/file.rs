@@ -93,6 +93,10 @@ struct VolumeEntry {
     /// transform).
     #[serde(default)]
     emission: Option<FieldEntry>,
+    /// A colour grid (an OpenVDB file's vector grid, or a scalar one read as grey, under the
+    /// same transform) that tints the material's scattering point by point.
+    #[serde(default)]
+    scatter_color: Option<FieldEntry>,
 }
 
 /// A grid of an OpenVDB file beside the scene file.
@@ -743,6 +747,20 @@ fn read_volume(
             Some(grid)
         }
     };
+    let scatter_color = match &v.scatter_color {
+        None => None,
+        Some(_) if !volume.scatters() => {
+            scene.warnings.push(format!(
+                "{}: material {} does not scatter: its scatter colour grid is not read",
+                v.name, v.material
+            ));
+            None
+        }
+        Some(entry) => Some(
+            color_grids(scene, path, &v.name, entry, to_world, read)
+                .map_err(|(at, reason)| (format!(".scatter_color{at}"), reason))?,
+        ),
+    };
     let density = Some(scene.grids.len() as u32);
     let material = if volume.density.is_none() {
         v.material
@@ -761,8 +779,14 @@ fn read_volume(
         scene.grids.push(t);
         scene.grids.len() as u32 - 1
     });
+    let scatter_color = scatter_color.map(|channels| {
+        let first = scene.grids.len() as u32;
+        scene.grids.extend(channels);
+        [first, first + 1, first + 2]
+    });
     if let Some(volume) = scene.materials[material as usize].volume.as_mut() {
         volume.density = density;
+        volume.scatter_color = scatter_color;
         if let Some(b) = volume.blackbody.as_mut() {
             b.temperature = glow;
         }
@@ -806,6 +830,53 @@ fn field_grid(
         return Err((".to_world", reason));
     }
     Ok(grid)
+}
+
+/// The colour grid of `entry` (red, green and blue; read once per scene, `read` keeps its
+/// channels) under `to_world`, for volume `volume`; on failure, the entry's field at fault
+/// and why.
+fn color_grids(
+    scene: &mut Scene,
+    path: &Path,
+    volume: &str,
+    entry: &FieldEntry,
+    to_world: glam::DMat4,
+    read: &mut HashMap<(String, Option<String>), super::DensityGrid>,
+) -> std::result::Result<[super::DensityGrid; 3], (&'static str, String)> {
+    let file = entry.file.as_str();
+    let channel_key = |c: &str| {
+        let grid = entry.grid.as_deref().unwrap_or_default();
+        (file.to_string(), Some(format!("{grid}\u{1e}{c}")))
+    };
+    let keys = ["r", "g", "b"].map(channel_key);
+    let mut channels = match keys
+        .iter()
+        .map(|k| read.get(k).cloned())
+        .collect::<Option<Vec<_>>>()
+    {
+        Some(cached) => <[super::DensityGrid; 3]>::try_from(cached).expect("three channels"),
+        None => {
+            let full = path.parent().unwrap_or(Path::new("")).join(file);
+            let bytes = crate::files::read_input(&full)
+                .map_err(|reason| (".file", format!("{}: {reason}", full.display())))?;
+            let parsed = crate::ingest::vdb::parse_color(&bytes, file, entry.grid.as_deref())
+                .map_err(|reason| (".file", format!("{file}: {reason}")))?;
+            scene
+                .warnings
+                .extend(parsed.warnings.iter().map(|w| format!("{volume}: {w}")));
+            for (key, grid) in keys.into_iter().zip(&parsed.channels) {
+                read.insert(key, grid.clone());
+            }
+            parsed.channels
+        }
+    };
+    for grid in &mut channels {
+        grid.to_world = to_world * grid.to_world;
+        if let Some(reason) = grid.defect() {
+            return Err((".to_world", reason));
+        }
+    }
+    Ok(channels)
 }
 
 /// The unit cube to world transform of a box around `density`'s cube and `other`'s (a
@@ -1284,6 +1355,9 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                                     .get(g as usize)
                                     .is_some_and(|t| b.too_hot(t).is_none())
                             })
+                    })
+                    && v.scatter_color.is_none_or(|c| {
+                        v.density.is_some() && c.iter().all(|&g| (g as usize) < scene.grids.len())
                     })
                     && v.emission_field.is_none_or(|e| {
                         v.density.is_some()

@@ -140,6 +140,14 @@ pub struct Volume {
     /// without a `blackbody` (one glowing field a medium).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub emission_field: Option<EmissionField>,
+    /// Colour grids (indices into `Scene::grids`: red, green and blue, one lattice) that
+    /// tint the scattering point by point, as Arnold standard_volume's
+    /// `scatter_color_channel` and the colour attribute of Cycles' Principled Volume do: the
+    /// extinction stays, the albedo is multiplied by the colour (at most 1) and the
+    /// absorption is the rest. Only with a density grid; a scene file's `volumes` entry
+    /// names the field instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scatter_color: Option<[u32; 3]>,
 }
 
 /// Emission of a medium by a grid of its own (Arnold standard_volume's emission_mode
@@ -216,6 +224,7 @@ impl Volume {
             emission: Vec3::ZERO,
             blackbody: None,
             emission_field: None,
+            scatter_color: None,
         }
     }
 

@@ -1316,6 +1316,7 @@ fn delta_tracking_through_a_density_grid() {
         0.0,
         DMat4::IDENTITY,
         None,
+        None,
     )
     .unwrap();
     // The density along the ray, at voxel coordinate x in [0, n].

@@ -372,6 +372,7 @@ fn medium(absorption: Vec3, scattering: Vec3, g: f32) -> lucerna::scene::Materia
             emission: Vec3::ZERO,
             blackbody: None,
             emission_field: None,
+            scatter_color: None,
         }),
         ..material(BsdfModel::Interface, Vec3::ONE, 0.0, 0.0)
     }
@@ -447,6 +448,7 @@ fn scattering_media_disappear() {
                     emission: Vec3::ZERO,
                     blackbody: None,
                     emission_field: None,
+                    scatter_color: None,
                 }),
                 ..glass(Some(Vec3::ZERO), 1.5)
             },

@@ -566,6 +566,75 @@ fn volumes_read_their_emission_field() {
     assert!(volume.emits());
 }
 
+/// A scatter colour named by a volume entry is read (three channels, shared between the
+/// instances of one volume) under the volume's transform and set on its material; on a
+/// material that does not scatter it is left out with a warning.
+#[test]
+fn volumes_read_their_scatter_colour() {
+    let entry = |smoke: usize, x: f64| {
+        json!({"name": format!("/Smoke{x}"), "file": plume_vdb(), "grid": "density",
+            "scatter_color": {"file": plume_vdb(), "grid": "velocity"},
+            "to_world": [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, x, 0, 0, 1], "material": smoke})
+    };
+    let scene = with_volumes("volumes-colour", |m| {
+        let smoke = m["materials"].as_array().unwrap().len() - 1;
+        m["volumes"] = json!([entry(smoke, 0.0), entry(smoke, 0.5)]);
+    })
+    .unwrap();
+    let volumes: Vec<_> = scene.instances[scene.instances.len() - 2..]
+        .iter()
+        .map(|i| {
+            scene.materials[scene.meshes[i.mesh as usize].material as usize]
+                .volume
+                .unwrap()
+        })
+        .collect();
+    let [first, second] = [0, 1].map(|k| volumes[k].scatter_color.unwrap());
+    for (k, g) in first.iter().enumerate() {
+        let channel = &scene.grids[*g as usize];
+        assert!(
+            channel
+                .source
+                .ends_with(&format!("[velocity].{}", ["r", "g", "b"][k]))
+        );
+        // velocity is (0, 1, 0) over its voxels: green alone.
+        assert_eq!(
+            channel.max_density(),
+            [0.0, 1.0, 0.0][k],
+            "{}",
+            channel.source
+        );
+        let other = &scene.grids[second[k] as usize];
+        assert!(std::sync::Arc::ptr_eq(&channel.values, &other.values));
+        assert_eq!(other.to_world.w_axis.x - channel.to_world.w_axis.x, 0.5);
+    }
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    // A medium that only absorbs has nothing to tint.
+    let absorbing = with_volumes("volumes-colour-absorbing", |m| {
+        let smoke = m["materials"].as_array().unwrap().len() - 1;
+        m["materials"][smoke]["volume"]["scattering"] = json!([0.0, 0.0, 0.0]);
+        m["volumes"] = json!([entry(smoke, 0.0)]);
+    })
+    .unwrap();
+    let instance = absorbing.instances.last().unwrap();
+    let mesh = &absorbing.meshes[instance.mesh as usize];
+    assert!(
+        absorbing.materials[mesh.material as usize]
+            .volume
+            .unwrap()
+            .scatter_color
+            .is_none()
+    );
+    assert!(
+        absorbing
+            .warnings
+            .iter()
+            .any(|w| w.contains("/Smoke0: material") && w.contains("does not scatter")),
+        "{:?}",
+        absorbing.warnings
+    );
+}
+
 #[test]
 fn volumes_that_cannot_be_read_are_errors() {
     type Edit = Box<dyn FnOnce(&mut Value)>;
@@ -582,7 +651,27 @@ fn volumes_that_cannot_be_read_are_errors() {
         }
         m["volumes"] = json!([entry]);
     }
-    let cases: [(&str, Edit, &str); 6] = [
+    let cases: [(&str, Edit, &str); 8] = [
+        (
+            "volume-colour-missing-grid",
+            Box::new(|m| {
+                let grid = json!({"file": plume_vdb(), "grid": "Cd"});
+                glowing(m, json!({}), json!({"scatter_color": grid}));
+            }),
+            "volumes[0].scatter_color.file: ",
+        ),
+        (
+            "volume-colour-level-set",
+            Box::new(|m| {
+                let file = plume_vdb().replace("plume.vdb", "sphere-level-set.vdb");
+                glowing(
+                    m,
+                    json!({}),
+                    json!({"scatter_color": {"file": file, "grid": null}}),
+                );
+            }),
+            "level set",
+        ),
         (
             "volume-no-medium",
             Box::new(|m| {

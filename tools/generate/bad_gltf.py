@@ -266,6 +266,23 @@ def cases():
                                                + base64.b64encode(vdb()).decode(), "grid": "heat"}),
            "materials[0].extras.lucerna.medium.emission_field.file",
            "it has no grid \"heat\" (grids: density (Tree_float_5_4_3))")
+    yield ("medium-scatter-color-without-density.gltf",
+           with_vdb(vdb(), density=None, scatter_color={"file": one_voxel_uri}),
+           "materials[0].extras.lucerna.medium.scatter_color",
+           "a scatter colour grid needs the medium's density grid")
+    yield ("medium-scatter-color-not-vdb.gltf",
+           with_vdb(one_voxel, scatter_color={"file": one_voxel_uri}),
+           "materials[0].extras.lucerna.medium.scatter_color.file", "is not an OpenVDB file")
+    yield ("medium-scatter-color-missing-grid.gltf",
+           with_vdb(one_voxel, scatter_color={"file": "data:application/octet-stream;base64,"
+                                              + base64.b64encode(vdb(kind="Tree_vec3s_5_4_3")).decode(),
+                                              "grid": "Cd"}),
+           "materials[0].extras.lucerna.medium.scatter_color.file",
+           "it has no grid \"Cd\" (grids: density (Tree_vec3s_5_4_3))")
+    yield ("medium-scatter-color-truncated.gltf",
+           with_vdb(one_voxel, scatter_color={"file": "data:application/octet-stream;base64,"
+                                              + base64.b64encode(vdb(kind="Tree_vec3s_5_4_3", cut=30)).decode()}),
+           "materials[0].extras.lucerna.medium.scatter_color.file", "the file ends early")
     # What glTF-Validator calls errors and lucerna accepted quietly before.
     yield ("version-3.gltf", variant(lambda d: d["asset"].update(version="3.0")),
            "asset.version", "lucerna reads glTF 2.x")

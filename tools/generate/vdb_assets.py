@@ -15,6 +15,9 @@ then `/usr/bin/python3 tools/generate/vdb_assets.py`). The files:
 - fire.vdb: a small fire: `temperature` (a flame, values 0 to about 1.2, to be read as
   3000 K per unit) over voxels that reach below the smoke's, and `density` (smoke
   rising above it), on one transform of 1 cm voxels.
+- colour.vdb: the fire's smoke (`density`) and a colour (`Cd`, a vector grid saved as
+  halves, as Houdini writes it) from orange where the smoke is low to blue where it is
+  high, over voxels that reach beyond the smoke's.
 
 wdas-cloud-sixteenth.vdb (vendored: Walt Disney Animation Studios' cloud at a sixteenth of
 its resolution, CC BY-SA 3.0, LICENSE-wdas-cloud.txt) is described too when it is there.
@@ -95,6 +98,42 @@ def fire_grids():
     return grids
 
 
+def colour_grid(density):
+    """`Cd` over the voxels of `density` grown by two: orange low, blue high, with a
+    sideways green ripple so that the components differ voxel by voxel."""
+    n = (32, 56, 32)
+    x, y, z = np.meshgrid(*(np.arange(k) + 0.5 for k in n), indexing="ij")
+    h = y / n[1]
+    rgb = np.stack([1.0 - 0.8 * h, 0.35 + 0.25 * np.sin(0.4 * x + 0.3 * z), 0.15 + 0.8 * h], axis=-1)
+    dense = np.zeros(n, dtype=np.float32)
+    density.copyToArray(dense, ijk=(0, 0, 0))
+    grown = dense > 0.0
+    for axis in range(3):
+        for shift in (-2, -1, 1, 2):
+            grown |= np.roll(dense > 0.0, shift, axis=axis)
+    rgb = np.where(grown[..., None], rgb, 0.0).astype(np.float32)
+    grid = vdb.Vec3SGrid()
+    grid.copyFromArray(np.ascontiguousarray(rgb), ijk=(0, 0, 0), tolerance=(0, 0, 0))
+    grid.prune((0, 0, 0))
+    grid.name = "Cd"
+    grid.transform = density.transform
+    grid.saveFloatAsHalf = True
+    return grid
+
+
+def describe_vector(grid, probes):
+    """What OpenVDB reads back from a vector grid: its active box and values at `probes`."""
+    accessor = grid.getConstAccessor()
+    lo, hi = grid.evalActiveVoxelBoundingBox()
+    return {
+        "name": grid.name,
+        "active_box": [list(lo), list(hi)],
+        "probes": [{"index": list(p), "value": list(accessor.getValue(tuple(p))),
+                    "world": list(grid.transform.indexToWorld(tuple(float(c) for c in p)))}
+                   for p in probes],
+    }
+
+
 def main():
     out = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).resolve().parents[2] / "tests" / "assets" / "vdb"
     out.mkdir(parents=True, exist_ok=True)
@@ -138,6 +177,12 @@ def main():
     smoke, flame = fire_grids()
     vdb.write(str(out / "fire.vdb"), grids=[smoke, flame])
     expected["fire.vdb"] = {g.name: describe(g, [(16, 14, 16), (16, 40, 16), (3, 2, 16)]) for g in (smoke, flame)}
+
+    colour = colour_grid(smoke)
+    vdb.write(str(out / "colour.vdb"), grids=[smoke, colour])
+    read_back = vdb.read(str(out / "colour.vdb"), "Cd")  # the halves as OpenVDB reads them
+    colour_probes = [(16, 14, 16), (16, 40, 16), (10, 30, 14), (2, 2, 2)]
+    expected["colour.vdb"] = {"Cd": describe_vector(read_back, colour_probes)}
 
     cloud = out / "wdas-cloud-sixteenth.vdb"
     if cloud.exists():

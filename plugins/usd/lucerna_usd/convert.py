@@ -161,10 +161,10 @@ class Converter:
                             "centre": [float(x) for x in centre],
                             "radius": float(radius * scale), "material": material})
             elif g.kind == "volume":
-                file, grid, material, name, glow = g.payload
+                file, grid, material, name, fields = g.payload
                 for k, m in enumerate(world):
                     self.writer.add_volume(name if len(world) == 1 else f"{name}[{k}]", file, grid,
-                                           matrix(m), material, glow)
+                                           matrix(m), material, fields)
             elif g.kind == "camera":
                 for m in world:
                     self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
@@ -286,8 +286,16 @@ class Converter:
         name = f"{path} ({bound})" if shader else path
         unread = volumes.unread_inputs(shader, self.time)
         if unread:
-            self.warn(path, f"standard_volume inputs not read (lucerna reads scalar fields and a "
-                            f"uniform albedo): {', '.join(unread)}")
+            self.warn(path, f"standard_volume inputs not read (lucerna reads no transparency): "
+                            f"{', '.join(unread)}")
+        fields = {}
+        colour_channel = str(inputs["scatter_color_channel"] or "")
+        if colour_channel:
+            colour_field, missing = volumes.density_field(prim, colour_channel, self.time)
+            if colour_field is None:
+                self.warn(path, f"scatter_color_channel is not read: {missing}")
+            elif float(inputs["scatter"]) > 0.0:
+                fields["scatter_color"] = colour_field
         glow = None
         channel = volumes.glow_channel(inputs)
         if channel is not None:
@@ -301,10 +309,12 @@ class Converter:
                 self.warn(path, f"{what}: {missing}")
         material = volumes.medium_material(name, inputs, 1.0 / self.meters_per_unit, self.warn,
                                            glowing=glow is not None)
-        if not {"blackbody", "emission_field"} & set(material["volume"]):
-            glow = None
+        if glow is not None and {"blackbody", "emission_field"} & set(material["volume"]):
+            fields[glow[0]] = glow[1]
+        if fields.get("scatter_color") and not any(material["volume"]["scattering"]):
+            del fields["scatter_color"]
         index = self.writer.add_material(material)
-        return [Group("volume", (field[0], field[1], index, path, glow))]
+        return [Group("volume", (field[0], field[1], index, path, fields))]
 
     def _bound_material(self, prim):
         material = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial(UsdShade.Tokens.full)[0]

@@ -151,17 +151,16 @@ class SceneWriter:
                 "transform": matrix(m),
             })
 
-    def add_volume(self, name, file, grid, to_world, material, glow=None):
+    def add_volume(self, name, file, grid, to_world, material, fields=None):
         """Adds a volume: grid `grid` of the OpenVDB `file` (an absolute path), its index
         space placed by `to_world` (the scene file's 16 numbers) after the grid's own
         transform, filling an interface box of `material` (whose medium the grid's
-        densities scale); `glow`: (kind, (file, grid)) of the field its material glows by,
-        under the same transform: kind "temperature" for its blackbody, "emission" for its
-        emission field."""
+        densities scale); `fields`: {kind: (file, grid)} of its other fields, under the same
+        transform: "temperature" for its material's blackbody, "emission" for its emission
+        field, "scatter_color" for the colour that tints its scattering."""
         entry = {"name": name, "file": file, "grid": grid, "to_world": to_world, "material": material}
-        if glow is not None:
-            kind, (glow_file, glow_grid) = glow
-            entry[kind] = {"file": glow_file, "grid": glow_grid}
+        for kind, (field_file, field_grid) in (fields or {}).items():
+            entry[kind] = {"file": field_file, "grid": field_grid}
         self.volumes.append(entry)
 
     def add_to_light_group(self, group, member):

@@ -20,8 +20,11 @@ density) or "blackbody" (the default): the field `temperature_channel` names (de
 Cycles' Principled Volume does (radiance per stage unit sigma T^4 / pi x 1e-6 in Planck's
 colour: docs/media.md), times `blackbody_intensity` x `emission` x `emission_color`. The
 renderer reads scalar (float or double) grids: a vector emission field is an error naming
-the volume and its field. Colour and transparency fields (`scatter_color_channel`,
-`transparent_channel`) and a `transparent` colour are not read and are reported. Arnold does not publish its blackbody's brightness, so a fire tuned in
+the volume and its field. `scatter_color_channel` names a colour field (a vector grid such
+as Houdini's `Cd`, or a scalar one read as grey) that multiplies the albedo point by point
+(at most 1; the extinction is the density's alone), as Arnold does. A transparency field
+(`transparent_channel`) and a `transparent` colour are not read and are reported. Arnold
+does not publish its blackbody's brightness, so a fire tuned in
 Arnold may render brighter or darker; `blackbody_intensity` scales it. A Volume without
 such a shader renders as standard_volume with its defaults (density 1, albedo 0.5 grey,
 g 0; blackbody emission where it has a temperature field), as Arnold and Karma render an
@@ -36,19 +39,18 @@ from .scene_file import default_material
 DEFAULTS = {"density": 1.0, "scatter": 1.0, "scatter_color": (0.5, 0.5, 0.5), "scatter_anisotropy": 0.0,
             "emission": 1.0, "emission_color": (1.0, 1.0, 1.0), "emission_mode": "blackbody",
             "density_channel": "density", "temperature": 1.0, "temperature_channel": "temperature",
-            "emission_channel": "heat",
+            "emission_channel": "heat", "scatter_color_channel": "",
             "blackbody_kelvin": 5000.0, "blackbody_intensity": 1.0}
 
 
-# standard_volume inputs that lucerna does not read: per-voxel colour and transparency
-# fields (vector grids) and a transparency colour. Authored, they are reported.
-UNREAD = ("scatter_color_channel", "transparent", "transparent_channel")
+# standard_volume inputs that lucerna does not read: a transparency field and colour.
+# Authored, they are reported.
+UNREAD = ("transparent", "transparent_channel")
 
 
 def unread_inputs(shader, time):
     """The authored standard_volume inputs of `shader` that the medium ignores, with their
-    values: a colour or transparency channel naming a field, a transparency other than
-    black."""
+    values: a transparency channel naming a field, a transparency other than black."""
     unread = []
     for name in UNREAD:
         shader_input = shader.GetInput(name) if shader is not None else None

@@ -191,20 +191,40 @@ def test_emission_channel_without_its_field_is_reported(stage_file, converted, t
     assert s.warnings_about("/World/Smoke: the emission channel needs its field: it has no field 'heat'")
 
 
-def test_unread_colour_and_transparency_channels_are_reported(stage_file, converted, tmp_path):
-    """A scatter colour or transparency field (vector grids) is not read: said on the prim;
-    an empty channel name or a black transparency is the default and says nothing."""
+def test_scatter_color_channel_reads_its_field(stage_file, converted, tmp_path):
+    """scatter_color_channel names the colour field that tints the scattering: the volume
+    entry carries it; a transparency colour is still reported, an empty transparency
+    channel and a black transparency say nothing."""
     shutil.copy(PLUME, tmp_path / "smoke.vdb")
     text = SHADED.replace('token inputs:emission_mode = "density"',
                           'token inputs:emission_mode = "density"\n'
                           '                string inputs:scatter_color_channel = "Cd"\n'
                           '                string inputs:transparent_channel = ""\n'
                           '                color3f inputs:transparent = (0.1, 0.1, 0.1)')
+    text = text.replace('        rel field:density = </World/Smoke/density>\n',
+                        '        rel field:density = </World/Smoke/density>\n'
+                        '        rel field:Cd = </World/Smoke/colour>\n'
+                        '        def OpenVDBAsset "colour" {\n'
+                        '            asset filePath = @./smoke.vdb@\n'
+                        '            token fieldName = "velocity"\n'
+                        '        }\n')
     s = converted(stage_file(text), no_validate=True)
-    assert len(s["volumes"]) == 1
-    assert s.warnings_about("/World/Smoke: standard_volume inputs not read (lucerna reads scalar fields "
-                            "and a uniform albedo): scatter_color_channel = 'Cd', transparent = (0.1, 0.1, 0.1)")
-    assert not s.warnings_about("transparent_channel")
+    [volume] = s["volumes"]
+    assert volume["scatter_color"] == {"file": str(tmp_path / "smoke.vdb"), "grid": "velocity"}
+    assert s.warnings_about("/World/Smoke: standard_volume inputs not read (lucerna reads no "
+                            "transparency): transparent = (0.1, 0.1, 0.1)")
+    assert not s.warnings_about("scatter_color") and not s.warnings_about("transparent_channel")
+
+
+def test_scatter_color_channel_without_its_field_is_reported(stage_file, converted, tmp_path):
+    shutil.copy(PLUME, tmp_path / "smoke.vdb")
+    text = SHADED.replace('token inputs:emission_mode = "density"',
+                          'token inputs:emission_mode = "density"\n'
+                          '                string inputs:scatter_color_channel = "Cd"')
+    s = converted(stage_file(text), no_validate=True)
+    [volume] = s["volumes"]
+    assert "scatter_color" not in volume
+    assert s.warnings_about("/World/Smoke: scatter_color_channel is not read: it has no field 'Cd'")
 
 
 def _render(scene, out, *args, env="1,1,1"):

@@ -253,6 +253,10 @@ impl<'a> Importer<'a> {
                 }),
                 None => None,
             };
+            let scatter_color = match &medium.scatter_color {
+                Some(c) => Some(self.color_grids(&c.file, c.grid.as_deref(), element)?),
+                None => None,
+            };
             material.volume = Some(scene::Volume {
                 absorption: medium.absorption.map_or(absorption, |a| a.rgb()),
                 scattering: medium.scattering.map_or(Vec3::ZERO, |s| s.rgb()),
@@ -261,6 +265,7 @@ impl<'a> Importer<'a> {
                 emission: medium.emission.map_or(Vec3::ZERO, |e| e.rgb()),
                 blackbody,
                 emission_field,
+                scatter_color,
             });
         } else if model == BsdfModel::Interface && material.volume.is_none() {
             self.warn(
@@ -545,6 +550,29 @@ impl<'a> Importer<'a> {
         Ok(g)
     }
 
+    /// The scene grids (red, green, blue) of colour grid `name` of the OpenVDB file at `uri`
+    /// (read once however many materials use it); `element` is the material's.
+    fn color_grids(&mut self, uri: &str, name: Option<&str>, element: &str) -> Result<[u32; 3]> {
+        let key = format!("{uri}\u{1e}{}\u{1e}rgb", name.unwrap_or_default());
+        if let Some(&g) = self.grids.get(&key) {
+            return Ok([g, g + 1, g + 2]);
+        }
+        let e = format!("{element}.extras.lucerna.medium.scatter_color.file");
+        let bytes = crate::ingest::uri::read(uri, self.base).map_err(|r| self.err(&e, r))?;
+        if !crate::ingest::vdb::is_vdb(&bytes) {
+            return Err(self.err(&e, format!("{uri} is not an OpenVDB file")));
+        }
+        let read = crate::ingest::vdb::parse_color(&bytes, uri, name)
+            .map_err(|r| self.err(&e, format!("{uri}: {r}")))?;
+        for warning in &read.warnings {
+            self.warn(&e, warning);
+        }
+        let g = self.scene.grids.len() as u32;
+        self.scene.grids.extend(read.channels);
+        self.grids.insert(key, g);
+        Ok([g, g + 1, g + 2])
+    }
+
     /// The BSDF model, the diffuse roughness and the medium from `extras.lucerna` (default:
     /// the glTF BRDF, a Lambertian base, no medium).
     pub(super) fn lucerna_extras(&self, m: &gltf::Material, element: &str) -> Result<Extras> {
@@ -617,6 +645,12 @@ impl<'a> Importer<'a> {
                         format!("intensity and tint must be in [0, {MAX_COEFFICIENT:e}]"),
                     ));
                 }
+            }
+            if medium.scatter_color.is_some() && medium.density.is_none() {
+                return Err(self.err(
+                    format!("{e}.medium.scatter_color"),
+                    "a scatter colour grid needs the medium's density grid (medium.density)",
+                ));
             }
             if let Some(f) = &medium.emission_field {
                 let ef = format!("{e}.medium.emission_field");

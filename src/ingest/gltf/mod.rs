@@ -199,6 +199,22 @@ pub(super) struct MediumExtras {
     /// Light from an emission grid: radiance per metre = value × tint (needs `density`).
     #[serde(default)]
     pub(super) emission_field: Option<EmissionFieldExtras>,
+    /// Colour grids that tint the scattering point by point (needs `density`).
+    #[serde(default)]
+    pub(super) scatter_color: Option<ScatterColorExtras>,
+}
+
+/// `extras.lucerna.medium.scatter_color`: a colour grid of an OpenVDB file that multiplies
+/// the medium's albedo point by point, its extinction unchanged (`scene::Volume`).
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ScatterColorExtras {
+    /// The `.vdb` file.
+    pub(super) file: String,
+    /// Its grid (default: `Cd`, else `color`, else the file's only grid): a vector grid, or a
+    /// scalar one read as grey.
+    #[serde(default)]
+    pub(super) grid: Option<String>,
 }
 
 /// `extras.lucerna.medium.emission_field`: glow from a grid whose value is the radiance per

@@ -1,5 +1,6 @@
 //! OpenVDB files (`.vdb`): the sparse grids that Houdini, Blender and EmberGen write for
-//! smoke and fire, read into a [`DensityGrid`].
+//! smoke and fire, read into a [`DensityGrid`] (scalar grids: density, temperature,
+//! emission), or into three of them, one a channel (vector grids read as colours: `Cd`).
 //!
 //! The format (OpenVDB's `io/` and `tree/` sources, file versions 222 and later, that is
 //! OpenVDB 2.0 onward): a header (magic, versions, UUID, file metadata), then per grid a
@@ -9,7 +10,10 @@
 //! masks and its tile values) and then the leaves' values. Value arrays may leave inactive
 //! values out (active-mask compression, restored from the background or one or two stored
 //! values) and are stored raw, zlib-compressed or Blosc-compressed (OpenVDB writes LZ4 in
-//! Blosc), as 32-bit floats, 64-bit floats or halves (`_HalfFloat` grids).
+//! Blosc), as 32-bit floats, 64-bit floats or halves (`_HalfFloat` grids), a value of a
+//! vector grid as its three components in a row. A colour is read one component at a time
+//! (three passes over the file's bytes, which keep the reader's single dense grid of floats
+//! and cost only decoding time, small beside the render).
 //!
 //! The sparse tree becomes a dense grid over the box of the active voxels, padded by one
 //! voxel of background so that interpolation fades to it as OpenVDB's samplers do: voxel
@@ -17,7 +21,7 @@
 //! world space (renders therefore match OpenVDB's trilinear sampling inside the box).
 //! Every size is checked against the bytes that remain and every dense allocation against
 //! `--max-memory` before it is made, so a corrupt file is an error, never a huge allocation.
-//! Level sets (signed distances, not densities) are refused; negative densities, which
+//! Level sets (signed distances, not densities) are refused; negative values, which
 //! simulations leave in places, read as zero and are counted in a warning.
 
 use crate::scene::DensityGrid;
@@ -69,48 +73,44 @@ pub fn parse_within(
     limit: Option<u64>,
 ) -> Result<VdbGrid, String> {
     let file = File::read(bytes)?;
-    let wanted = match name {
-        Some(name) => file
-            .grids
-            .iter()
-            .find(|g| g.name() == name)
-            .ok_or_else(|| format!("it has no grid {name:?} ({})", file.listing()))?,
-        None => match file.grids.iter().find(|g| g.name() == "density") {
-            Some(g) => g,
-            None if file.grids.len() == 1 => &file.grids[0],
-            None => {
-                return Err(format!(
-                    "it has no grid \"density\" and more than one grid: name the one to \
-                     read ({})",
-                    file.listing()
-                ));
-            }
-        },
+    let wanted = file.find(name, &["density"])?;
+    file.read_grid(bytes, wanted, source, None, limit)
+}
+
+/// A colour grid read from a VDB file: one scalar grid per channel (red, green, blue), on
+/// one lattice, and what the user should know about it.
+#[derive(Debug)]
+pub struct VdbColor {
+    pub channels: [DensityGrid; 3],
+    pub warnings: Vec<String>,
+}
+
+/// Reads the grid `name` of the VDB file `bytes` (without a name: the grid called `Cd`,
+/// Houdini's colour, or `color`, Blender's, or the file's only grid) as a colour: a vector
+/// grid's three components, or a scalar grid's value in every channel (grey); each channel
+/// is a dense grid of at most `limit` bytes (`None`: any).
+pub fn parse_color_within(
+    bytes: &[u8],
+    source: &str,
+    name: Option<&str>,
+    limit: Option<u64>,
+) -> Result<VdbColor, String> {
+    let file = File::read(bytes)?;
+    let wanted = file.find(name, &["Cd", "color"])?;
+    let mut warnings = Vec::new();
+    let mut channel = |c: usize| -> Result<DensityGrid, String> {
+        let read = file.read_grid(bytes, wanted, source, Some(c), limit)?;
+        warnings.extend(read.warnings);
+        Ok(read.grid)
     };
-    let tree_of = match wanted.parent.is_empty() {
-        true => wanted,
-        false => file
-            .grids
-            .iter()
-            .find(|g| g.unique_name == wanted.parent)
-            .ok_or_else(|| {
-                format!(
-                    "grid {:?} is an instance of {:?}, which the file lacks",
-                    wanted.name(),
-                    wanted.parent
-                )
-            })?,
-    };
-    let label = format!("{source}[{}]", wanted.name());
-    let in_grid = |reason: String| format!("grid {:?}: {reason}", wanted.name());
-    let header = GridHeader::read(bytes, wanted).map_err(in_grid)?;
-    let tree = if std::ptr::eq(tree_of, wanted) {
-        Tree::read(bytes, &header).map_err(in_grid)?
-    } else {
-        let parent = GridHeader::read(bytes, tree_of).map_err(in_grid)?;
-        Tree::read(bytes, &parent).map_err(in_grid)?
-    };
-    densify(&tree, header.index_to_world, label, limit).map_err(in_grid)
+    let channels = [channel(0)?, channel(1)?, channel(2)?];
+    warnings.dedup();
+    Ok(VdbColor { channels, warnings })
+}
+
+/// [`parse_color_within`] within `--max-memory`.
+pub fn parse_color(bytes: &[u8], source: &str, name: Option<&str>) -> Result<VdbColor, String> {
+    parse_color_within(bytes, source, name, crate::memory::process_limit())
 }
 
 /// The grids of a file, in order.
@@ -186,6 +186,73 @@ impl File {
         Ok(Self { grids })
     }
 
+    /// The grid `name`, or without one the first of `defaults` the file has, or its only
+    /// grid.
+    fn find(&self, name: Option<&str>, defaults: &[&str]) -> Result<&Descriptor, String> {
+        if let Some(name) = name {
+            return self
+                .grids
+                .iter()
+                .find(|g| g.name() == name)
+                .ok_or_else(|| format!("it has no grid {name:?} ({})", self.listing()));
+        }
+        let named = defaults
+            .iter()
+            .find_map(|d| self.grids.iter().find(|g| g.name() == *d));
+        match named {
+            Some(g) => Ok(g),
+            None if self.grids.len() == 1 => Ok(&self.grids[0]),
+            None => Err(format!(
+                "it has no grid {} and more than one grid: name the one to read ({})",
+                defaults
+                    .iter()
+                    .map(|d| format!("{d:?}"))
+                    .collect::<Vec<_>>()
+                    .join(" or "),
+                self.listing()
+            )),
+        }
+    }
+
+    /// Grid `wanted` of the file `bytes` as a dense grid (`component`: the component of a
+    /// vector grid to read, or a scalar grid read as one; `None`: a scalar grid).
+    fn read_grid(
+        &self,
+        bytes: &[u8],
+        wanted: &Descriptor,
+        source: &str,
+        component: Option<usize>,
+        limit: Option<u64>,
+    ) -> Result<VdbGrid, String> {
+        let tree_of = match wanted.parent.is_empty() {
+            true => wanted,
+            false => self
+                .grids
+                .iter()
+                .find(|g| g.unique_name == wanted.parent)
+                .ok_or_else(|| {
+                    format!(
+                        "grid {:?} is an instance of {:?}, which the file lacks",
+                        wanted.name(),
+                        wanted.parent
+                    )
+                })?,
+        };
+        let label = match component {
+            None => format!("{source}[{}]", wanted.name()),
+            Some(c) => format!("{source}[{}].{}", wanted.name(), ["r", "g", "b"][c]),
+        };
+        let in_grid = |reason: String| format!("grid {:?}: {reason}", wanted.name());
+        let header = GridHeader::read(bytes, wanted, component).map_err(in_grid)?;
+        let tree = if std::ptr::eq(tree_of, wanted) {
+            Tree::read(bytes, &header).map_err(in_grid)?
+        } else {
+            let parent = GridHeader::read(bytes, tree_of, component).map_err(in_grid)?;
+            Tree::read(bytes, &parent).map_err(in_grid)?
+        };
+        densify(&tree, header.index_to_world, label, limit).map_err(in_grid)
+    }
+
     /// "grids: density (float), temperature (float)" for messages.
     fn listing(&self) -> String {
         let names: Vec<String> = self
@@ -197,12 +264,15 @@ impl File {
     }
 }
 
-/// How a grid's values are stored: bytes of a value in the value arrays (2 for grids saved
-/// as halves, `_HalfFloat`) and elsewhere (background, tiles, inactive values: 4 or 8).
+/// How a grid's values are stored: bytes of a component in the value arrays (2 for grids
+/// saved as halves, `_HalfFloat`) and elsewhere (background, tiles, inactive values: 4 or
+/// 8), the components of a value (1, or 3 for a vector grid) and the one that is read.
 #[derive(Clone, Copy, PartialEq)]
 struct Values {
     stored: usize,
     full: usize,
+    components: usize,
+    pick: usize,
 }
 
 /// What precedes a grid's tree.
@@ -215,14 +285,21 @@ struct GridHeader {
 }
 
 impl GridHeader {
-    fn read(bytes: &[u8], grid: &Descriptor) -> Result<Self, String> {
-        let full = match grid.kind.trim_end_matches("_HalfFloat") {
-            "Tree_float_5_4_3" => 4,
-            "Tree_double_5_4_3" => 8,
+    fn read(bytes: &[u8], grid: &Descriptor, component: Option<usize>) -> Result<Self, String> {
+        let (full, components) = match grid.kind.trim_end_matches("_HalfFloat") {
+            "Tree_float_5_4_3" => (4, 1),
+            "Tree_double_5_4_3" => (8, 1),
+            "Tree_vec3s_5_4_3" if component.is_some() => (4, 3),
+            "Tree_vec3d_5_4_3" if component.is_some() => (8, 3),
             kind => {
                 return Err(format!(
                     "its type is {kind}: lucerna reads scalar float and double grids \
-                     (Tree_float_5_4_3, Tree_double_5_4_3)"
+                     (Tree_float_5_4_3, Tree_double_5_4_3){}",
+                    if component.is_none() {
+                        ", and vector grids (Tree_vec3s_5_4_3, Tree_vec3d_5_4_3) only as colours"
+                    } else {
+                        " and vector ones (Tree_vec3s_5_4_3, Tree_vec3d_5_4_3)"
+                    }
                 ));
             }
         };
@@ -233,6 +310,12 @@ impl GridHeader {
                 full
             },
             full,
+            components,
+            pick: if components == 1 {
+                0
+            } else {
+                component.unwrap_or(0)
+            },
         };
         let mut r = Reader::at(bytes, grid.start);
         let compression = r.u32()?;
@@ -515,7 +598,8 @@ impl Compressed {
             // Halves store nothing at all for an empty array (OpenVDB's HalfReader).
             return Ok(Vec::new());
         }
-        let expected = count * size;
+        let (components, pick) = (self.values.components, self.values.pick);
+        let expected = count * size * components;
         let raw: std::borrow::Cow<[u8]> = if self.compression & (ZIP | BLOSC) == 0 {
             r.bytes(expected)?.into()
         } else {
@@ -539,17 +623,18 @@ impl Compressed {
                 }
             }
         };
+        // The picked component of each value.
+        let picked = raw
+            .chunks_exact(size * components)
+            .map(|v| &v[pick * size..(pick + 1) * size]);
         Ok(match size {
-            4 => raw
-                .chunks_exact(4)
+            4 => picked
                 .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
                 .collect(),
-            8 => raw
-                .chunks_exact(8)
+            8 => picked
                 .map(|c| f64::from_le_bytes(c.try_into().unwrap()) as f32)
                 .collect(),
-            _ => raw
-                .chunks_exact(2)
+            _ => picked
                 .map(|c| half::f16::from_le_bytes(c.try_into().unwrap()).to_f32())
                 .collect(),
         })
@@ -680,7 +765,7 @@ fn densify(
                 (i / nx % ny) as i64,
                 (i / (nx * ny)) as i64,
             ) + lo;
-            return Err(format!("voxel {p} has value {v}: densities must be finite"));
+            return Err(format!("voxel {p} has value {v}: values must be finite"));
         }
         if *v < 0.0 {
             negative += 1;
@@ -689,7 +774,7 @@ fn densify(
     }
     if negative > 0 {
         warnings.push(format!(
-            "{source}: {negative} voxel(s) with a negative density read as 0"
+            "{source}: {negative} voxel(s) with a negative value read as 0"
         ));
     }
     let unit_to_index =
@@ -767,12 +852,19 @@ impl<'a> Reader<'a> {
         Ok(I64Vec3::from_array(c))
     }
 
-    /// A value outside the value arrays (32 or 64 bits).
+    /// A value outside the value arrays (components of 32 or 64 bits): its picked component.
     fn value(&mut self, values: Values) -> Result<f32, String> {
-        Ok(match values.full {
-            8 => self.f64()? as f32,
-            _ => f32::from_le_bytes(self.array()?),
-        })
+        let mut picked = 0.0;
+        for c in 0..values.components {
+            let v = match values.full {
+                8 => self.f64()? as f32,
+                _ => f32::from_le_bytes(self.array()?),
+            };
+            if c == values.pick {
+                picked = v;
+            }
+        }
+        Ok(picked)
     }
 
     /// A file offset (64 bits), which must lie inside the file.

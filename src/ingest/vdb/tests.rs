@@ -256,7 +256,7 @@ fn non_finite_densities_are_errors_naming_the_voxel() {
         let err = parse(&write(&leaves, compression, 4, false), "x", None).unwrap_err();
         // Entry 9 of the leaf at the origin: x 0, y 1, z 1 (z fastest).
         assert!(
-            err.contains("voxel [0, 1, 1] has value NaN: densities must be finite"),
+            err.contains("voxel [0, 1, 1] has value NaN: values must be finite"),
             "{err}"
         );
     }

@@ -5,7 +5,7 @@ NanoVDB), so that the grid's placement (index space, voxel centres, transform), 
 interpolation and the medium's coefficients are compared end to end:
 
     BLENDER=/path/to/bpy-venv/bin/python .venv/bin/python tools/compare/cycles/vdb_volume.py \\
-        [--case plume|cloud|fire|glow] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
+        [--case plume|cloud|fire|glow|colour] [--spp 256] [--resolution 160x160] [--out tools/compare/cycles/results/vdb-volume]
 
 The smoke plume of tests/assets/vdb/plume.vdb (36 x 36 x 31 active voxels of 9 mm, Blosc)
 with extinction 90 per metre at density 1, albedo (0.9, 0.8, 0.65) and Henyey-Greenstein
@@ -19,7 +19,11 @@ unit, glows by Cycles' blackbody with intensity 1, under a dim sky: `--case fire
 the same fire's `temperature` grid read as an emission grid (`--case glow`: radiance per
 metre = value x (2, 1, 0.4), lucerna's `medium.emission_field`, USD standard_volume's
 emission channel, against the Principled Volume's Emission Strength driven by the grid's
-attribute, Emission Color the tint).
+attribute, Emission Color the tint); or a smoke whose albedo a colour grid tints
+(tests/assets/vdb/colour.vdb: the fire's smoke, extinction 40 per metre at density 1, albedo
+white times the `Cd` vector grid, saved as halves: `--case colour`, lucerna's
+`medium.scatter_color`, USD standard_volume's scatter_color_channel, against the Principled
+Volume's Color Attribute).
 lucerna: a glTF
 interface box around the grid with `extras.lucerna.medium.density` naming the file. Cycles:
 a Volume object of the same file (turned from glTF's Y up to Blender's Z up) with a
@@ -63,6 +67,10 @@ CASES = {
              "albedo": (0.3, 0.3, 0.3), "anisotropy": 0.0, "sky": 0.05, "camera": (0.0, 0.28, 1.2),
              "vfov": 0.55, "box": ((-0.18, -0.015, -0.18), (0.17, 0.57, 0.17)), "floor_y": -0.02,
              "floor_half": 20.0, "near": 0.01, "emission_tint": (2.0, 1.0, 0.4)},
+    "colour": {"vdb": lt.ROOT / "tests" / "assets" / "vdb" / "colour.vdb", "extinction": 40.0,
+               "albedo": (1.0, 1.0, 1.0), "anisotropy": 0.2, "sky": 1.0, "camera": (0.0, 0.28, 1.2),
+               "vfov": 0.55, "box": ((-0.18, -0.015, -0.18), (0.17, 0.57, 0.17)), "floor_y": -0.02,
+               "floor_half": 20.0, "near": 0.01, "colour_grid": "Cd"},
 }
 FLOOR = 0.5
 
@@ -93,6 +101,10 @@ if job["emission_tint"]:
     smoke.node_tree.links.new(field.outputs["Fac"], scale.inputs[0])
     smoke.node_tree.links.new(scale.outputs[0], pv.inputs["Emission Strength"])
     pv.inputs["Emission Color"].default_value = tuple(c / max(tint) for c in tint) + (1,)
+if job["colour_grid"]:
+    # The albedo is Color x the grid's colour; the extinction stays Density (Absorption
+    # Color black).
+    pv.inputs["Color Attribute"].default_value = job["colour_grid"]
 smoke.node_tree.links.new(pv.outputs[0], out.inputs["Volume"])
 volume.materials.append(smoke)
 grey_floor(job["floor_half"], job["floor_y"], job["floor"])
@@ -117,6 +129,9 @@ def write_gltf(path, width, height, case):
         medium["density_grid"] = "density"
         medium["emission_field"] = {"file": case["vdb"].name, "grid": "temperature",
                                     "tint": list(case["emission_tint"])}
+    if case.get("colour_grid"):
+        medium["density_grid"] = "density"
+        medium["scatter_color"] = {"file": case["vdb"].name, "grid": case["colour_grid"]}
     smoke = w.material("smoke", extras={"lucerna": {"bsdf": "interface", "medium": medium}})
     positions, triangles = box(*case["box"])
     w.node(name="smoke", mesh=w.mesh("smoke", positions, triangles, smoke))
@@ -134,7 +149,7 @@ def cycles_job(work, width, height, spp, case):
             "floor": FLOOR, "floor_y": case["floor_y"], "floor_half": case["floor_half"], "vfov": case["vfov"],
             "camera": case["camera"], "near": case["near"], "kelvin": case.get("kelvin", 0.0),
             "blackbody_intensity": case.get("blackbody_intensity", 0.0),
-            "emission_tint": case.get("emission_tint")}
+            "emission_tint": case.get("emission_tint"), "colour_grid": case.get("colour_grid")}
 
 
 def main():

@@ -17,16 +17,42 @@ pub fn walk_the_grid(data: &[u8]) -> Result<(), String> {
 }
 
 /// The same for an OpenVDB file: its default grid, then its grid `temperature` if it
-/// names one (a second grid read from the same bytes).
+/// names one (a second grid read from the same bytes), then its default colour grid (a
+/// vector grid read component by component) tinting the default grid's scattering.
 pub fn walk_the_vdb(data: &[u8]) -> Result<(), String> {
-    let read = lucerna::ingest::vdb::parse_within(data, "fuzz.vdb", None, Some(VDB_LIMIT))?;
-    walk(&read.grid)?;
+    let read = lucerna::ingest::vdb::parse_within(data, "fuzz.vdb", None, Some(VDB_LIMIT));
+    if let Ok(read) = &read {
+        walk(&read.grid)?;
+    }
     if let Ok(other) =
         lucerna::ingest::vdb::parse_within(data, "fuzz.vdb", Some("temperature"), Some(VDB_LIMIT))
     {
         walk(&other.grid)?;
     }
-    Ok(())
+    let colour = lucerna::ingest::vdb::parse_color_within(data, "fuzz.vdb", None, Some(VDB_LIMIT));
+    if let Ok(colour) = &colour {
+        let [r, g, b] = &colour.channels;
+        let density = read.as_ref().map_or(r, |read| &read.grid);
+        let coefficients = [
+            Vec3::new(0.5, 1.0, 2.0),
+            Vec3::new(3.0, 1.0, 0.2),
+            Vec3::ZERO,
+        ];
+        if let Some(medium) = Heterogeneous::new(
+            density,
+            coefficients,
+            0.3,
+            DMat4::IDENTITY,
+            None,
+            Some([r, g, b]),
+        ) {
+            walk_the_medium(density, &medium);
+        }
+    }
+    match (read, colour) {
+        (Err(reason), Err(_)) => Err(reason),
+        _ => Ok(()),
+    }
 }
 
 fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
@@ -48,7 +74,7 @@ fn walk(grid: &lucerna::scene::DensityGrid) -> Result<(), String> {
     for radiance in [blackbody, linear] {
         let glow = GlowField { grid, radiance };
         if let Some(medium) =
-            Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY, Some(glow))
+            Heterogeneous::new(grid, coefficients, 0.3, DMat4::IDENTITY, Some(glow), None)
         {
             walk_the_medium(grid, &medium);
         }
