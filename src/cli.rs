@@ -315,7 +315,9 @@ struct RenderArgs {
     /// unlimited]
     #[arg(long, help_heading = "Integrator")]
     max_depth: Option<String>,
-    /// Light selection for light sampling: uniform, power, contribution. [default: power]
+    /// Light selection for light sampling: uniform, power, contribution (a light BVH), or
+    /// learned (the light BVH mixed with what light samples found, occlusion included).
+    /// [default: power]
     #[arg(long, help_heading = "Integrator")]
     light_select: Option<String>,
     /// Measure area lights are sampled in: auto (spheres in the cone they subtend, other

@@ -294,7 +294,8 @@ pub fn inspect(
             crate::integrator::RussianRoulette::Efficiency(_)
         ),
     )
-    .with_guiding(options.settings.guiding);
+    .with_guiding(options.settings.guiding)
+    .with_light_selection(options.settings.light_select);
     let _ = writeln!(out, "{plan}");
     Ok(out)
 }

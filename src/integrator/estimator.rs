@@ -16,6 +16,7 @@ use super::media::Media;
 use super::settings::Settings;
 use crate::geometry::cone::RayCone;
 use crate::geometry::ray::Ray;
+use crate::light::learned::LightLearning;
 use crate::light::{Light, LightSample};
 use crate::material::PerLobe;
 use crate::world::{Interaction, World};
@@ -118,12 +119,21 @@ impl PathState {
     /// other technique's density in its MIS weight (0 after a delta lobe, which light
     /// sampling cannot follow).
     #[inline]
-    pub(crate) fn light_density(&self, world: &World, settings: &Settings, e: &Emitter) -> f32 {
+    pub(crate) fn light_density(
+        &self,
+        world: &World,
+        settings: &Settings,
+        learned: Option<&LightLearning>,
+        e: &Emitter,
+    ) -> f32 {
         if self.prev_delta {
             return 0.0;
         }
         let lights = &world.lights;
-        let select = lights.selection_probability(e.light, self.prev_p, self.prev_n);
+        let select = match learned {
+            Some(l) => l.probability(lights, e.light, self.prev_p, self.prev_n),
+            None => lights.selection_probability(e.light, self.prev_p, self.prev_n),
+        };
         let density = match &lights.lights[e.light] {
             Light::Environment => lights
                 .environment
@@ -211,15 +221,33 @@ pub(crate) fn surface_emitter(
 pub(crate) fn sample_light(
     world: &World,
     settings: &Settings,
+    (learned, region): (Option<&LightLearning>, Option<u32>),
     it: &Interaction,
-    u_select: f32,
-    u_light: Vec2,
+    (u_select, u_light): (f32, Vec2),
     both_sides: bool,
 ) -> Option<(usize, f32, LightSample)> {
-    let (index, p_select) = world.lights.select(u_select, it.p, it.frame.n)?;
+    let (index, p_select) = select_light(world, learned, region, u_select, it.p, it.frame.n)?;
     let ng = if both_sides { None } else { Some(it.ng) };
     let ls = sample_chosen_light(world, settings, it.p, ng, index, u_light)?;
     Some((index, p_select, ls))
+}
+
+/// A light chosen with `u` for point `p` with normal `n` (ZERO in media): by learned
+/// selection `learned` (in region `region` of `p`) if there is one, else by the light set's
+/// own selection; its index and probability.
+#[inline]
+pub(crate) fn select_light(
+    world: &World,
+    learned: Option<&LightLearning>,
+    region: Option<u32>,
+    u: f32,
+    p: Vec3,
+    n: Vec3,
+) -> Option<(usize, f32)> {
+    match learned {
+        Some(l) => l.select(&world.lights, u, p, n, region),
+        None => world.lights.select(u, p, n),
+    }
 }
 
 /// [`sample_light`]'s sample of light `index`, once chosen, from point `p`; with a

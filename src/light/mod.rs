@@ -4,7 +4,8 @@
 //! point and spot lights (`point`, `spot`); directional lights and distant lights with an
 //! angular size (`distant`); and the environment (`environment`). [`Light`] is the closed
 //! set of kinds and dispatches to them, as the BSDFs' enum does; which light to sample is
-//! `selection`'s job, with `tree` for selection by contribution.
+//! `selection`'s job, with `tree` for selection by contribution and `learned` for selection
+//! by what light samples found.
 //!
 //! A new kind of light is a new file here, an arm of [`Light`] and of its dispatch, and its
 //! construction in `world::build`.
@@ -15,6 +16,7 @@ pub mod environment;
 pub mod groups;
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod lanes;
+pub mod learned;
 pub mod point;
 pub mod quadric;
 pub mod sample;

@@ -18,6 +18,10 @@ pub enum LightSelect {
     /// In proportion to an estimate of the unoccluded contribution at the shading point,
     /// through a light BVH (see `light::tree`).
     Contribution,
+    /// The light BVH's selection mixed with what light samples found each group of
+    /// lights to bring to each region of the scene, shadow rays included (see
+    /// `light::learned`).
+    Learned,
 }
 
 impl LightSelect {
@@ -27,8 +31,9 @@ impl LightSelect {
             "uniform" => Ok(Self::Uniform),
             "power" => Ok(Self::Power),
             "contribution" => Ok(Self::Contribution),
+            "learned" => Ok(Self::Learned),
             _ => Err(format!(
-                "unknown light selection {s:?} (uniform, power, contribution)"
+                "unknown light selection {s:?} (uniform, power, contribution, learned)"
             )),
         }
     }
@@ -39,6 +44,7 @@ impl LightSelect {
             Self::Uniform => "uniform",
             Self::Power => "power",
             Self::Contribution => "contribution",
+            Self::Learned => "learned",
         }
     }
 }
@@ -103,7 +109,7 @@ impl LightSet {
                 selectable: powers.iter().map(|&p| p > 0.0).collect(),
             }),
             LightSelect::Power => AliasTable::new(&powers).map(Selector::Power),
-            LightSelect::Contribution => {
+            LightSelect::Contribution | LightSelect::Learned => {
                 let mut bounded = Vec::new();
                 let mut infinite = Vec::new();
                 for (i, l) in lights.iter().enumerate() {
@@ -178,6 +184,27 @@ impl LightSet {
                     tree.pmf(p, n, i) * (1.0 - infinite.len() as f32 / groups)
                 }
             }
+        }
+    }
+
+    /// The light tree and the lights at infinity beside it, under selection by
+    /// contribution (`None` under other strategies).
+    pub fn tree(&self) -> Option<(&LightTree, &[u32])> {
+        match self.selector.as_ref()? {
+            Selector::Contribution { tree, infinite } => Some((tree, infinite)),
+            _ => None,
+        }
+    }
+
+    /// Under selection by contribution, the share of selections that go to the light tree
+    /// (the rest go to the lights at infinity, each a group of its own).
+    pub fn tree_share(&self) -> f32 {
+        match self.selector.as_ref() {
+            Some(Selector::Contribution { tree, infinite }) => {
+                let groups = (infinite.len() + usize::from(!tree.is_empty())) as f32;
+                1.0 - infinite.len() as f32 / groups
+            }
+            _ => 0.0,
         }
     }
 

@@ -289,14 +289,29 @@ impl LightTree {
     }
 
     /// Chooses a light for shading point `p` (normal `n`): its index and probability.
-    pub fn sample(&self, p: Vec3, n: Vec3, mut u: f32) -> Option<(usize, f32)> {
-        let mut node = 0usize;
+    pub fn sample(&self, p: Vec3, n: Vec3, u: f32) -> Option<(usize, f32)> {
+        let root = self.nodes.first()?;
+        if root.leaf {
+            return (root.bounds.importance(p, n) > 0.0)
+                .then_some((root.child_or_light as usize, 1.0));
+        }
+        self.sample_below(0, p, n, u)
+    }
+
+    /// Chooses a light among those below node `node` (see [`LightTree::cut`]): its index
+    /// and probability given the node.
+    pub fn sample_below(
+        &self,
+        mut node: usize,
+        p: Vec3,
+        n: Vec3,
+        mut u: f32,
+    ) -> Option<(usize, f32)> {
         let mut pmf = 1.0f32;
         loop {
             let current = self.nodes.get(node)?;
             if current.leaf {
-                return (current.bounds.importance(p, n) > 0.0 || node > 0)
-                    .then_some((current.child_or_light as usize, pmf));
+                return Some((current.child_or_light as usize, pmf));
             }
             let (a, b) = (node + 1, current.child_or_light as usize);
             let ia = self.nodes[a].bounds.importance(p, n);
@@ -319,40 +334,169 @@ impl LightTree {
 
     /// Probability that [`LightTree::sample`] picks light `light` at `p` with normal `n`.
     pub fn pmf(&self, p: Vec3, n: Vec3, light: usize) -> f32 {
-        let Some(&(trail, depth)) = self.trails.get(light) else {
-            return 0.0;
-        };
-        if depth == u8::MAX || self.nodes.is_empty() {
-            return 0.0;
-        }
-        if depth == 0 {
+        match self.nodes.first() {
+            None => 0.0,
             // The root is the light's leaf: sampled whenever it matters at all.
-            return if self.nodes[0].bounds.importance(p, n) > 0.0 {
-                1.0
-            } else {
-                0.0
-            };
+            Some(root) if root.leaf => f32::from(
+                root.child_or_light as usize == light && root.bounds.importance(p, n) > 0.0,
+            ),
+            Some(_) => self.pmf_below(
+                TreeNode {
+                    index: 0,
+                    depth: 0,
+                    trail: 0,
+                },
+                p,
+                n,
+                light,
+            ),
         }
-        let mut node = 0usize;
-        let mut pmf = 1.0f32;
-        for level in 0..depth as usize {
-            let current = &self.nodes[node];
-            let (a, b) = (node + 1, current.child_or_light as usize);
+    }
+
+    /// Probability that [`LightTree::sample_below`] picks light `light` below `node`; 0 for
+    /// a light not below it.
+    pub fn pmf_below(&self, node: TreeNode, p: Vec3, n: Vec3, light: usize) -> f32 {
+        self.descend(node, node.depth as usize, p, n, light).1
+    }
+
+    /// [`LightTree::pmf`] of light `light` and, in the same descent, its
+    /// [`LightTree::pmf_below`] node `node`.
+    pub fn pmf_and_below(&self, node: TreeNode, p: Vec3, n: Vec3, light: usize) -> (f32, f32) {
+        if self.nodes.first().is_some_and(|root| root.leaf) {
+            let pmf = self.pmf(p, n, light);
+            return (pmf, f32::from(pmf > 0.0));
+        }
+        let root = TreeNode {
+            index: 0,
+            depth: 0,
+            trail: 0,
+        };
+        let (above, below) = self.descend(root, node.depth as usize, p, n, light);
+        // Below `node` only if the light's trail passes through it.
+        let mask = if node.depth == 0 {
+            0
+        } else {
+            u64::MAX >> (64 - node.depth as u32)
+        };
+        match self.trails.get(light) {
+            Some(&(trail, _)) if trail & mask == node.trail & mask => (above * below, below),
+            _ => (above * below, 0.0),
+        }
+    }
+
+    /// The descent from `node` to light `light`: the product of the choices above depth
+    /// `split` and of those from it on; zeros where the light is not below `node`.
+    fn descend(&self, node: TreeNode, split: usize, p: Vec3, n: Vec3, light: usize) -> (f32, f32) {
+        let Some(&(trail, depth)) = self.trails.get(light) else {
+            return (0.0, 0.0);
+        };
+        let start = node.depth as usize;
+        if depth == u8::MAX || (depth as usize) < start || self.nodes.is_empty() {
+            return (0.0, 0.0);
+        }
+        // The light is below `node` when its trail passes through it: its first `start`
+        // choices are the node's.
+        let mask = if start == 0 {
+            0
+        } else {
+            u64::MAX >> (64 - start)
+        };
+        if trail & mask != node.trail & mask {
+            return (0.0, 0.0);
+        }
+        let mut index = node.index as usize;
+        let (mut above, mut below) = (1.0f32, 1.0f32);
+        for level in start..depth as usize {
+            let current = &self.nodes[index];
+            let (a, b) = (index + 1, current.child_or_light as usize);
             let ia = self.nodes[a].bounds.importance(p, n);
             let ib = self.nodes[b].bounds.importance(p, n);
             if !(ia + ib > 0.0) {
-                return 0.0;
+                return (0.0, 0.0);
             }
-            if trail & (1 << level) == 0 {
-                pmf *= ia / (ia + ib);
-                node = a;
+            let choice = if trail & (1 << level) == 0 {
+                index = a;
+                ia / (ia + ib)
             } else {
-                pmf *= ib / (ia + ib);
-                node = b;
+                index = b;
+                ib / (ia + ib)
+            };
+            if level < split {
+                above *= choice;
+            } else {
+                below *= choice;
             }
         }
-        pmf
+        (above, below)
     }
+
+    /// At most `count` nodes (at least one, if the tree holds a light) that together hold
+    /// every light once: the root, split where the most power is until there are `count`
+    /// nodes or only leaves. Learned light selection learns one value per node of the cut.
+    pub fn cut(&self, count: usize) -> Vec<TreeNode> {
+        if self.nodes.is_empty() || count == 0 {
+            return Vec::new();
+        }
+        let mut cut = vec![TreeNode {
+            index: 0,
+            depth: 0,
+            trail: 0,
+        }];
+        while cut.len() < count {
+            let widest = cut
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| !self.nodes[c.index as usize].leaf)
+                .max_by(|a, b| {
+                    let phi = |c: &TreeNode| self.nodes[c.index as usize].bounds.phi;
+                    phi(a.1).total_cmp(&phi(b.1)).then(b.0.cmp(&a.0))
+                })
+                .map(|(i, _)| i);
+            let Some(i) = widest else { break };
+            let node = cut[i];
+            let second = self.nodes[node.index as usize].child_or_light;
+            cut[i] = TreeNode {
+                index: node.index + 1,
+                depth: node.depth + 1,
+                trail: node.trail,
+            };
+            cut.insert(
+                i + 1,
+                TreeNode {
+                    index: second,
+                    depth: node.depth + 1,
+                    trail: node.trail | (1 << node.depth),
+                },
+            );
+        }
+        cut
+    }
+
+    /// The node of the cut `cut` that light `light` is below, if it is in the tree.
+    pub fn cluster_of(&self, cut: &[TreeNode], light: usize) -> Option<usize> {
+        let &(trail, depth) = self.trails.get(light)?;
+        if depth == u8::MAX {
+            return None;
+        }
+        cut.iter().position(|c| {
+            let start = c.depth as usize;
+            let mask = if start == 0 {
+                0
+            } else {
+                u64::MAX >> (64 - start)
+            };
+            start <= depth as usize && trail & mask == c.trail & mask
+        })
+    }
+}
+
+/// A node of the light tree with where it lies: its depth and the bit trail of the choices
+/// from the root to it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TreeNode {
+    pub index: u32,
+    pub depth: u8,
+    pub trail: u64,
 }
 
 #[cfg(test)]

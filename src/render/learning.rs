@@ -1,17 +1,19 @@
 //! What the render learns while it runs, in one holder that the render loop drives between
 //! passes: efficiency-aware roulette and splitting (`integrator::ears`: per-region radiance
-//! moments and costs, learned in passes of 1, 1, 2, 4 and 8 samples) and learned first-vertex
+//! moments and costs, learned in passes of 1, 1, 2, 4 and 8 samples), learned first-vertex
 //! splitting (`integrator::split`: the split counts, learned in a pass of their own over one
-//! pixel in every 2×2 block).
+//! pixel in every 2×2 block), path guiding (`integrator::guiding`: the SD-tree, trained in
+//! passes of 1, 1, 2, 4, ... samples) and learned light selection (`light::learned`: what
+//! each cluster of lights brings to each region, trained in passes of 1, 1, 2, 4, 8, 16).
 //!
 //! Each pass, the loop asks the holder whether a technique needs a learning pass of its own
 //! ([`LearnedState::split_learning_pass`]) or a shorter pass ([`LearnedState::limit_pass`]),
 //! renders with what has been learned so far ([`LearnedState::ears`],
-//! [`LearnedState::first_split`]), and hands back what each tile learned, in tile order
-//! whatever the thread count, so that the next pass decides the same way
-//! ([`LearnedState::absorb`]). A new learned technique (path guiding, a learned light
-//! selection) is a field of the holder, a field of [`TileLearning`], and its arms in these
-//! methods; the kernels read its state as they read these.
+//! [`LearnedState::first_split`], [`LearnedState::guide`], [`LearnedState::lights`]), and
+//! hands back what each tile learned, in tile order whatever the thread count, so that the
+//! next pass decides the same way ([`LearnedState::absorb`]). A new learned technique is a
+//! field of the holder, a field of [`TileLearning`], and its arms in these methods; the
+//! kernels read its state as they read these.
 
 use super::schedule::PassSamples;
 use crate::film::Film;
@@ -21,6 +23,8 @@ use crate::integrator::guiding::sdtree::SdTree;
 use crate::integrator::guiding::{AUTO_INDIRECT_SHARE, Guide, GuidingMode, TRAINING_SAMPLES};
 use crate::integrator::split::{self, FirstSplit, LearningPixels, SplitStats};
 use crate::integrator::{RussianRoulette, Settings, Split, SplitChoice};
+use crate::light::LightSelect;
+use crate::light::learned::{self, LightLearning, LightRecords};
 use crate::world::World;
 
 /// What one pass lets the techniques learn.
@@ -33,6 +37,8 @@ pub(super) struct PassLearning {
     /// Path guiding records what this pass's paths find (the samples per pixel taken
     /// when the pass ends).
     pub guiding: Option<u32>,
+    /// Learned light selection records what this pass's light samples find.
+    pub lights: bool,
 }
 
 /// What one tile learned in a pass.
@@ -41,6 +47,7 @@ pub(super) struct TileLearning {
     pub ears: Option<Learning>,
     pub split: Option<SplitStats>,
     pub guiding: Option<TileRecords>,
+    pub lights: Option<LightRecords>,
 }
 
 /// The learned state of a render.
@@ -56,6 +63,9 @@ pub(super) struct LearnedState {
     learning_pixels: LearningPixels,
     /// Path guiding's SD-tree, while guiding is on.
     guiding: Option<Guiding>,
+    /// Learned light selection (`--light-select learned`, where there are lights to
+    /// choose between).
+    lights: Option<LightLearning>,
 }
 
 /// Path guiding's state between passes.
@@ -80,8 +90,12 @@ impl LearnedState {
             auto: settings.guiding == GuidingMode::Auto,
             iteration_start: 0,
         });
+        let lights = (settings.light_select == LightSelect::Learned)
+            .then(|| LightLearning::new(&world.lights, world.radius))
+            .flatten();
         Self {
             guiding,
+            lights,
             ears: match settings.rr {
                 RussianRoulette::Efficiency(max_split) => {
                     Some(Ears::new(film.width, film.height, max_split))
@@ -121,7 +135,9 @@ impl LearnedState {
         // Path guiding trains in passes of 1, 1, 2, 4, ... too, each sampling from what
         // the one before learned.
         let training = self.guiding.is_some() && done < TRAINING_SAMPLES;
-        let n = if learning || training {
+        // So does learned light selection.
+        let lights = self.lights.is_some() && done < learned::TRAINING_SAMPLES;
+        let n = if learning || training || lights {
             n.min(done.max(1))
         } else {
             n
@@ -132,6 +148,7 @@ impl LearnedState {
                 ears: learning,
                 split: None,
                 guiding: training.then_some(done + n),
+                lights,
             },
         )
     }
@@ -148,6 +165,11 @@ impl LearnedState {
     /// The tree a training pass records into.
     pub(super) fn guiding_tree(&self) -> Option<&SdTree> {
         self.guiding.as_ref().map(|g| &g.tree)
+    }
+
+    /// What learned light selection has learned (and records into in a training pass).
+    pub(super) fn lights(&self) -> Option<&LightLearning> {
+        self.lights.as_ref()
     }
 
     /// Efficiency-aware roulette's statistics so far.
@@ -172,6 +194,13 @@ impl LearnedState {
                 e.merge(l);
             }
             e.refresh();
+        }
+        if let (Some(l), true) = (self.lights.as_mut(), pass.lights) {
+            for r in tiles.iter().filter_map(|t| t.lights.as_ref()) {
+                l.absorb(r);
+            }
+            let regions = l.update();
+            log::debug!("learned light selection: {regions} regions sample from what they learned");
         }
         if let Some(n) = pass.split {
             let mut stats = SplitStats::default();

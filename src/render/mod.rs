@@ -103,6 +103,7 @@ pub fn render_with(
                 ears: false,
                 split: Some(n),
                 guiding: None,
+                lights: false,
             };
             (learned.split_learning_samples(&film, n), learning)
         } else if done < uniform_spp {
@@ -140,6 +141,8 @@ pub fn render_with(
             split_learning: learning.split.is_some(),
             guide: learned.guide(),
             guiding_records: learning.guiding.and(learned.guiding_tree()),
+            lights: learned.lights(),
+            light_records: learning.lights,
             rays: &counts,
             progress: progress.tiles(),
         };

@@ -357,6 +357,7 @@ impl RenderOptions {
             matches!(self.settings.rr, RussianRoulette::Efficiency(_)),
         )
         .with_guiding(self.settings.guiding)
+        .with_light_selection(self.settings.light_select)
     }
 }
 

@@ -13,6 +13,7 @@
 
 use crate::film::aov::{Aov, AovSet, MEAN_DATA};
 use crate::integrator::guiding::GuidingMode;
+use crate::light::LightSelect;
 use crate::scene::features::SceneFeatures;
 use std::fmt;
 
@@ -111,6 +112,9 @@ pub struct RenderPlan {
     /// Path guiding (`integrator::guiding`) learns and guides this render's paths; in
     /// `--guiding auto` the first training pass may still turn it off.
     pub guiding: bool,
+    /// Light selection learns what each group of lights brings where
+    /// (`light::learned`), in training passes of its own.
+    pub learned_lights: bool,
 }
 
 impl RenderPlan {
@@ -158,7 +162,18 @@ impl RenderPlan {
                 PlanMode::General => Kernel::GENERAL,
             },
             guiding: false,
+            learned_lights: false,
         }
+    }
+
+    /// The plan with lights selected as `select` says: learned selection runs in the
+    /// scalar kernel, which alone has it.
+    pub fn with_light_selection(mut self, select: LightSelect) -> Self {
+        self.learned_lights = select == LightSelect::Learned;
+        if self.learned_lights {
+            self.kernel.packet = false;
+        }
+        self
     }
 
     /// The plan with path guiding as `mode` asks: `on` guides (in the scalar kernel, which
@@ -261,11 +276,12 @@ impl fmt::Display for RenderPlan {
         let k = &self.kernel;
         write!(
             f,
-            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}, path guiding {}, {} kernel",
+            "  integrator: emitter lookups and MIS at BSDF hits {}, first-hit data {}, AOV routing {}, path guiding {}, learned light selection {}, {} kernel",
             on_off(k.emitter_hits),
             on_off(k.first_hit_data),
             on_off(k.routing),
             on_off(self.guiding),
+            on_off(self.learned_lights),
             if k.packet {
                 "packet (8 lanes, AVX2)"
             } else {

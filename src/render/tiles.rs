@@ -15,6 +15,7 @@ use crate::integrator::guiding::record::PathRecords;
 use crate::integrator::guiding::sdtree::SdTree;
 use crate::integrator::path::PathTracer;
 use crate::integrator::split::{FirstSplit, PixelParts, SampleParts, SplitStats};
+use crate::light::learned::{LightLearning, LightRecords};
 use crate::sampling::sampler::Sampler;
 use crate::world::World;
 use glam::Vec2;
@@ -39,6 +40,10 @@ pub(super) struct PassArgs<'a> {
     /// What paths are guided by, and where a guiding training pass records.
     pub guide: Option<Guide<'a>>,
     pub guiding_records: Option<&'a SdTree>,
+    /// What learned light selection chooses lights by, and whether this pass records
+    /// for it.
+    pub lights: Option<&'a LightLearning>,
+    pub light_records: bool,
     pub rays: &'a Mutex<RayCounts>,
     /// What finished tiles advance.
     pub progress: TileProgress<'a>,
@@ -69,13 +74,16 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
         split_learning,
         guide,
         guiding_records,
+        lights,
+        light_records,
         rays: counts,
         progress,
     } = *args;
     let router = &film.router;
     let crypto = film.aovs.wants_crypto();
-    let tracer =
-        PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears, split).guided_by(guide);
+    let tracer = PathTracer::<EMITTERS, DATA>::new(world, &options.settings, ears, split)
+        .guided_by(guide)
+        .selecting_lights_by(lights);
     let window = film.window;
     let camera = &world.camera;
     let interrupt = options.interrupt.as_deref();
@@ -90,6 +98,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
             let mut tile_learning = learning.then(Learning::default);
             let mut tile_split = split_learning.then(SplitStats::default);
             let mut tile_guiding = guiding_records.map(PathRecords::new);
+            let mut tile_lights = light_records.then(LightRecords::default);
             let mut taken = 0u64;
             for ty in 0..tile.height {
                 for tx in 0..tile.width {
@@ -128,6 +137,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                             tile_learning.as_mut(),
                             parts.as_mut(),
                             tile_guiding.as_mut(),
+                            tile_lights.as_mut(),
                         );
                         if let (Some(stats), Some(parts)) = (tile_split.as_mut(), parts.as_mut()) {
                             parts.rays[3] = rays.closest + rays.shadow;
@@ -156,6 +166,7 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                 ears: tile_learning,
                 split: tile_split,
                 guiding: tile_guiding.map(|g| g.tile),
+                lights: tile_lights,
             }
         })
         .collect()
@@ -242,6 +253,7 @@ pub(super) fn run_packet_pass<const EMITTERS: bool>(
                 ears: None,
                 split: split_learning.then_some(buffers.split_stats),
                 guiding: None,
+                lights: None,
             }
         })
         .collect()

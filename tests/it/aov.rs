@@ -248,6 +248,7 @@ fn single_technique_layers_estimate_direct_light_without_bias() {
                         None,
                         None,
                         None,
+                        None,
                     );
                     stats.end_sample();
                 }

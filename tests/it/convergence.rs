@@ -1,7 +1,7 @@
 //! Every technique configuration converges to the same image.
 //!
 //! Each setting (each MIS heuristic, each Russian roulette mode, splitting fixed and learned, each
-//! light selection and light sampling strategy, each sampler, path guiding) renders the Cornell box, the
+//! light selection (learned selection too) and light sampling strategy, each sampler, path guiding) renders the Cornell box, the
 //! MIS plates (also under a sun with an angular size), the indirect room, the glass box
 //! (smooth and rough glass, a thin pane), the Cornell box lit by a textured screen (light
 //! samples that follow the texture, or uniform ones) and the Cornell box with a chromatic
@@ -56,6 +56,7 @@ const CONFIGURATIONS: &[&[(&str, &str)]] = &[
     &[("split", "nee=4,bsdf=2"), ("sampler", "sobol")],
     &[("light-select", "uniform")],
     &[("light-select", "contribution")],
+    &[("light-select", "learned"), ("split", "nee=2,bsdf=1")],
     &[("light-sampling", "solid-angle")],
     &[("light-sampling", "area")],
     &[("sampler", "sobol")],

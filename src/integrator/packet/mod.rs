@@ -456,7 +456,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
             Self::contribute(slot, value);
             return;
         }
-        let p_light = path.light_density(self.world, self.settings, &e);
+        let p_light = path.light_density(self.world, self.settings, None, &e);
         let w = self
             .settings
             .mis

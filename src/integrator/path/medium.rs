@@ -12,7 +12,7 @@
 //! What a medium emits along a segment is added as the path enters the segment, whatever
 //! its flight then does (`crate::medium`).
 
-use super::super::estimator::{PathState, RayCounts, sample_chosen_light};
+use super::super::estimator::{PathState, RayCounts, sample_chosen_light, select_light};
 use super::super::mis::Technique;
 use super::super::roulette::RussianRoulette;
 use super::{MediumVertex, PathTracer, Segment, Walk, record};
@@ -167,7 +167,10 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
         rec: &mut R,
     ) -> u64 {
         let world = self.world;
-        let Some((index, p_select)) = world.lights.select(vs.light_select, v.p, Vec3::ZERO) else {
+        let region = self.lights.and_then(|l| l.region(v.p, Vec3::ZERO));
+        let Some((index, p_select)) =
+            select_light(world, self.lights, region, vs.light_select, v.p, Vec3::ZERO)
+        else {
             return 0;
         };
         let Some(ls) = sample_chosen_light(world, self.settings, v.p, None, index, vs.light) else {

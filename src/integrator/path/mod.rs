@@ -29,12 +29,11 @@
 //! the previous vertex's light samples, which crossed the same filter. It still takes new
 //! random numbers (`PathState::vertex`).
 
+mod light_sample;
 mod medium;
 
 use super::ears::{self, Ears, Learning, MAX_BRANCHES};
-use super::estimator::{
-    Emitter, PathState, RayCounts, emitters_at_infinity, sample_light, surface_emitter,
-};
+use super::estimator::{Emitter, PathState, RayCounts, emitters_at_infinity, surface_emitter};
 use super::guiding::mixture::guided_sample;
 use super::guiding::record::PathRecords;
 use super::guiding::sdtree::Cell;
@@ -48,6 +47,7 @@ use crate::color::luminance;
 use crate::film::record::{Contribution, FirstHit, Recorder, Source};
 use crate::geometry::Hit;
 use crate::geometry::ray::{Ray, offset_past, offset_ray_origin_within};
+use crate::light::learned::{LightLearning, LightRecords};
 use crate::material::{self, Bsdf, BsdfStorage, Lobe, PerLobe};
 use crate::medium::Medium;
 use crate::sampling::sampler::{Sampler, SplitKind, VertexSample};
@@ -72,6 +72,8 @@ struct Walk<'l, 'g> {
     split_points: SamplePoints,
     /// Where a path-guiding training pass records the radiance found along continuations.
     guiding: Option<&'l mut PathRecords<'g>>,
+    /// Where a training pass of learned light selection records what light samples find.
+    lights: Option<&'l mut LightRecords>,
 }
 
 impl Walk<'_, '_> {
@@ -173,6 +175,8 @@ pub struct PathTracer<'a, const EMITTERS: bool, const DATA: bool> {
     split: FirstSplit,
     /// The learned distributions continuations are guided by, if any.
     guide: Option<Guide<'a>>,
+    /// Learned light selection, if lights are chosen by it.
+    lights: Option<&'a LightLearning>,
     /// The media around the camera, where camera paths start.
     camera_media: Media,
 }
@@ -254,7 +258,7 @@ impl PathState {
             });
             return;
         }
-        let p_light = self.light_density(tracer.world, tracer.settings, &e);
+        let p_light = self.light_density(tracer.world, tracer.settings, tracer.lights, &e);
         record(
             rec,
             walk,
@@ -288,6 +292,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             ears,
             split,
             guide: None,
+            lights: None,
             camera_media,
         }
     }
@@ -297,10 +302,16 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         Self { guide, ..self }
     }
 
+    /// The same tracer, its lights chosen by learned selection `lights` (the light set's
+    /// own selection where `None`).
+    pub fn selecting_lights_by(self, lights: Option<&'a LightLearning>) -> Self {
+        Self { lights, ..self }
+    }
+
     /// Traces the paths of camera ray `ray` for pixel `pixel` using `sampler`'s current
     /// pixel sample; `learning` receives statistics for efficiency-aware roulette, `parts`
     /// what the sample's parts bring back for learned splitting, `guiding` what a
-    /// path-guiding training pass learns.
+    /// path-guiding training pass learns, `lights` what learned light selection learns.
     #[allow(clippy::too_many_arguments)]
     pub fn trace<R: Recorder>(
         &self,
@@ -312,6 +323,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         learning: Option<&mut Learning>,
         parts: Option<&mut SampleParts>,
         guiding: Option<&mut PathRecords>,
+        lights: Option<&mut LightRecords>,
     ) {
         let mut walk = Walk {
             mis: self.settings.mis,
@@ -325,6 +337,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 .split
                 .sample_points(sampler.pixel(), sampler.sample_index()),
             guiding,
+            lights,
         };
         let camera = PathState {
             media: self.camera_media,
@@ -360,6 +373,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             parts,
             split_points,
             guiding: None,
+            lights: None,
         };
         self.trace_from(ray, path, Some(hit), &mut walk, sampler, rec, rays);
     }
@@ -768,80 +782,6 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
             first_hit_recorded: true,
         };
         Some((Ray::new(origin, wi), next))
-    }
-
-    /// One light sample at vertex `v`: a light chosen by the selection strategy, a point on
-    /// it, a shadow ray. Returns the number of shadow rays traced.
-    #[allow(clippy::too_many_arguments)]
-    fn next_event<R: Recorder>(
-        &self,
-        v: &Vertex,
-        path: &PathState,
-        walk: &mut Walk,
-        (n_nee, n_bsdf): (u32, u32),
-        u_light: Vec2,
-        u_select: f32,
-        rec: &mut R,
-    ) -> u64 {
-        let Vertex { it, bsdf, wo, .. } = *v;
-        let world = self.world;
-        let transmits = bsdf.transmits();
-        let Some((index, p_select, ls)) =
-            sample_light(world, self.settings, it, u_select, u_light, transmits)
-        else {
-            return 0;
-        };
-        let mut radiance = ls.radiance;
-        let wi = it.frame.to_local(ls.wi);
-        let below = transmits && ls.wi.dot(it.ng) < 0.0;
-        // Light through the surface only where the shading frame agrees it crosses.
-        if below != (wi.z < 0.0) && transmits {
-            return 0;
-        }
-        // At the first vertex the lobe layers need f split by lobe: evaluated once, split.
-        let (f, lobes) = if walk.lobes && path.depth == 0 {
-            let parts = bsdf.eval_lobes(wo, wi);
-            (parts[0] + parts[1] + parts[2], material::shares(parts))
-        } else {
-            (bsdf.eval(wo, wi), path.lobes)
-        };
-        if f == Vec3::ZERO {
-            return 0;
-        }
-        let origin = v.origin(below);
-        let shadow = ls.shadow_ray(origin);
-        let media = path.media.beyond(it, v.material, below);
-        let mut traced = 1;
-        let through = if world.surfaces.participating {
-            traced = 0;
-            media.shadow_transmittance(world, &shadow, &mut traced)
-        } else {
-            let length = ls.target.map_or(f32::INFINITY, |t| (t - origin).length());
-            world.transmittance(&shadow) * media.transmittance(&world.surfaces, &shadow, length)
-        };
-        if through == Vec3::ZERO {
-            return traced;
-        }
-        radiance *= through;
-        let p_light = p_select * ls.pdf;
-        // BSDF sampling cannot reach a delta light (nor any light, in a kernel without
-        // emitter lookups): its density there is 0, and the light sample's weight 1.
-        let p_bsdf = if ls.delta || !EMITTERS {
-            0.0
-        } else {
-            v.continuation_pdf(wi)
-        };
-        let value = path.beta * f * radiance / (p_light * n_nee as f32);
-        record(
-            rec,
-            walk,
-            Technique::Nee,
-            value,
-            (path.depth + 1, lobes, index),
-            p_light * n_nee as f32,
-            p_bsdf * n_bsdf as f32,
-        );
-        traced
     }
 }
 
