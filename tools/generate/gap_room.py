@@ -11,31 +11,21 @@ specularFactor 0: exactly Lambert), as other renderers read them.
 import sys
 from pathlib import Path
 
-from lucerna_tools.gltf_writer import GltfWriter, box
+from lucerna_tools.gltf_writer import GltfWriter, write_scene
 
 GAP = 0.06
-SPECULAR_ZERO = {"KHR_materials_specular": {"specularFactor": 0.0}}
 
 
 def build():
     w = GltfWriter("lucerna tools/generate/gap_room.py")
-    w._use("KHR_materials_specular")
-
-    def lambert(name, base, **kw):
-        index = w.material(name, base=base, **kw)
-        w.doc["materials"][index].setdefault("extensions", {}).update(SPECULAR_ZERO)
-        return index
-
+    lambert = w.lambert_material
     walls = lambert("walls", (0.75, 0.75, 0.72))
     floor = lambert("floor", (0.6, 0.55, 0.5))
     red = lambert("red", (0.7, 0.15, 0.1))
     # A black emitter without a specular layer: it reflects nothing, in any renderer.
     light = lambert("panel", (0, 0, 0), emissive=[400.0, 380.0, 340.0], double_sided=False)
 
-    def add_box(name, lo, hi, material, outward=True):
-        v, t = box(lo, hi, outward)
-        w.node(name=name, mesh=w.mesh(name, v, t, material))
-
+    add_box = w.add_box
     # The room's inside: x in [-3, 2.95], y in [0, 3], z in [-3, 3]; its walls are slabs.
     add_box("floor", (-3.1, -0.1, -3.1), (3.05, 0.0, 3.1), floor)
     add_box("ceiling", (-3.1, 3.0, -3.1), (3.05, 3.1, 3.1), walls)
@@ -64,11 +54,8 @@ def build():
 
 
 def main():
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else \
-        Path(__file__).resolve().parents[2] / "scenes" / "gap-room" / "gap-room.glb"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    build().write_glb(out)
-    print(f"wrote {out}")
+    write_scene(build, Path(__file__).resolve().parents[2] / "scenes" / "gap-room" / "gap-room.glb",
+                sys.argv)
 
 
 if __name__ == "__main__":

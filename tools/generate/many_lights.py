@@ -12,9 +12,8 @@ case learned, occlusion-aware light selection is for. Materials are plain glTF P
 import sys
 from pathlib import Path
 
-from lucerna_tools.gltf_writer import GltfWriter, box
+from lucerna_tools.gltf_writer import GltfWriter, write_scene
 
-SPECULAR_ZERO = {"KHR_materials_specular": {"specularFactor": 0.0}}
 ROOM, HEIGHT, WALL = 4.0, 3.0, 0.1
 COLUMNS, ROWS = 4, 2
 DOOR = 0.9
@@ -22,22 +21,13 @@ DOOR = 0.9
 
 def build():
     w = GltfWriter("lucerna tools/generate/many_lights.py")
-    w._use("KHR_materials_specular")
-
-    def lambert(name, base, **kw):
-        index = w.material(name, base=base, **kw)
-        w.doc["materials"][index].setdefault("extensions", {}).update(SPECULAR_ZERO)
-        return index
-
+    lambert = w.lambert_material
     walls = lambert("walls", (0.7, 0.7, 0.68))
     floor = lambert("floor", (0.5, 0.45, 0.4))
     blue = lambert("blue", (0.15, 0.25, 0.6))
     width, depth = COLUMNS * ROOM, ROWS * ROOM
 
-    def add_box(name, lo, hi, material):
-        v, t = box(lo, hi, True)
-        w.node(name=name, mesh=w.mesh(name, v, t, material))
-
+    add_box = w.add_box
     add_box("floor", (-WALL, -WALL, -WALL), (width + WALL, 0.0, depth + WALL), floor)
     add_box("ceiling", (-WALL, HEIGHT, -WALL), (width + WALL, HEIGHT + WALL, depth + WALL), walls)
     add_box("outer_w", (-WALL, 0, -WALL), (0, HEIGHT, depth + WALL), walls)
@@ -83,11 +73,8 @@ def build():
 
 
 def main():
-    out = Path(sys.argv[1]) if len(sys.argv) > 1 else \
-        Path(__file__).resolve().parents[2] / "scenes" / "many-lights" / "many-lights.glb"
-    out.parent.mkdir(parents=True, exist_ok=True)
-    build().write_glb(out)
-    print(f"wrote {out}")
+    write_scene(build, Path(__file__).resolve().parents[2] / "scenes" / "many-lights" / "many-lights.glb",
+                sys.argv)
 
 
 if __name__ == "__main__":

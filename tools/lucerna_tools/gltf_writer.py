@@ -31,6 +31,20 @@ class GltfWriter:
         if extension not in used:
             used.append(extension)
 
+    def lambert_material(self, name, base, **kw):
+        """A plain glTF PBR material that every renderer reads as Lambert: metallic 0,
+        KHR_materials_specular specularFactor 0."""
+        self._use("KHR_materials_specular")
+        index = self.material(name, base=base, **kw)
+        self.doc["materials"][index].setdefault("extensions", {}).update(
+            {"KHR_materials_specular": {"specularFactor": 0.0}})
+        return index
+
+    def add_box(self, name, lo, hi, material, outward=True):
+        """A node holding an axis-aligned box mesh (see `box`)."""
+        v, t = box(lo, hi, outward)
+        self.node(name=name, mesh=self.mesh(name, v, t, material))
+
     def accessor(self, values, kind, component=5126):
         """A tightly packed accessor; `values` is a list of tuples (or of ints for SCALAR)."""
         width = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[kind]
@@ -204,3 +218,11 @@ def box(lo, hi, outward=True):
             a, b, c, d = d, c, b, a
         tris += [(a, b, c), (a, c, d)]
     return v, tris
+
+
+def write_scene(build, default, argv):
+    """The generators' command line: writes `build()`'s scene to argv[1] or `default`."""
+    out = Path(argv[1]) if len(argv) > 1 else default
+    out.parent.mkdir(parents=True, exist_ok=True)
+    build().write_glb(out)
+    print(f"wrote {out}")
