@@ -83,3 +83,35 @@ fn guided_images_are_identical_with_one_and_two_threads() {
         "guiding changed nothing"
     );
 }
+
+/// Learned light selection merges what tiles learned in tile order: its render is the same
+/// with one thread and with two, and it selects differently from the light tree alone
+/// (the flat of eight rooms, where what is learned matters).
+#[test]
+fn learned_light_selection_is_identical_with_one_and_two_threads() {
+    use lucerna::integrator::LightSelect;
+    let settings = Settings {
+        seed: 3,
+        light_select: LightSelect::Learned,
+        ..Default::default()
+    };
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/many-lights/many-lights.glb");
+    let scene = || ingest::load(&path, &Default::default()).unwrap();
+    let (one, _) = render(scene(), (48, 32), 40, settings.clone(), 1);
+    let (two, _) = render(scene(), (48, 32), 40, settings.clone(), 2);
+    let beauty = ALL[0];
+    assert!(
+        one.planes(beauty) == two.planes(beauty),
+        "learned selection renders differ"
+    );
+    let tree = Settings {
+        light_select: LightSelect::Contribution,
+        ..settings
+    };
+    let (plain, _) = render(scene(), (48, 32), 40, tree, 2);
+    assert!(
+        one.planes(beauty) != plain.planes(beauty),
+        "learned selection changed nothing"
+    );
+}

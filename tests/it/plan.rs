@@ -512,3 +512,25 @@ fn guiding_plans_keep_to_the_scalar_kernel() {
     };
     assert!(!mirrors.with_guiding(GuidingMode::Auto).guiding);
 }
+
+/// Learned light selection runs in the scalar kernel: the plan keeps the packet kernel out
+/// and says so.
+#[test]
+fn learned_light_selection_keeps_to_the_scalar_kernel() {
+    use lucerna::integrator::LightSelect;
+    let scene = cornell();
+    let beauty = plan_for(&scene, "beauty", PlanMode::Packet);
+    let learned = beauty.clone().with_light_selection(LightSelect::Learned);
+    assert!(learned.learned_lights && !learned.kernel.packet);
+    assert!(
+        learned.to_string().contains("learned light selection on"),
+        "{learned}"
+    );
+    let tree = beauty
+        .clone()
+        .with_light_selection(LightSelect::Contribution);
+    assert_eq!(
+        (tree.learned_lights, tree.kernel.packet),
+        (false, beauty.kernel.packet)
+    );
+}
