@@ -177,11 +177,10 @@ impl LightSet {
             Some(Selector::Uniform { .. }) => 0.0,
             Some(Selector::Power(table)) => table.pmf(i),
             Some(Selector::Contribution { tree, infinite }) => {
-                let groups = (infinite.len() + usize::from(!tree.is_empty())) as f32;
                 if infinite.contains(&(i as u32)) {
-                    1.0 / groups
+                    1.0 / (infinite.len() + usize::from(!tree.is_empty())) as f32
                 } else {
-                    tree.pmf(p, n, i) * (1.0 - infinite.len() as f32 / groups)
+                    tree.pmf(p, n, i) * self.tree_share()
                 }
             }
         }
