@@ -40,6 +40,17 @@ pub struct Camera {
     /// Clipping range along the viewing axis, render space.
     clip_near: f32,
     clip_far: f32,
+    /// Camera to render space over the shutter, where the camera moves: rays leave from
+    /// where it is at their time ([`Camera::generate_ray_at`]).
+    motion: Option<std::sync::Arc<crate::geometry::motion::MotionTransform>>,
+}
+
+/// Where a camera is and which way it looks (render space, unit axes).
+struct Pose {
+    origin: Vec3,
+    right: Vec3,
+    up: Vec3,
+    forward: Vec3,
 }
 
 /// Pixels rendered beyond each edge of the image (overscan): the EXR's data window reaches
@@ -173,6 +184,7 @@ pub fn framing_camera(lo: DVec3, hi: DVec3) -> scene::Camera {
         clip_near: 0.0,
         clip_far: None,
         fit: Default::default(),
+        motion: Vec::new(),
     }
 }
 
@@ -276,7 +288,39 @@ impl Camera {
             clip_far: c
                 .clip_far
                 .map_or(f32::INFINITY, |f| (f * space.scale) as f32),
+            motion: crate::geometry::motion::keys_move(&c.motion)
+                .then(|| {
+                    let keys: Vec<DMat4> = c.motion.iter().map(|k| space.matrix() * *k).collect();
+                    crate::geometry::motion::MotionTransform::new(&keys)
+                })
+                .flatten()
+                .map(std::sync::Arc::new),
         }
+    }
+
+    /// True if the camera moves while the shutter is open.
+    pub fn moves(&self) -> bool {
+        self.motion.is_some()
+    }
+
+    /// [`Camera::generate_ray`] at shutter time `time`: from where a moving camera is then
+    /// (its frame's axes made orthonormal, as [`Camera::new`] makes them).
+    #[inline]
+    pub fn generate_ray_at(&self, film: Vec2, lens: Vec2, time: f32) -> Ray {
+        let Some(motion) = &self.motion else {
+            return self.generate_ray(film, lens).at_time(time);
+        };
+        let m = motion.at(time);
+        let right = m.transform_vector3(DVec3::X).normalize();
+        let forward = (-m.transform_vector3(DVec3::Z)).normalize();
+        let up = right.cross(forward).normalize();
+        let pose = Pose {
+            origin: m.transform_point3(DVec3::ZERO).as_vec3(),
+            right: forward.cross(up).as_vec3(),
+            up: up.as_vec3(),
+            forward: forward.as_vec3(),
+        };
+        self.ray_from(&pose, film, lens).at_time(time)
     }
 
     /// The camera rendering `overscan` pixels beyond the edges of its image as well: the
@@ -332,6 +376,19 @@ impl Camera {
     /// direction is unit length.
     #[inline]
     pub fn generate_ray(&self, film: Vec2, lens: Vec2) -> Ray {
+        let pose = Pose {
+            origin: self.origin,
+            right: self.right,
+            up: self.up,
+            forward: self.forward,
+        };
+        self.ray_from(&pose, film, lens)
+    }
+
+    /// [`Camera::generate_ray`] from the camera at `pose`.
+    #[inline(always)]
+    fn ray_from(&self, pose: &Pose, film: Vec2, lens: Vec2) -> Ray {
+        let to_world = |v: Vec3| pose.right * v.x + pose.up * v.y + pose.forward * v.z;
         let ndc = Vec2::new(
             film.x * self.film_to_ndc.x - 1.0,
             1.0 - film.y * self.film_to_ndc.y,
@@ -362,14 +419,15 @@ impl Camera {
             ),
         };
         let length = dir_cam.length();
-        let dir = self.to_world(dir_cam) * length.recip();
+        let dir = to_world(dir_cam) * length.recip();
         // Clipping distances are along the viewing axis: as dir_cam.z = 1, a unit of ray
         // distance covers 1 / length of it.
         let (near, far) = (self.clip_near * length, self.clip_far * length);
         Ray {
-            origin: self.origin + self.to_world(origin_cam) + dir * near,
+            origin: pose.origin + to_world(origin_cam) + dir * near,
             dir,
             tmax: far - near,
+            time: 0.0,
         }
     }
 
@@ -457,6 +515,7 @@ mod tests {
             clip_near: 0.5,
             clip_far: Some(20.0),
             fit: Default::default(),
+            motion: Vec::new(),
         };
         let space = RenderSpace::from_bounds(DVec3::splat(-4.0), DVec3::splat(6.0));
         Camera::new(&c, &space, 64, 48)

@@ -135,6 +135,11 @@ struct LoadArgs {
     /// Frames per second of glTF animations. [default: 24]
     #[arg(long)]
     fps: Option<String>,
+    /// The shutter, OPEN,CLOSE in frames relative to the frame (-0.25,0.25: a 180-degree
+    /// shutter): what moves while it is open is blurred. glTF animations are sampled over
+    /// it (frame 0 without --frame). [default: closed: no motion blur]
+    #[arg(long, allow_hyphen_values = true)]
+    shutter: Option<String>,
     /// Skip usd-core's validators (USD stages; faster on large stages).
     #[arg(long, conflicts_with = "strict")]
     no_validate: bool,

@@ -317,15 +317,6 @@ impl F8 {
         unsafe { F8(_mm256_loadu_ps(floats.as_ptr().add(at))) }
     }
 
-    /// Each lane takes the next lane's value; the last keeps its own.
-    #[inline(always)]
-    pub fn shift_down(self) -> F8 {
-        unsafe {
-            let next = _mm256_setr_epi32(1, 2, 3, 4, 5, 6, 7, 7);
-            F8(_mm256_permutevar8x32_ps(self.0, next))
-        }
-    }
-
     /// Row `index[i]` of `table` in each lane, transposed (as [`U8::gather_rows`]).
     #[inline(always)]
     pub fn gather_rows(table: &[[f32; 4]], index: U8) -> [F8; 4] {
@@ -888,7 +879,7 @@ mod tests {
     /// Lanes read and written one at a time, merged under a mask and shifted down, and
     /// unsigned comparisons (above 2^31 too).
     #[test]
-    fn lane_access_merges_and_shifts() {
+    fn lane_access_merges() {
         with_avx2(|| {
             let mut x = F8::from_array(std::array::from_fn(|l| l as f32));
             x.set_lane(3, -7.5);
@@ -899,10 +890,6 @@ mod tests {
             assert_eq!(
                 x.to_array(),
                 [100.0, 1.0, 100.0, -7.5, 4.0, 100.0, 6.0, 100.0]
-            );
-            assert_eq!(
-                x.shift_down().to_array(),
-                [1.0, 100.0, -7.5, 4.0, 100.0, 6.0, 100.0, 100.0]
             );
             let big = [0, 1, 8, 9, u32::MAX, 1 << 31, 7, 3];
             let mut u = U8::from_array(big);

@@ -3,9 +3,14 @@
 //! moved into the placement's object space, into the shared BVH. Memory grows with the
 //! shared geometry plus one transform and one top-level leaf per placement, as in pbrt's
 //! and Cycles' instancing, instead of with every placed triangle.
+//!
+//! A placement may move over the shutter (`geometry::motion`): its top-level box bounds the
+//! whole motion, as pbrt-v4's does for animated transforms, and a ray enters it through
+//! the inverse of its transform at the ray's time.
 
 use super::bvh::Bvh;
 use super::hit::{Hit, PrimitiveHit};
+use super::motion::MotionTransform;
 use super::ray::Ray;
 use super::wide::{LeafResult, WideBvh};
 use glam::{Affine3A, Vec3};
@@ -19,13 +24,18 @@ use obvhs::aabb::Aabb;
 const PLACEMENTS_PER_LEAF: u32 = 2;
 const PLACEMENT_NODE_COST: f32 = 1.0;
 
+/// [`Placement::motion`] of a placement that does not move.
+pub const STILL: u32 = u32::MAX;
+
 /// One placement of a shared BVH.
 #[derive(Clone, Copy, Debug)]
 pub struct Placement {
     /// Index of the shared BVH.
     pub shared: u32,
-    /// Render space to the shared geometry's object space.
+    /// Render space to the shared geometry's object space (of a still placement).
     pub to_object: Affine3A,
+    /// Index of its motion (object space to render space over the shutter), or [`STILL`].
+    pub motion: u32,
 }
 
 /// A top-level BVH over placements of shared BVHs.
@@ -36,12 +46,19 @@ pub struct InstancedBvh {
     /// Placements in top-level leaf order.
     placements: Vec<Placement>,
     shared: Vec<Bvh>,
+    /// The motions that [`Placement::motion`] indexes.
+    motions: Vec<MotionTransform>,
 }
 
 impl InstancedBvh {
-    /// Builds the top level over `placements` of the `shared` BVHs; `bounds[i]` is the
-    /// render-space box of placement `i`.
-    pub fn build(shared: Vec<Bvh>, placements: &[Placement], bounds: &[(Vec3, Vec3)]) -> Self {
+    /// Builds the top level over `placements` of the `shared` BVHs, moving by `motions`;
+    /// `bounds[i]` is the render-space box of placement `i` (over its whole motion).
+    pub fn build(
+        shared: Vec<Bvh>,
+        placements: &[Placement],
+        bounds: &[(Vec3, Vec3)],
+        motions: Vec<MotionTransform>,
+    ) -> Self {
         assert_eq!(placements.len(), bounds.len());
         let aabbs: Vec<Aabb> = bounds
             .iter()
@@ -52,6 +69,7 @@ impl InstancedBvh {
             placements: top.order.iter().map(|&i| placements[i as usize]).collect(),
             top,
             shared,
+            motions,
         }
     }
 
@@ -63,16 +81,25 @@ impl InstancedBvh {
     }
 
     /// Top-level leaf `leaf`: its placement's index, `ray` in the placement's object space
-    /// (the parameter `t` is the same in both spaces because the direction is not
-    /// renormalised), and the shared BVH to trace it in.
+    /// at the ray's time (the parameter `t` is the same in both spaces because the
+    /// direction is not renormalised), and the shared BVH to trace it in.
     #[inline]
     fn enter(&self, leaf: usize, ray: &Ray, tmax: f32) -> (u32, Ray, &Bvh) {
         let placement = &self.placements[leaf];
-        let m = &placement.to_object;
+        let moved;
+        let m = if placement.motion == STILL {
+            &placement.to_object
+        } else {
+            moved = self.motions[placement.motion as usize]
+                .affine_at(ray.time)
+                .inverse();
+            &moved
+        };
         let object_ray = Ray {
             origin: m.transform_point3(ray.origin),
             dir: m.transform_vector3(ray.dir),
             tmax,
+            time: ray.time,
         };
         (
             self.top.order[leaf],
@@ -180,6 +207,7 @@ mod tests {
             placements.push(Placement {
                 shared: 0,
                 to_object: to_render.inverse(),
+                motion: STILL,
             });
             bounds.push(transformed_bounds(Vec3::ZERO, Vec3::ONE, &to_render));
             for t in &cube {
@@ -192,7 +220,7 @@ mod tests {
                 }));
             }
         }
-        let instanced = InstancedBvh::build(vec![shared], &placements, &bounds);
+        let instanced = InstancedBvh::build(vec![shared], &placements, &bounds, Vec::new());
         let flat_bvh = Bvh::build(&flat, &vec![0; flat.len()]);
         let mut rng = crate::sampling::pcg::Pcg32::new(3, 0);
         let mut hits = 0;

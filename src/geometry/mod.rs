@@ -1,7 +1,7 @@
 //! Geometry in render space: render space itself (`space`), the primitives (`triangle`,
 //! `sphere`, `quadric`) and what a BVH holds of them (`primitive`), the BVH (`bvh`, over
 //! eight-wide nodes of `wide`), placements of shared meshes through a top-level BVH
-//! (`instances`), rays and hits, ray cones (`cone`), shading frames, and subdivision surfaces refined into
+//! (`instances`) and their motion over the shutter (`motion`), rays and hits, ray cones (`cone`), shading frames, and subdivision surfaces refined into
 //! triangles.
 
 pub mod bvh;
@@ -9,6 +9,7 @@ pub mod cone;
 pub mod frame;
 pub mod hit;
 pub mod instances;
+pub mod motion;
 pub mod primitive;
 pub mod quadric;
 pub mod ray;

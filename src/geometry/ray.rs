@@ -4,14 +4,17 @@
 use crate::simd::{F8, LANES, V3};
 use glam::Vec3;
 
-/// A ray `origin + t * dir` for `t` in `(0, tmax)`. `dir` need not be normalised.
-/// Laid out as seven floats (origin, direction, bound), which [`RayLanes::of_rays`] reads.
+/// A ray `origin + t * dir` for `t` in `(0, tmax)` at shutter time `time` (0 at the
+/// shutter's opening, 1 at its closing: where moving geometry is, `geometry::motion`).
+/// `dir` need not be normalised. Laid out as eight floats (origin, direction, bound, time),
+/// which [`RayLanes::of_rays`] reads.
 #[derive(Clone, Copy, Debug)]
 #[repr(C)]
 pub struct Ray {
     pub origin: Vec3,
     pub dir: Vec3,
     pub tmax: f32,
+    pub time: f32,
 }
 
 /// Eight rays in lanes (lane i: ray i), as packet queries take them
@@ -27,21 +30,17 @@ pub(crate) struct RayLanes {
 
 #[cfg(target_arch = "x86_64")]
 impl RayLanes {
-    /// The rays of an array. Each ray's seven floats are one row of an 8×8 transpose, so
+    /// The rays of an array. Each ray's eight floats are one row of an 8×8 transpose, so
     /// that no component is copied on its own (24 scalar stores that the vector loads
-    /// would wait for).
+    /// would wait for). The packet kernel renders only scenes that do not move, so the
+    /// rays' times are not kept.
     #[inline(always)]
     pub(crate) fn of_rays(rays: &[Ray; LANES]) -> Self {
         const FLOATS: usize = std::mem::size_of::<Ray>() / 4;
-        const { assert!(FLOATS == 7 && std::mem::align_of::<Ray>() == 4) };
-        // SAFETY: Ray is repr(C) of seven f32s (checked above), so the array is 56 floats.
+        const { assert!(FLOATS == 8 && std::mem::align_of::<Ray>() == 4) };
+        // SAFETY: Ray is repr(C) of eight f32s (checked above), so the array is 64 floats.
         let floats: &[f32; FLOATS * LANES] = unsafe { &*rays.as_ptr().cast() };
-        let mut rows = [F8::ZERO; LANES];
-        for (i, row) in rows.iter_mut().enumerate().take(LANES - 1) {
-            *row = F8::load(floats, FLOATS * i);
-        }
-        // The last ray's floats end the array: read from one float earlier and shift down.
-        rows[LANES - 1] = F8::load(floats, FLOATS * (LANES - 1) - 1).shift_down();
+        let rows: [F8; LANES] = std::array::from_fn(|i| F8::load(floats, FLOATS * i));
         let [ox, oy, oz, dx, dy, dz, tmax, _] = F8::transpose(rows);
         Self {
             origin: V3::new(ox, oy, oz),
@@ -57,18 +56,26 @@ impl RayLanes {
             origin: self.origin.lane(lane),
             dir: self.dir.lane(lane),
             tmax: self.tmax.lane(lane),
+            time: 0.0,
         }
     }
 }
 
 impl Ray {
-    /// A ray without an upper bound.
+    /// A ray without an upper bound, at the shutter's opening.
     pub fn new(origin: Vec3, dir: Vec3) -> Self {
         Self {
             origin,
             dir,
             tmax: f32::INFINITY,
+            time: 0.0,
         }
+    }
+
+    /// The ray at shutter time `time`.
+    #[inline]
+    pub fn at_time(self, time: f32) -> Self {
+        Self { time, ..self }
     }
 
     /// Point at parameter `t`.
@@ -89,9 +96,10 @@ impl Ray {
                 origin,
                 dir: end - origin,
                 tmax: 1.0,
+                time: self.time,
             }
         } else {
-            Self::new(origin, self.dir)
+            Self::new(origin, self.dir).at_time(self.time)
         }
     }
 }
@@ -321,6 +329,7 @@ mod tests {
                 origin: Vec3::new(c(0), c(1), c(2)),
                 dir: Vec3::new(c(3), c(4), special[i % 4]),
                 tmax: if i == 7 { f32::INFINITY } else { c(6) },
+                time: 0.0,
             }
         });
         let lanes = RayLanes::of_rays(&rays);

@@ -567,6 +567,7 @@ mod tests {
                 origin: o,
                 dir: d,
                 tmax,
+                time: 0.0,
             };
             let block = intersect(&RayShear::new(&ray), &TriangleBlock::new(&tris), tmax);
             let bits = |h: Option<PrimitiveHit>| {
@@ -653,6 +654,7 @@ mod tests {
                     origin,
                     dir: target - origin,
                     tmax,
+                    time: 0.0,
                 }
             });
             let active = if k % 3 == 0 {

@@ -39,6 +39,9 @@ pub struct LoadOptions {
     pub frame: Option<f64>,
     /// Frames per second of glTF animations.
     pub fps: f64,
+    /// The shutter's opening and closing in frames relative to the frame, where the
+    /// stage does not say (or to override it); an open shutter blurs what moves.
+    pub shutter: Option<(f64, f64)>,
     /// Run usd-core's validators (USD stages); their findings are warnings...
     pub validate: bool,
     /// ...unless strict: then an error refuses the stage.
@@ -69,6 +72,7 @@ impl Default for LoadOptions {
         Self {
             frame: None,
             fps: DEFAULT_FPS,
+            shutter: None,
             validate: true,
             strict: false,
             variants: Vec::new(),
@@ -92,10 +96,18 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     match ext.as_str() {
         "gltf" | "glb" => gltf::load(
             path,
-            options.frame.map(|f| f / options.fps),
+            // An open shutter opens around frame 0 where no frame is given.
+            options
+                .frame
+                .or(options.shutter.map(|_| 0.0))
+                .map(|f| f / options.fps),
             gltf::Choices {
                 material_variant: options.material_variant.as_deref(),
                 animation: options.animation.as_deref(),
+                shutter: options.shutter.map(|(open, close)| {
+                    let frame = options.frame.unwrap_or(0.0);
+                    ((frame + open) / options.fps, (frame + close) / options.fps)
+                }),
             },
         ),
         scene::file::EXTENSION => scene::file::read(path),

@@ -74,6 +74,8 @@ pub(crate) struct PathState {
     /// Whether the camera's first surface has been recorded (data layers, coverage): the
     /// first one that is not an interface around a medium, which the camera sees through.
     pub(crate) first_hit_recorded: bool,
+    /// The shutter time of the camera ray: every ray of the path is traced at it.
+    pub(crate) time: f32,
 }
 
 impl PathState {
@@ -94,6 +96,7 @@ impl PathState {
             crossed: 0.0,
             cone,
             first_hit_recorded: false,
+            time: 0.0,
         }
     }
 

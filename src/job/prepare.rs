@@ -86,6 +86,22 @@ pub(super) fn prepare(
     if let Some(path) = &job.env_map {
         ingest::set_environment_map(&mut scene, path, job.env_scale)?;
     }
+    let moving_emitters: Vec<&str> = scene
+        .instances
+        .iter()
+        .filter(|i| {
+            crate::geometry::motion::keys_move(&i.motion)
+                && scene.materials[scene.meshes[i.mesh as usize].material as usize].is_emissive()
+        })
+        .map(|i| i.name.as_str())
+        .collect();
+    if !moving_emitters.is_empty() {
+        log::warn!(
+            "{}: {} emit light and move while the shutter is open: emitters are not blurred (they stay where they are at the frame)",
+            scene.source,
+            moving_emitters.join(", ")
+        );
+    }
     if !scene.has_light() {
         if job.default_light {
             log::warn!(

@@ -97,11 +97,12 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 42] = [
+pub const JOB_SETTINGS: [&str; 43] = [
     "output",
     "frames",
     "frame",
     "fps",
+    "shutter",
     "no-validate",
     "strict",
     "variant",
@@ -210,6 +211,29 @@ fn parse_frame(s: &str) -> std::result::Result<f64, String> {
         .ok_or_else(|| format!("a finite number, got {s:?}"))
 }
 
+/// A shutter interval `OPEN,CLOSE` in frames relative to the frame (USD's
+/// `shutter:open`/`shutter:close`): `-0.25,0.25` is a 180-degree shutter centred on it.
+fn parse_shutter(s: &str) -> std::result::Result<(f64, f64), String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let number = |p: &str| {
+        p.parse::<f64>()
+            .ok()
+            .filter(|f| f.is_finite() && f.abs() <= 1e3)
+    };
+    match parts.as_slice() {
+        [open, close] => match (number(open), number(close)) {
+            (Some(open), Some(close)) if open <= close => Ok((open, close)),
+            (Some(_), Some(_)) => Err(format!("the shutter closes before it opens: {s:?}")),
+            _ => Err(format!(
+                "OPEN,CLOSE in frames relative to the frame (finite, at most 1000), got {s:?}"
+            )),
+        },
+        _ => Err(format!(
+            "OPEN,CLOSE in frames relative to the frame (such as -0.25,0.25), got {s:?}"
+        )),
+    }
+}
+
 impl RenderJob {
     /// Sets `name` from its textual value: a job setting ([`JOB_SETTINGS`]) or a render
     /// option.
@@ -229,6 +253,7 @@ impl RenderJob {
                         format!("frames per second must be a positive number, got {value:?}")
                     })?
             }
+            "shutter" => self.load.shutter = Some(parse_shutter(value)?),
             "no-validate" => self.load.validate = !parse_bool(value)?,
             "strict" => self.load.strict = parse_bool(value)?,
             "variant" => self.load.variants.push(value.into()),

@@ -28,16 +28,17 @@ pub struct LightSample {
 
 impl LightSample {
     /// The shadow ray from `origin` towards the sample: to its (offset) point, or along
-    /// `wi` without end for lights at infinity.
+    /// `wi` without end for lights at infinity; at shutter time `time`.
     #[inline]
-    pub fn shadow_ray(&self, origin: Vec3) -> Ray {
+    pub fn shadow_ray(&self, origin: Vec3, time: f32) -> Ray {
         match self.target {
             Some(target) => Ray {
                 origin,
                 dir: target - origin,
                 tmax: 1.0,
+                time,
             },
-            None => Ray::new(origin, self.wi),
+            None => Ray::new(origin, self.wi).at_time(time),
         }
     }
 }

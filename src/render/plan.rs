@@ -75,8 +75,8 @@ pub struct Kernel {
     pub routing: bool,
     /// Eight paths at a time in SIMD lanes (`integrator::packet`): where neither routing
     /// nor first-hit data is needed, the CPU has AVX2 and FMA, roulette does not learn
-    /// (`rr = efficiency`), no participating medium is in the scene (media are scalar
-    /// only), and (in `auto`) some material has a GGX lobe or some mesh a uniform material
+    /// (`rr = efficiency`), no participating medium and nothing moving is in the scene
+    /// (media and motion blur are scalar only), and (in `auto`) some material has a GGX lobe or some mesh a uniform material
     /// ([`SceneFeatures::uniform_meshes`]), which is what the lanes speed up. Where no surface is uniform and none glossy, the lanes would shade nothing and
     /// only add their bookkeeping, so `auto` keeps the scalar kernel (`--plan packet` runs
     /// it there too). Passes that learn the first vertex's split (`--split auto`) run in it
@@ -147,6 +147,7 @@ impl RenderPlan {
                 && !routing
                 && !roulette_learns
                 && features.participating_media == 0
+                && !features.moves()
                 && crate::integrator::packet_kernel_available(),
         };
         Self {
@@ -233,6 +234,19 @@ impl fmt::Display for RenderPlan {
             yes_no(s.lobes.specular),
             yes_no(s.lobes.transmission)
         )?;
+        if s.moves() {
+            writeln!(
+                f,
+                "  motion blur: {} moving instance{}{} (rendered by the scalar kernel)",
+                s.moving_instances,
+                if s.moving_instances == 1 { "" } else { "s" },
+                if s.moving_camera {
+                    ", the camera moves"
+                } else {
+                    ""
+                },
+            )?;
+        }
         if s.participating_media > 0 {
             writeln!(
                 f,

@@ -86,6 +86,8 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
         .selecting_lights_by(lights);
     let window = film.window;
     let camera = &world.camera;
+    // Rays carry a time in the shutter only where something moves.
+    let moving = world.features.moves();
     let interrupt = options.interrupt.as_deref();
     film.tiles
         .par_iter_mut()
@@ -120,8 +122,12 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                     for index in first..first + n {
                         sampler.start(ix as u32, iy as u32, index);
                         let cs = sampler.camera();
-                        let ray =
-                            camera.generate_ray(centre + options.filter.sample(cs.film), cs.lens);
+                        let film_position = centre + options.filter.sample(cs.film);
+                        let ray = if moving {
+                            camera.generate_ray_at(film_position, cs.lens, sampler.time())
+                        } else {
+                            camera.generate_ray(film_position, cs.lens)
+                        };
                         record.clear();
                         let before = rays.closest + rays.shadow;
                         let mut parts = tile_split.is_some().then(|| SampleParts {

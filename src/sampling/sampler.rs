@@ -146,6 +146,14 @@ impl Sampler {
         }
     }
 
+    /// The camera ray's time in the shutter, in [0, 1): the first dimension of a set of its
+    /// own, so that the pixel's samples spread evenly over the shutter, and drawn only in
+    /// scenes that move (those that do not keep their numbers to the bit).
+    #[inline]
+    pub fn time(&mut self) -> f32 {
+        self.set(TIME_SET)[0]
+    }
+
     /// What the camera's Sobol set starts from: the sample's bit-reversed index and the
     /// set's seed, so that [`sobol_4d_lanes`] computes eight samples' camera numbers at once
     /// ([`Sampler::camera`]'s to the bit); `None` for the independent sampler.
@@ -211,6 +219,10 @@ impl VertexSample {
         }
     }
 }
+
+/// The dimension set of the shutter time ([`Sampler::time`]): apart from the camera's (0),
+/// the main path's (1 + 2k) and the branches' (from 0x4000_0000).
+const TIME_SET: u32 = 0x2000_0000;
 
 /// The dimension sets of vertex `depth` of branch `branch`: the main path's follow the
 /// camera's; a split branch's start at a key of their own.

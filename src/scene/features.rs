@@ -130,9 +130,19 @@ pub struct SceneFeatures {
     /// texture, no vertex colours): the packet kernel's lanes compute their shading points
     /// (`world::lanes`).
     pub uniform_meshes: usize,
+    /// Instances that move over the shutter (transform motion blur): rays then carry a
+    /// time, which only the scalar kernel follows.
+    pub moving_instances: usize,
+    /// The render camera moves over the shutter (set when the world chooses it).
+    pub moving_camera: bool,
 }
 
 impl SceneFeatures {
+    /// True if something moves over the shutter: rays then carry a time.
+    pub fn moves(&self) -> bool {
+        self.moving_instances > 0 || self.moving_camera
+    }
+
     /// Analyses `scene`: only materials that some geometry uses count.
     pub fn of(scene: &Scene) -> Self {
         let mut used = vec![false; scene.materials.len()];
@@ -236,6 +246,12 @@ impl SceneFeatures {
                 .zip(&placements)
                 .filter(|&(mesh, &n)| n == 1 && mesh.uniform_material(&scene.materials).is_some())
                 .count(),
+            moving_instances: scene
+                .instances
+                .iter()
+                .filter(|i| crate::geometry::motion::keys_move(&i.motion))
+                .count(),
+            moving_camera: false,
         }
     }
 }

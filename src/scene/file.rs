@@ -938,6 +938,7 @@ fn enclosure(to_world: glam::DMat4, name: &str, material: u32) -> (Mesh, Instanc
         name: name.to_string(),
         mesh: 0,
         transform: to_world,
+        motion: Vec::new(),
     };
     (mesh, instance)
 }
@@ -1252,6 +1253,9 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 "transform is not finite",
             );
         }
+        if let Err(reason) = crate::geometry::motion::check_keys(&inst.motion) {
+            return fail(format!("instances[{i}].motion"), &reason);
+        }
     }
     for (i, s) in scene.spheres.iter().enumerate() {
         if s.material as usize >= materials {
@@ -1466,6 +1470,9 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 format!("cameras[{i}]"),
                 "a value is not finite or out of range",
             );
+        }
+        if let Err(reason) = crate::geometry::motion::check_keys(&c.motion) {
+            return fail(format!("cameras[{i}].motion"), &reason);
         }
     }
     match &scene.environment {

@@ -242,6 +242,10 @@ pub struct Instance {
     pub mesh: u32,
     /// Object to world.
     pub transform: DMat4,
+    /// Object to world over the shutter, at evenly spaced times from its opening to its
+    /// closing (`geometry::motion`); empty where the instance does not move.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub motion: Vec<DMat4>,
 }
 
 /// An analytic sphere: exact silhouettes, and solid-angle sampling when it emits.
@@ -347,6 +351,10 @@ pub struct Camera {
     /// How the view fits an image whose aspect differs from the camera's.
     #[serde(default)]
     pub fit: CameraFit,
+    /// Camera to world over the shutter, at evenly spaced times from its opening to its
+    /// closing (`geometry::motion`); empty where the camera does not move.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub motion: Vec<DMat4>,
 }
 
 /// How a camera's view fits an image of another aspect ratio.

@@ -4,11 +4,12 @@
 //! before any of it is allocated, the estimate of the memory it will take. Subdivision
 //! surfaces are refined here, for the view they are seen from, before the estimate.
 
+use super::placed::{NOT_SHARED, PlacedGeometry, flattened_uses, shared_mesh_indices};
 use super::surfaces::{NO_LIGHT, PlacedMesh, PrimRef, RenderQuadric, RenderSphere, Surfaces};
 use super::{Objects, World};
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
-use crate::geometry::instances::{InstancedBvh, Placement, transformed_bounds};
+use crate::geometry::instances::Placement;
 use crate::geometry::quadric::Quadric;
 use crate::geometry::space::RenderSpace;
 use crate::geometry::triangle::geometric_normal;
@@ -24,7 +25,7 @@ use crate::medium::Medium;
 use crate::memory::MemoryEstimate;
 use crate::scene::features::SceneFeatures;
 use crate::scene::{self, AlphaMode, LightKind, Material, Mesh, Scene, Texture};
-use glam::{Affine3A, DMat3, DMat4, DVec3, Mat3A, Vec2, Vec3};
+use glam::{DMat3, DMat4, DVec3, Vec2, Vec3};
 use std::sync::Arc;
 
 /// Pixels a refined subdivision edge spans on screen when chosen by size (the dicing rate
@@ -306,34 +307,6 @@ fn primitive(
     }
 }
 
-/// Marks a mesh that is flattened into render space in [`shared_mesh_indices`].
-const NOT_SHARED: u32 = u32::MAX;
-
-/// For each scene mesh, its index among the shared meshes, or [`NOT_SHARED`]. A mesh is
-/// shared (traced once in object space, placed through the top-level BVH) when several
-/// instances place it and it does not emit: emitters are flattened so that every emitting
-/// triangle is a light of its own.
-fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
-    let mut uses = vec![0u32; scene.meshes.len()];
-    for inst in &scene.instances {
-        uses[inst.mesh as usize] += 1;
-    }
-    let mut next = 0;
-    scene
-        .meshes
-        .iter()
-        .zip(uses)
-        .map(|(mesh, uses)| {
-            if uses >= 2 && !scene.materials[mesh.material as usize].is_emissive() {
-                next += 1;
-                next - 1
-            } else {
-                NOT_SHARED
-            }
-        })
-        .collect()
-}
-
 /// Bytes obvhs holds per primitive at the peak of a BVH build beyond the primitives'
 /// flags and leaves: the bounds it is given, its PLOC nodes, sort keys and reinsertion
 /// state, and the wide nodes. Measured: the peak of `lucerna render` on single meshes of 1,
@@ -344,18 +317,6 @@ const BVH_BUILD_BYTES_PER_PRIMITIVE: u64 = 210;
 
 /// Bytes a light holds beyond its `Light`: its light-tree node and selection entries.
 const LIGHT_SELECTION_BYTES: u64 = 96;
-
-/// How many times each mesh of `scene` is flattened into render space (placed and not
-/// shared: [`shared_mesh_indices`]).
-fn flattened_uses(scene: &Scene, shared_index: &[u32]) -> Vec<u32> {
-    let mut uses = vec![0u32; scene.meshes.len()];
-    for inst in &scene.instances {
-        if shared_index[inst.mesh as usize] == NOT_SHARED {
-            uses[inst.mesh as usize] += 1;
-        }
-    }
-    uses
-}
 
 /// Estimated bytes of rendering `scene` before any of them is allocated: the scene itself and
 /// what [`World::build`] adds (the film is the caller's: it depends on the request).
@@ -440,97 +401,6 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
             + environment_texels * 8
             + trees,
         film: 0,
-    }
-}
-
-/// The shared meshes (object space) and their placements, before their BVHs are built.
-struct PlacedGeometry {
-    meshes: Vec<Mesh>,
-    /// Per placement: the shared mesh and object space to render space (in double
-    /// precision, so that the inverse is accurate too).
-    placements: Vec<(u32, DMat4)>,
-    /// Per placement: its render-space bounds.
-    bounds: Vec<(Vec3, Vec3)>,
-}
-
-impl PlacedGeometry {
-    /// Moves the shared meshes out of `scene` and collects their placements.
-    fn new(scene: &mut Scene, shared_index: &[u32], to_render: &DMat4) -> Self {
-        let mut meshes = Vec::new();
-        for (mesh, &index) in scene.meshes.iter_mut().zip(shared_index) {
-            if index != NOT_SHARED {
-                meshes.push(std::mem::take(mesh));
-            }
-        }
-        let object_bounds: Vec<Option<(Vec3, Vec3)>> = meshes.iter().map(Mesh::bounds).collect();
-        let (mut placements, mut bounds) = (Vec::new(), Vec::new());
-        for inst in &scene.instances {
-            let index = shared_index[inst.mesh as usize];
-            if index == NOT_SHARED {
-                continue;
-            }
-            // A placement of a mesh without vertices has nothing to hit.
-            let Some((lo, hi)) = object_bounds[index as usize] else {
-                continue;
-            };
-            let m = *to_render * inst.transform;
-            bounds.push(transformed_bounds(
-                lo,
-                hi,
-                &Affine3A::from_mat4(m.as_mat4()),
-            ));
-            placements.push((index, m));
-        }
-        Self {
-            meshes,
-            placements,
-            bounds,
-        }
-    }
-
-    /// One BVH per shared mesh, the top level over the placements, and the placements as
-    /// shading reads them.
-    fn build(&self, materials: &[Material]) -> (Option<InstancedBvh>, Vec<PlacedMesh>) {
-        if self.placements.is_empty() {
-            return (None, Vec::new());
-        }
-        let shared = self
-            .meshes
-            .iter()
-            .map(|mesh| {
-                let flags = vec![
-                    intersection_flags(&materials[mesh.material as usize]);
-                    mesh.triangles.len()
-                ];
-                Bvh::build_from(&flags, |t| {
-                    let t = mesh.triangles[t as usize];
-                    Primitive::Triangle(t.map(|i| mesh.positions[i as usize]))
-                })
-            })
-            .collect();
-        let placements: Vec<Placement> = self
-            .placements
-            .iter()
-            .map(|&(shared, to_render)| Placement {
-                shared,
-                to_object: Affine3A::from_mat4(to_render.inverse().as_mat4()),
-            })
-            .collect();
-        let shading = self
-            .placements
-            .iter()
-            .map(|&(mesh, to_render)| PlacedMesh {
-                mesh,
-                to_render: Affine3A::from_mat4(to_render.as_mat4()),
-                normal_matrix: Mat3A::from(
-                    DMat3::from_mat4(to_render).inverse().transpose().as_mat3(),
-                ),
-            })
-            .collect();
-        (
-            Some(InstancedBvh::build(shared, &placements, &self.bounds)),
-            shading,
-        )
     }
 }
 
@@ -724,7 +594,7 @@ impl World {
                 "geometry is not finite",
             ));
         }
-        let features = SceneFeatures::of(&scene);
+        let mut features = SceneFeatures::of(&scene);
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
         let shared_index = shared_mesh_indices(&scene);
@@ -808,7 +678,7 @@ impl World {
         let bvh = Bvh::build_from(&flags, |i| {
             primitive(refs[i as usize], &meshes, &spheres, &quadrics)
         });
-        let (placed_bvh, placements) = placed.build(&scene.materials);
+        let (placed_bvh, placements) = placed.build(&scene.materials, intersection_flags);
         let bvh_seconds = bvh_start.elapsed().as_secs_f64();
 
         let scene_camera = match camera_name {
@@ -828,6 +698,7 @@ impl World {
         };
         let (width, height) = camera::resolve_resolution(resolution, Some(&scene_camera));
         let camera = Camera::new(&scene_camera, &space, width, height);
+        features.moving_camera = camera.moves();
         let objects = {
             let mut names: Vec<String> = scene.instances.iter().map(|i| i.name.clone()).collect();
             let (meshes, placements) = (0..scene.instances.len() as u32).partition(|&i| {
@@ -857,6 +728,7 @@ impl World {
                 meshes,
                 shared_meshes: placed.meshes,
                 placements,
+                motions: placed.motions,
                 spheres,
                 quadrics,
                 media: scene

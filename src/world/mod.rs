@@ -4,12 +4,14 @@
 //! [`World`] answers the ray queries of both kernels (closest hit, occlusion, transmittance
 //! through filters, in lanes too) and names what a hit belongs to (objects, lights). It is
 //! built from a scene by `build` (render space, BVHs, lights, the memory estimate made
-//! before any of it is allocated); `surfaces` holds what shading reads and turns a hit into
+//! before any of it is allocated; `placed` decides which meshes are placed through the
+//! top-level BVH and gathers them); `surfaces` holds what shading reads and turns a hit into
 //! a shading point; `lanes` does so for eight hits at a time.
 
 pub mod build;
 pub mod footprint;
 pub(crate) mod lanes;
+mod placed;
 pub mod surfaces;
 
 use crate::camera::Camera;

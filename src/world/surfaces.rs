@@ -46,6 +46,9 @@ pub struct PlacedMesh {
     pub to_render: Affine3A,
     /// Transforms object-space normals to render space (the inverse transpose).
     pub normal_matrix: Mat3A,
+    /// Index into [`Surfaces::motions`] of a placement that moves over the shutter (its
+    /// transforms then come from there at the ray's time), or `geometry::instances::STILL`.
+    pub motion: u32,
 }
 
 /// What shading reads: meshes, spheres, materials, textures, and what each BVH primitive is.
@@ -57,6 +60,8 @@ pub struct Surfaces {
     pub shared_meshes: Vec<Mesh>,
     /// The placements of shared meshes, indexed by [`Hit::instance`].
     pub placements: Vec<PlacedMesh>,
+    /// The moving placements' transforms over the shutter (object space to render space).
+    pub motions: Vec<crate::geometry::motion::MotionTransform>,
     pub spheres: Vec<RenderSphere>,
     pub quadrics: Vec<RenderQuadric>,
     pub materials: Vec<Material>,
@@ -169,6 +174,7 @@ impl Surfaces {
             meshes,
             shared_meshes: Vec::new(),
             placements: Vec::new(),
+            motions: Vec::new(),
             spheres: Vec::new(),
             quadrics: Vec::new(),
             materials,
@@ -406,7 +412,7 @@ impl Surfaces {
         });
         let (p, n_front, ns_front, attrs, material, tangents, magnitude) =
             if hit.instance != NOT_PLACED {
-                self.placed_surface(hit, cone)
+                self.placed_surface(hit, cone, ray.time)
             } else {
                 match self.prims[hit.prim as usize] {
                     PrimRef::Triangle { mesh, tri } => {
@@ -467,9 +473,21 @@ impl Surfaces {
     }
 
     /// [`Surfaces::triangle_surface`] of a placed hit, moved from the shared mesh's object
-    /// space into render space.
-    fn placed_surface(&self, hit: &Hit, cone: Option<Cone>) -> SurfacePoint {
-        let placed = &self.placements[hit.instance as usize];
+    /// space into render space (where it is at shutter time `time`, if it moves).
+    fn placed_surface(&self, hit: &Hit, cone: Option<Cone>, time: f32) -> SurfacePoint {
+        let mut placed = &self.placements[hit.instance as usize];
+        let moved;
+        if placed.motion != crate::geometry::instances::STILL {
+            let m = self.motions[placed.motion as usize].at(time);
+            moved = PlacedMesh {
+                to_render: Affine3A::from_mat4(m.as_mat4()),
+                normal_matrix: Mat3A::from(
+                    glam::DMat3::from_mat4(m).inverse().transpose().as_mat3(),
+                ),
+                ..*placed
+            };
+            placed = &moved;
+        }
         let mesh = &self.shared_meshes[placed.mesh as usize];
         let (p, n, ns, attrs, material, tangents, magnitude) =
             self.triangle_surface(mesh, hit.prim, hit, cone, Some(&placed.to_render));

@@ -247,3 +247,126 @@ fn animation_clips_are_chosen_by_name_or_index() {
         "{err}"
     );
 }
+
+/// With an open shutter the importer gives a moving node's instances their transforms at
+/// evenly spaced times of it (the channels sampled there, through the hierarchy); a node
+/// that does not move gets none, nor does a closed shutter.
+#[test]
+fn an_open_shutter_samples_the_motion() {
+    let mut b = animated_scene([0.0, 1.0]);
+    let prim = b.quad_primitive(None);
+    let still = b.mesh(json!([prim]));
+    b.root(json!({"name": "still", "mesh": still}));
+    let import = |shutter: Option<(f64, f64)>| {
+        lucerna::ingest::gltf::import_with(
+            &b.glb(),
+            "animated.glb",
+            None,
+            Some(0.3),
+            lucerna::ingest::gltf::Choices {
+                shutter,
+                ..Default::default()
+            },
+        )
+        .unwrap()
+    };
+    let scene = import(Some((0.2, 0.4)));
+    let moving = &scene.instances[0];
+    assert_eq!(moving.motion.len(), 9);
+    for (k, key) in moving.motion.iter().enumerate() {
+        let at = scene_at(&b, Some(0.2 + 0.2 * k as f64 / 8.0))
+            .unwrap()
+            .instances[0]
+            .transform;
+        assert!(key.abs_diff_eq(at, 1e-9), "key {k}: {key} vs {at}");
+    }
+    // The frame's own pose is kept.
+    assert!(moving.transform.abs_diff_eq(
+        scene_at(&b, Some(0.3)).unwrap().instances[0].transform,
+        1e-12
+    ));
+    assert!(scene.instances[1].motion.is_empty(), "the still node moved");
+    assert!(import(Some((0.3, 0.3))).instances[0].motion.is_empty());
+    assert!(import(None).instances[0].motion.is_empty());
+}
+
+/// `--shutter` blurs the sliding quad (made black against a white sky): it darkens more
+/// columns than the frame's instant does, its darkness spread over the 0.5 s the shutter
+/// is open; a shutter of no width renders the frame's image to the bit.
+#[test]
+fn shutter_blurs_a_sliding_quad() {
+    let dir = temp_dir("shutter");
+    let mut b = animated_scene([0.0, 1.0]);
+    b.json["materials"][0] = json!({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1]}});
+    let scene = b.write_glb(&dir, "slide");
+    let render = |name: &str, shutter: Option<&str>| {
+        let out = dir.join(name);
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_lucerna"));
+        cmd.args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
+            .args(["--env", "1,1,1", "--frame", "12", "-o"])
+            .arg(&out)
+            .arg(&scene);
+        if let Some(s) = shutter {
+            cmd.args(["--shutter", s]);
+        }
+        let run = cmd.output().unwrap();
+        assert!(
+            run.status.success(),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        lucerna::output::exr::read(&out).unwrap().0
+    };
+    let dark_columns = |planes: &lucerna::film::planes::Planes| {
+        let r = planes.channel("R").unwrap();
+        let w = planes.window.width as usize;
+        (0..w)
+            .filter(|&x| r.iter().skip(x).step_by(w).any(|&v| v < 0.9))
+            .count()
+    };
+    let frame = render("frame.exr", None);
+    let blurred = render("blurred.exr", Some("-6,6"));
+    let (sharp, smeared) = (dark_columns(&frame), dark_columns(&blurred));
+    assert!(
+        smeared >= sharp + 8,
+        "{sharp} columns sharp, {smeared} blurred"
+    );
+    let closed = render("closed.exr", Some("0,0"));
+    assert_eq!(frame.channel("R").unwrap(), closed.channel("R").unwrap());
+    let refused = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", "-q", "--shutter", "0.5,-0.5"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("closes before it opens"));
+}
+
+/// An emitter that moves while the shutter is open is rendered where it is at the frame,
+/// with a warning naming it (lights do not move).
+#[test]
+fn a_moving_emitter_is_named_in_a_warning() {
+    let dir = temp_dir("moving-emitter");
+    let scene = animated_scene([0.0, 1.0]).write_glb(&dir, "slide");
+    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args([
+            "render",
+            "--resolution",
+            "16x8",
+            "--spp",
+            "1",
+            "--frame",
+            "12",
+        ])
+        .args(["--shutter", "-0.5,0.5", "-o"])
+        .arg(dir.join("out.exr"))
+        .arg(&scene)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("nodes[0] emit light and move") && stderr.contains("not blurred"),
+        "{stderr}"
+    );
+}

@@ -710,6 +710,7 @@ fn unlit_surfaces_show_their_colour_to_the_camera_and_let_other_rays_pass() {
     lit.instances.push(lucerna::scene::Instance {
         name: "floor".into(),
         mesh: 1,
+        motion: Vec::new(),
         transform: DMat4::from_translation(DVec3::new(0.0, 0.0, -1.0))
             * DMat4::from_scale(DVec3::splat(8.0)),
     });

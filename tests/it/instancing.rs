@@ -36,6 +36,7 @@ fn spheres(placements: usize) -> Scene {
         s.instances.push(Instance {
             name: format!("ball{i}"),
             mesh: 1,
+            motion: Vec::new(),
             transform: DMat4::from_scale_rotation_translation(
                 DVec3::new(0.35 * mirror, 0.25 + 0.05 * x, 0.3),
                 DQuat::from_euler(glam::EulerRot::XYZ, 0.4 * x, 0.7 * z, 0.2),

@@ -19,6 +19,7 @@ mod gltf_ingest;
 mod image_formats;
 mod instancing;
 mod learned_split;
+mod motion_blur;
 mod pipeline;
 mod plan;
 mod quadric_lights;

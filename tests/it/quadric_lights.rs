@@ -43,6 +43,7 @@ fn scene(analytic: bool) -> Scene {
             clip_near: 0.0,
             clip_far: None,
             fit: Default::default(),
+            motion: Vec::new(),
         }],
         ..Default::default()
     };
@@ -95,6 +96,7 @@ fn scene(analytic: bool) -> Scene {
         s.instances.push(Instance {
             name: format!("mesh{i}"),
             mesh: i as u32,
+            motion: Vec::new(),
             transform: DMat4::IDENTITY,
         });
     }

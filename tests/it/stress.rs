@@ -353,6 +353,7 @@ fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
             clip_near: 0.0,
             clip_far: None,
             fit: Default::default(),
+            motion: Vec::new(),
         }],
         ..Default::default()
     };
@@ -364,6 +365,7 @@ fn white_closed_box_with_long_paths_is_an_integrating_sphere() {
         scene.instances.push(Instance {
             name: format!("mesh{i}"),
             mesh: i as u32,
+            motion: Vec::new(),
             transform: DMat4::IDENTITY,
         });
     }
@@ -467,6 +469,7 @@ fn thin_slab_does_not_leak_light() {
     s.instances.push(Instance {
         name: "slab".into(),
         mesh: 1,
+        motion: Vec::new(),
         transform: DMat4::IDENTITY,
     });
     s.lights.push(Light {

@@ -71,6 +71,7 @@ fn checker_plane() -> Scene {
         instances: vec![Instance {
             name: "plane".into(),
             mesh: 0,
+            motion: Vec::new(),
             // The quad (XY, ±1) laid in y = 0, 400 units wide.
             transform: DMat4::from_rotation_x(-std::f64::consts::FRAC_PI_2)
                 * DMat4::from_scale(DVec3::splat(200.0)),
@@ -88,6 +89,7 @@ fn checker_plane() -> Scene {
             clip_near: 0.0,
             clip_far: None,
             fit: Default::default(),
+            motion: Vec::new(),
         }],
         ..Default::default()
     }

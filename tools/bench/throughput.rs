@@ -89,6 +89,7 @@ fn ray_sets(world: &World) -> RaySets {
         origin: from,
         dir: to - from,
         tmax: 1.0,
+        time: 0.0,
     };
     let shadow_coherent = hits.iter().map(|&(p, _)| segment(p, target)).collect();
     let mut rng = Pcg32::new(11, 3);

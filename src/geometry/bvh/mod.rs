@@ -523,6 +523,7 @@ pub(crate) mod tests {
                 } else {
                     8.0 * point(0.5).x.abs()
                 },
+                time: 0.0,
             });
             let mask = match k % 4 {
                 0 => 0xff,
@@ -598,7 +599,12 @@ pub(crate) mod tests {
             let origin = point(6.0);
             let dir = point(1.0);
             let tmax = if k % 2 == 0 { f32::INFINITY } else { 4.0 };
-            let ray = Ray { origin, dir, tmax };
+            let ray = Ray {
+                origin,
+                dir,
+                tmax,
+                time: 0.0,
+            };
             let shear = RayShear::new(&ray);
             let brute = soup
                 .iter()

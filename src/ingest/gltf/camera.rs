@@ -72,6 +72,7 @@ impl<'a> Importer<'a> {
             clip_near: znear.max(0.0) as f64,
             clip_far: zfar.filter(|f| f.is_finite() && *f > znear).map(f64::from),
             fit: Default::default(),
+            motion: Vec::new(),
         })
     }
 }

@@ -133,6 +133,7 @@ impl<'a> Importer<'a> {
                     name: name.to_string(),
                     mesh: m,
                     transform: DMat4::IDENTITY,
+                    motion: Vec::new(),
                 });
             }
         }

@@ -40,6 +40,9 @@ pub struct Choices<'a> {
     pub material_variant: Option<&'a str>,
     /// An animation's name, or its index in the file.
     pub animation: Option<&'a str>,
+    /// The shutter's opening and closing, seconds of the animations: nodes that move
+    /// while it is open get their transforms over it (motion blur).
+    pub shutter: Option<(f64, f64)>,
 }
 
 /// Reads and converts the glTF file at `path`, posed at `time` seconds of its animations
@@ -106,6 +109,9 @@ pub fn import_with(
         skinned: Vec::new(),
         variant: None,
         animation: None,
+        shutter: choices.shutter.filter(|(open, close)| close > open),
+        placed: Vec::new(),
+        placed_cameras: Vec::new(),
         unsupported_material_extensions: Default::default(),
         texture_plan: Default::default(),
     };
@@ -145,6 +151,14 @@ pub(crate) struct Importer<'a> {
     /// The one animation that plays (`--animation`); `None`: all, clips resolved as
     /// [`Importer::pose_at`] says.
     animation: Option<usize>,
+    /// The open shutter, seconds: its opening and closing.
+    shutter: Option<(f64, f64)>,
+    /// With a shutter, each instance placed by a node: its index in the scene, the node,
+    /// and its transform in the node's space (GPU instancing), so that its motion over the
+    /// shutter can follow the node's ([`Importer::sample_motion`]).
+    placed: Vec<(usize, usize, DMat4)>,
+    /// With a shutter, each camera: its index in the scene and its node.
+    placed_cameras: Vec<(usize, usize)>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
     /// Which images are read through a tile cache (the textures do not fit in the texture
@@ -325,6 +339,11 @@ impl<'a> Importer<'a> {
         }
         for (node, name) in std::mem::take(&mut self.skinned) {
             self.skinned_node(node, &name)?;
+        }
+        if let Some(shutter) = self.shutter
+            && self.doc.animations().next().is_some()
+        {
+            self.sample_motion(gltf_scene.clone(), shutter)?;
         }
         self.warn_unsupported_extensions();
         if self.scene.instanced_triangle_count() == 0 && self.scene.spheres.is_empty() {

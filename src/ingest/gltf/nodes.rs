@@ -19,6 +19,10 @@ pub(super) const FLOAT_OR_NORMALIZED: &[DataType] = &[
     DataType::U16,
 ];
 
+/// Transforms a moving instance gets over the shutter (`geometry::motion` interpolates
+/// between them: linear motion exactly, turns by slerp).
+pub(super) const MOTION_KEYS: usize = 9;
+
 /// Deepest node hierarchy accepted (deeper ones are almost certainly malicious).
 const MAX_NODE_DEPTH: usize = 1024;
 
@@ -279,7 +283,7 @@ impl<'a> Importer<'a> {
             } else if self.is_sphere(&mesh)? {
                 self.sphere(&mesh, world, &name)?;
             } else {
-                let transforms = self.instance_transforms(&node, world)?;
+                let locals = self.instance_transforms(&node, DMat4::IDENTITY)?;
                 for primitive in mesh.primitives() {
                     let m = if weights.iter().any(|&w| w != 0.0) {
                         self.deformed(&node, &mesh, &primitive, &weights, None)?
@@ -287,11 +291,16 @@ impl<'a> Importer<'a> {
                         self.primitive(&mesh, &primitive)?
                     };
                     if let Some(m) = m {
-                        for &transform in &transforms {
+                        for &local in &locals {
+                            if self.shutter.is_some() {
+                                self.placed
+                                    .push((self.scene.instances.len(), node.index(), local));
+                            }
                             self.scene.instances.push(Instance {
                                 name: name.clone(),
                                 mesh: m,
-                                transform,
+                                transform: world * local,
+                                motion: Vec::new(),
                             });
                         }
                     }
@@ -300,6 +309,10 @@ impl<'a> Importer<'a> {
         }
         if let Some(camera) = node.camera() {
             let cam = self.camera(&camera, world, &name)?;
+            if self.shutter.is_some() {
+                self.placed_cameras
+                    .push((self.scene.cameras.len(), node.index()));
+            }
             self.scene.cameras.push(cam);
         }
         if let Some(light) = node.light() {
@@ -310,6 +323,83 @@ impl<'a> Importer<'a> {
             self.visit(child, world, path)?;
         }
         path.pop();
+        Ok(())
+    }
+
+    /// Gives each instance that moves while the shutter (`open`, `close`, seconds) is open
+    /// its transforms at [`MOTION_KEYS`] evenly spaced times of it: the animations sampled
+    /// there, the node hierarchy composed again. Skinned and morphed shapes keep the
+    /// frame's (deformation is not blurred); the frame's pose is restored after.
+    pub(super) fn sample_motion(
+        &mut self,
+        scene: gltf::Scene<'a>,
+        (open, close): (f64, f64),
+    ) -> Result<()> {
+        if self.placed.is_empty() && self.placed_cameras.is_empty() {
+            return Ok(());
+        }
+        // Sampling again would repeat the frame's warnings about clips.
+        let warnings = self.scene.warnings.len();
+        let (pose, weights) = (
+            std::mem::take(&mut self.pose),
+            std::mem::take(&mut self.morph_weights),
+        );
+        let mut keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed.len()];
+        let mut camera_keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed_cameras.len()];
+        for k in 0..MOTION_KEYS {
+            let time = open + (close - open) * k as f64 / (MOTION_KEYS - 1) as f64;
+            self.pose.clear();
+            self.pose_at(time)?;
+            let mut world = HashMap::new();
+            let mut stack: Vec<(gltf::Node, DMat4)> =
+                scene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+            while let Some((node, parent)) = stack.pop() {
+                let m = parent * self.local_transform(&node);
+                stack.extend(node.children().map(|c| (c, m)));
+                world.insert(node.index(), m);
+            }
+            for (&(_, node, local), keys) in self.placed.iter().zip(&mut keys) {
+                keys.push(world[&node] * local);
+            }
+            for (&(_, node), keys) in self.placed_cameras.iter().zip(&mut camera_keys) {
+                keys.push(world[&node]);
+            }
+        }
+        self.scene.warnings.truncate(warnings);
+        (self.pose, self.morph_weights) = (pose, weights);
+        for ((camera, node), keys) in std::mem::take(&mut self.placed_cameras)
+            .into_iter()
+            .zip(camera_keys)
+        {
+            if crate::geometry::motion::keys_move(&keys) {
+                if crate::geometry::motion::MotionTransform::new(&keys).is_none() {
+                    self.warn(
+                        format!("nodes[{node}]"),
+                        "the camera's transform is singular during the shutter; it does not move",
+                    );
+                    continue;
+                }
+                self.scene.cameras[camera].motion = keys;
+            }
+        }
+        for ((instance, node, _), keys) in std::mem::take(&mut self.placed).into_iter().zip(keys) {
+            if !keys.iter().all(DMat4::is_finite) {
+                return Err(self.err(
+                    format!("nodes[{node}]"),
+                    "the transform over the shutter is not finite",
+                ));
+            }
+            if crate::geometry::motion::keys_move(&keys) {
+                if crate::geometry::motion::MotionTransform::new(&keys).is_none() {
+                    self.warn(
+                        format!("nodes[{node}]"),
+                        "its transform is singular during the shutter; it is not blurred",
+                    );
+                    continue;
+                }
+                self.scene.instances[instance].motion = keys;
+            }
+        }
         Ok(())
     }
 

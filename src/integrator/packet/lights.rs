@@ -242,7 +242,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
         (out.wi[lane], out.radiance[lane]) = (ls.wi, ls.radiance);
         out.p_light[lane] = p_select * ls.pdf;
         let origin = v.origin.lane(lane);
-        out.shadow[lane] = ls.shadow_ray(origin);
+        out.shadow[lane] = ls.shadow_ray(origin, 0.0);
         if ls.delta {
             out.delta |= 1 << lane;
         }

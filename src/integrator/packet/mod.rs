@@ -334,6 +334,7 @@ impl<'a, const EMITTERS: bool> PacketTracer<'a, EMITTERS> {
                     origin: origin[lane],
                     dir: dir[lane],
                     tmax: tmax[lane],
+                    time: 0.0,
                 };
             }
         } else {

@@ -76,6 +76,7 @@ pub(super) const NO_PATH: Path = Path {
         origin: Vec3::ZERO,
         dir: Vec3::Z,
         tmax: 0.0,
+        time: 0.0,
     },
     state: LaneState {
         beta: Vec3::ZERO,
@@ -218,6 +219,8 @@ impl PathLanes {
             // Lanes record their first hits; a path handed over at the camera's first
             // surface has not yet.
             first_hit_recorded: self.depth.lane(lane) > 0,
+            // The packet kernel renders only scenes that do not move.
+            time: 0.0,
         }
     }
 }

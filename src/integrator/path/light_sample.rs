@@ -60,7 +60,7 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
             return 0;
         }
         let origin = v.origin(below);
-        let shadow = ls.shadow_ray(origin);
+        let shadow = ls.shadow_ray(origin, path.time);
         let media = path.media.beyond(it, v.material, below);
         let mut traced = 1;
         let through = if world.surfaces.participating {

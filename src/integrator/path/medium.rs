@@ -153,7 +153,7 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
                 .scattered(v.arrived, pdf, false, self.world.footprints.lobe_scale),
             ..*path
         };
-        Some((Ray::new(v.p, wi), next))
+        Some((Ray::new(v.p, wi).at_time(path.time), next))
     }
 
     /// One light sample at medium vertex `v`: returns the rays it traced.
@@ -177,7 +177,7 @@ impl<const EMITTERS: bool, const DATA: bool> PathTracer<'_, EMITTERS, DATA> {
             return 0;
         };
         let phase = v.medium.phase().eval(v.dir.dot(ls.wi.normalize()));
-        let shadow = ls.shadow_ray(v.p);
+        let shadow = ls.shadow_ray(v.p, path.time);
         let mut traced = 0;
         let through = path.media.shadow_transmittance(world, &shadow, &mut traced);
         if through == Vec3::ZERO {

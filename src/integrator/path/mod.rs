@@ -341,6 +341,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
         };
         let camera = PathState {
             media: self.camera_media,
+            time: ray.time,
             ..PathState::camera(ray.origin, self.world.footprints.camera)
         };
         self.trace_from(ray, camera, None, &mut walk, sampler, rec, rays);
@@ -470,7 +471,8 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                     media: path.media.beyond(&it, m, true),
                     ..path.past_filter(arrived)
                 };
-                ray = Ray::new(offset_past(it.p, it.ng, ray.dir, it.magnitude), ray.dir);
+                ray = Ray::new(offset_past(it.p, it.ng, ray.dir, it.magnitude), ray.dir)
+                    .at_time(path.time);
                 continue;
             }
             let ctx = it.shading_context(path.media.outside_ior(surfaces, &it));
@@ -717,7 +719,7 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 branch,
                 ..path.past_filter(v.arrived)
             };
-            return Some((Ray::new(origin, wi), next));
+            return Some((Ray::new(origin, wi).at_time(path.time), next));
         }
         let depth = path.depth + 1;
         let media = path.media.beyond(it, v.material, crossing);
@@ -780,8 +782,9 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 self.world.footprints.lobe_scale,
             ),
             first_hit_recorded: true,
+            time: path.time,
         };
-        Some((Ray::new(origin, wi), next))
+        Some((Ray::new(origin, wi).at_time(path.time), next))
     }
 }
 

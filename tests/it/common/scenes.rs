@@ -127,6 +127,7 @@ pub fn ortho_camera(eye: DVec3, half: f32) -> Camera {
         clip_near: 0.0,
         clip_far: None,
         fit: Default::default(),
+        motion: Vec::new(),
     }
 }
 
@@ -158,6 +159,7 @@ pub fn scene(meshes: Vec<(Mesh, DMat4)>, mat: Material, env: Vec3, camera: Camer
         scene.instances.push(Instance {
             name: format!("mesh{i}"),
             mesh: i as u32,
+            motion: Vec::new(),
             transform,
         });
     }

@@ -1,0 +1,258 @@
+//! Transform motion blur: an instance that moves over the shutter is where it is at each
+//! camera ray's time. A bar sliding under a box shutter gives the analytic smear; a blade
+//! that turns matches the average of renders at instants spread over the shutter; the
+//! image does not depend on the thread count.
+
+use crate::common;
+
+use common::scenes::{material, ortho_camera, quad, render, scene};
+use glam::{DMat4, DQuat, DVec3, Vec3};
+use lucerna::film::Film;
+use lucerna::film::aov::Aov;
+use lucerna::integrator::Settings;
+use lucerna::scene::{BsdfModel, Instance, Scene};
+
+/// Keys of a motion: `at(t)` at `n` evenly spaced times of the shutter.
+fn keys(n: usize, at: impl Fn(f64) -> DMat4) -> Vec<DMat4> {
+    (0..n).map(|k| at(k as f64 / (n - 1) as f64)).collect()
+}
+
+/// A black bar 0.2 wide and taller than the view, its centre sliding from x = −0.5 to
+/// x = 0.5 over the shutter, in front of a white sky, seen from +z by an orthographic
+/// camera whose view spans x and y in [−1, 1] (on a square image).
+fn sliding_bar(moving: bool) -> Scene {
+    let bar = |t: f64| {
+        DMat4::from_translation(DVec3::new(-0.5 + t, 0.0, 0.0))
+            * DMat4::from_scale(DVec3::new(0.1, 2.0, 1.0))
+    };
+    let mut s = scene(
+        vec![(quad(), bar(0.5))],
+        material(BsdfModel::Lambert, Vec3::ZERO, 0.0, 1.0),
+        Vec3::ONE,
+        ortho_camera(DVec3::new(0.0, 0.0, 10.0), 1.0),
+    );
+    if moving {
+        s.instances[0].motion = keys(2, bar);
+    }
+    s
+}
+
+/// The fraction of the shutter during which the bar leaves the sky at x visible: the bar
+/// covers x while its centre −0.5 + t lies within 0.1 of x.
+fn sky_seen(x: f64) -> f64 {
+    let (from, to) = ((x + 0.4).clamp(0.0, 1.0), (x + 0.6).clamp(0.0, 1.0));
+    1.0 - (to - from)
+}
+
+/// Each column's mean of the red channel.
+fn column_means(film: &Film, width: usize, height: usize) -> Vec<f64> {
+    let plane = &film.planes(Aov::Beauty)[0];
+    (0..width)
+        .map(|x| {
+            (0..height)
+                .map(|y| plane[y * width + x] as f64)
+                .sum::<f64>()
+                / height as f64
+        })
+        .collect()
+}
+
+/// Checks that `film` shows the bar's analytic smear: in each column, the sky shows for the
+/// fraction of the shutter (averaged over the column's width) that the bar leaves it. Each
+/// camera sample sees the sky or the bar, so a column's mean of N samples has a standard
+/// deviation of at most sqrt(p (1 − p) / N); every column lies within 5 of them (plus the
+/// float rounding).
+fn assert_smear(film: &Film, (width, height): (usize, usize), spp: u32) {
+    let measured = column_means(film, width, height);
+    let samples = (height as u32 * spp) as f64;
+    let mut worst: f64 = 0.0;
+    for (x, &m) in measured.iter().enumerate() {
+        // The column spans x in [−1 + 2x/W, −1 + 2(x+1)/W].
+        let expected = (0..1000)
+            .map(|i| sky_seen(-1.0 + 2.0 * (x as f64 + (i as f64 + 0.5) / 1000.0) / width as f64))
+            .sum::<f64>()
+            / 1000.0;
+        let sd = (expected * (1.0 - expected) / samples).sqrt();
+        let z = (m - expected).abs() / (sd + 1e-4);
+        worst = worst.max(z);
+        assert!(
+            z < 5.0,
+            "column {x}: {m:.4} where the shutter gives {expected:.4} (sd {sd:.4})"
+        );
+    }
+    // The bar is smeared over 1.2 units: 38 columns see some of it.
+    let smeared = measured.iter().filter(|&&m| m < 0.99).count();
+    assert!((36..=40).contains(&smeared), "{smeared} columns darkened");
+    println!("worst column |z| {worst:.2}");
+}
+
+const BAR_IMAGE: (usize, usize) = (64, 64);
+
+/// The sliding bar's smear is the analytic one; frozen, it darkens a few columns only.
+#[test]
+fn a_sliding_bar_smears_as_the_shutter_integrates() {
+    let spp = 16;
+    let res = (BAR_IMAGE.0 as u32, BAR_IMAGE.1 as u32);
+    let (film, _) = render(sliding_bar(true), res, spp, Settings::default(), 2);
+    assert_smear(&film, BAR_IMAGE, spp);
+    let (still, _) = render(sliding_bar(false), res, spp, Settings::default(), 2);
+    let frozen = column_means(&still, BAR_IMAGE.0, BAR_IMAGE.1)
+        .iter()
+        .filter(|&&m| m < 0.99)
+        .count();
+    assert!(frozen <= 8, "{frozen} columns darkened without motion");
+}
+
+/// A camera that pans from x = 0.5 to x = −0.5 over the shutter sees the bar, still at x = 0,
+/// slide as the moving bar does before a still camera: the same smear.
+#[test]
+fn a_panning_camera_smears_a_still_bar_alike() {
+    let mut scene = sliding_bar(false);
+    scene.instances[0].transform = DMat4::from_scale(DVec3::new(0.1, 2.0, 1.0));
+    let at = scene.cameras[0].transform;
+    scene.cameras[0].motion = keys(3, |t| {
+        DMat4::from_translation(DVec3::new(0.5 - t, 0.0, 0.0)) * at
+    });
+    let spp = 16;
+    let (film, _) = render(
+        scene,
+        (BAR_IMAGE.0 as u32, BAR_IMAGE.1 as u32),
+        spp,
+        Settings::default(),
+        2,
+    );
+    assert_smear(&film, BAR_IMAGE, spp);
+}
+
+/// A red blade that turns by 120 degrees about a tilted axis while the shutter is open,
+/// above a white floor that it shadows from a white sky, seen from above at an angle.
+fn turning_blade(motion: Option<usize>, time: f64) -> Scene {
+    let axis = DVec3::new(0.3, 1.0, 0.2).normalize();
+    let blade = move |t: f64| {
+        DMat4::from_translation(DVec3::new(0.0, 0.6, 0.0))
+            * DMat4::from_quat(DQuat::from_axis_angle(axis, t * 120f64.to_radians()))
+            * DMat4::from_scale(DVec3::new(1.2, 0.4, 1.0))
+    };
+    let floor =
+        DMat4::from_rotation_x(-std::f64::consts::FRAC_PI_2) * DMat4::from_scale(DVec3::splat(3.0));
+    let mut s = scene(
+        vec![(quad(), floor)],
+        material(BsdfModel::Lambert, Vec3::splat(0.8), 0.0, 1.0),
+        Vec3::ONE,
+        ortho_camera(DVec3::new(1.0, 6.0, 2.0), 1.4),
+    );
+    s.materials.push(material(
+        BsdfModel::Lambert,
+        Vec3::new(0.8, 0.05, 0.05),
+        0.0,
+        1.0,
+    ));
+    s.meshes.push(lucerna::scene::Mesh {
+        material: 1,
+        ..quad()
+    });
+    s.instances.push(Instance {
+        name: "blade".into(),
+        mesh: 1,
+        transform: blade(time),
+        motion: motion.map_or_else(Vec::new, |n| keys(n, blade)),
+    });
+    s
+}
+
+/// Per pixel, the mean and its variance over `films`, each an estimate of the same image.
+fn mean_and_variance_of_mean(films: &[Film]) -> (Vec<f64>, Vec<f64>) {
+    let n = films.len() as f64;
+    let pixels = films[0].planes(Aov::Beauty)[0].len();
+    let (mut mean, mut var) = (vec![0.0; 3 * pixels], vec![0.0; 3 * pixels]);
+    for c in 0..3 {
+        for p in 0..pixels {
+            let values: Vec<f64> = films
+                .iter()
+                .map(|f| f.planes(Aov::Beauty)[c][p] as f64)
+                .collect();
+            let m = values.iter().sum::<f64>() / n;
+            let v = values.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (n - 1.0);
+            mean[c * pixels + p] = m;
+            var[c * pixels + p] = v / n;
+        }
+    }
+    (mean, var)
+}
+
+/// The blurred blade is the average of instantaneous renders at 256 times spread over the
+/// shutter (one in each 1/256 of it, jittered): both estimate the same image, so the
+/// squared differences of the pixels, each over the variance of the difference (measured
+/// from independent blurred renders and from the spread of the instants), average to one.
+/// Rendering the blade frozen at mid-shutter misses it by far.
+#[test]
+fn a_turning_blade_is_the_average_of_its_instants() {
+    let (res, spp) = ((24u32, 24u32), 16u32);
+    let settings = |seed: u32| Settings {
+        seed,
+        ..Settings::default()
+    };
+    let mut rng = lucerna::sampling::pcg::Pcg32::new(11, 3);
+    let instants: Vec<Film> = (0..256)
+        .map(|k| {
+            let t = (k as f64 + rng.next_f32() as f64) / 256.0;
+            render(turning_blade(None, t), res, 1, settings(1000 + k), 1).0
+        })
+        .collect();
+    let (reference, reference_var) = mean_and_variance_of_mean(&instants);
+    let blurred: Vec<Film> = (0..8)
+        .map(|seed| render(turning_blade(Some(9), 0.5), res, spp, settings(seed), 2).0)
+        .collect();
+    let (blur, blur_var) = mean_and_variance_of_mean(&blurred);
+    let chi2 = |image: &[f64], var: &[f64]| {
+        image
+            .iter()
+            .zip(&reference)
+            .zip(var.iter().zip(&reference_var))
+            .map(|((a, b), (va, vb))| (a - b).powi(2) / (va + vb + 1e-8))
+            .sum::<f64>()
+            / image.len() as f64
+    };
+    // Mean of n terms of one degree each; the variances are estimates, so a wider band.
+    let band = 8.0 * (2.0 / blur.len() as f64).sqrt() + 0.15;
+    let blurred_chi2 = chi2(&blur, &blur_var);
+    let frozen = render(turning_blade(None, 0.5), res, 8 * spp, settings(99), 2).0;
+    let planes = frozen.planes(Aov::Beauty);
+    let frozen_image: Vec<f64> = (0..3)
+        .flat_map(|c| planes[c].iter().map(|&v| v as f64))
+        .collect();
+    let frozen_chi2 = chi2(&frozen_image, &blur_var);
+    println!("mean squared z: blurred {blurred_chi2:.3}, frozen {frozen_chi2:.3}, band {band:.3}");
+    assert!(
+        (blurred_chi2 - 1.0).abs() < band,
+        "blurred blade against its instants: mean squared z {blurred_chi2:.3}"
+    );
+    assert!(
+        frozen_chi2 - 1.0 > 3.0 * band,
+        "the blade frozen at mid-shutter should not match: mean squared z {frozen_chi2:.3}"
+    );
+}
+
+/// A moving scene renders the same with one thread and with two.
+#[test]
+fn motion_blur_is_identical_with_one_and_two_threads() {
+    let one = render(
+        turning_blade(Some(9), 0.5),
+        (32, 32),
+        8,
+        Settings::default(),
+        1,
+    )
+    .0;
+    let two = render(
+        turning_blade(Some(9), 0.5),
+        (32, 32),
+        8,
+        Settings::default(),
+        2,
+    )
+    .0;
+    for c in 0..3 {
+        assert_eq!(one.planes(Aov::Beauty)[c], two.planes(Aov::Beauty)[c]);
+    }
+}
