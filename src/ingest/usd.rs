@@ -4,7 +4,8 @@
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
 //! [--no-validate | --strict] [--variant SET=NAME]... [--purpose LIST] [--no-payloads]
-//! [--render-settings PRIM] [--max-memory BYTES]` with the plugin folder on `PYTHONPATH`
+//! [--render-settings PRIM] [--shutter OPEN,CLOSE] [--max-memory BYTES]` with the plugin
+//! folder on `PYTHONPATH`
 //! (before any `PYTHONPATH` already set). The plugin is embedded in the binary; PYTHON and
 //! the plugin folder are found as src/install.rs says.
 //!
@@ -88,6 +89,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
         .stderr(Stdio::piped());
     if let Some(frame) = options.frame {
         command.arg("--frame").arg(frame.to_string());
+    }
+    if let Some((open, close)) = options.shutter {
+        command.arg(format!("--shutter={open},{close}"));
     }
     if !options.validate {
         command.arg("--no-validate");

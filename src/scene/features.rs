@@ -133,7 +133,8 @@ pub struct SceneFeatures {
     /// Instances that move over the shutter (transform motion blur): rays then carry a
     /// time, which only the scalar kernel follows.
     pub moving_instances: usize,
-    /// The render camera moves over the shutter (set when the world chooses it).
+    /// The render camera moves over the shutter (the scene's first camera here; the world
+    /// sets it for the camera it renders through).
     pub moving_camera: bool,
 }
 
@@ -251,7 +252,11 @@ impl SceneFeatures {
                 .iter()
                 .filter(|i| crate::geometry::motion::keys_move(&i.motion))
                 .count(),
-            moving_camera: false,
+            // The default camera's (the world sets the render camera's).
+            moving_camera: scene
+                .cameras
+                .first()
+                .is_some_and(|c| crate::geometry::motion::keys_move(&c.motion)),
         }
     }
 }

@@ -119,6 +119,16 @@ def select_variants(stage, selections, warn):
             warn(where or "stage", f"--variant {vset}={name}: no prim has the variant set {vset!r}")
 
 
+def _shutter(text):
+    """argparse's type of --shutter."""
+    from .motion import parse
+
+    try:
+        return parse(text)
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(str(e)) from None
+
+
 def _time(stage, frame):
     from pxr import Usd
 
@@ -149,13 +159,13 @@ def _validate(stage, path, strict, warnings):
 
 
 def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False,
-            variants=(), purposes=("render",), payloads=True, render_settings=None):
+            variants=(), purposes=("render",), payloads=True, render_settings=None, shutter=None):
     """Converts `path` to the scene file `output`; returns the exit status."""
     from pxr import Tf
 
     try:
         return _convert(path, output, frame, no_validate, quiet, strict, variants, purposes,
-                        payloads, render_settings)
+                        payloads, render_settings, shutter)
     except Tf.ErrorException as e:
         # usd-core raises on layers it cannot parse when composition reaches them.
         _error(path, "stage", _tf_reason(e))
@@ -169,7 +179,7 @@ def _tf_reason(error):
 
 
 def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purposes=("render",),
-             payloads=True, render_settings=None):
+             payloads=True, render_settings=None, shutter=None):
     from . import StageError
     from .convert import Converter
 
@@ -205,7 +215,10 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
     try:
         with _captured_stderr(captured):
             time = _time(stage, frame)
-            converter = Converter(stage, path, time, purposes)
+            from . import motion
+
+            shutter_times = motion.times(time, motion.shutter(stage, render_settings, shutter))
+            converter = Converter(stage, path, time, purposes, shutter_times)
             writer = converter.run()
             # Frame tokens of product names: the frame rendered, else the stage's start, else 1
             # (husk's default frame).
@@ -267,6 +280,9 @@ def main(argv=None):
     c.add_argument("--render-settings", metavar="PRIM",
                    help="the RenderSettings prim to follow (default: renderSettingsPrimPath, "
                         "else the first RenderSettings prim)")
+    c.add_argument("--shutter", metavar="OPEN,CLOSE", type=_shutter,
+                   help="the shutter in frames relative to the frame (default: the render "
+                        "camera's shutter:open and shutter:close)")
     c.add_argument("--max-memory", type=int, metavar="BYTES",
                    help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
     v = commands.add_parser("validate", help="print the validators' findings")
@@ -307,7 +323,7 @@ def main(argv=None):
             return EXIT_BAD_INPUT
         return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet,
                        args.strict, args.variant, purposes, not args.no_payloads,
-                       args.render_settings)
+                       args.render_settings, args.shutter)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request
         if os.environ.get("LUCERNA_USD_DEBUG"):
             raise

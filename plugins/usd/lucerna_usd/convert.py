@@ -57,19 +57,34 @@ class Group:
     """Something a prim contributes, placed by row-vector matrices `mats` (K, 4, 4)
     relative to the prim (or to the world when `absolute`, after a resetXformStack)."""
 
-    __slots__ = ("kind", "payload", "mats", "absolute")
+    __slots__ = ("kind", "payload", "mats", "absolute", "motion")
 
-    def __init__(self, kind, payload, mats=None, absolute=False):
+    def __init__(self, kind, payload, mats=None, absolute=False, motion=None):
         self.kind = kind
         self.payload = payload
         self.mats = np.identity(4)[None] if mats is None else mats
         self.absolute = absolute
+        # Where something above moves while the shutter is open: the matrices at each of
+        # the shutter's time codes, (S, K, 4, 4).
+        self.motion = motion
 
-    def placed(self, local, resets):
-        """This group seen from the parent whose child has `local` transform."""
+    def placed(self, local, resets, local_motion=None):
+        """This group seen from the parent whose child has `local` transform (and
+        `local_motion`, (S, 4, 4), over the shutter where it may move)."""
         if self.absolute:
             return self
-        return Group(self.kind, self.payload, self.mats @ local, resets)
+        motion = None
+        if self.motion is not None or local_motion is not None:
+            own = self.motion if self.motion is not None else self.mats[None]
+            step = local_motion[:, None] if local_motion is not None else local[None, None]
+            motion = own @ step
+        return Group(self.kind, self.payload, self.mats @ local, resets, motion)
+
+    def moving(self):
+        """The group's matrices over the shutter where they change, else None."""
+        if self.motion is None or np.allclose(self.motion, self.motion[:1], rtol=0, atol=1e-12):
+            return None
+        return self.motion
 
 
 def _np(m):
@@ -105,9 +120,11 @@ class Converter:
     """Converts one stage at one time code; `warnings` collects what was repaired,
     approximated or skipped, each naming its prim."""
 
-    def __init__(self, stage, source, time, purposes=("render",)):
+    def __init__(self, stage, source, time, purposes=("render",), shutter_times=None):
         self.stage = stage
         self.time = time
+        # The time codes over the open shutter at which transforms are sampled, or None.
+        self.shutter_times = shutter_times
         # Purposes rendered besides "default" (UsdGeom's render, proxy, guide).
         self.purposes = set(purposes)
         self.writer = SceneWriter(source)
@@ -135,9 +152,14 @@ class Converter:
         for g in groups:
             world_usd = g.mats
             world = g.mats @ self.to_lucerna
+            moving = g.moving()
+            world_motion = None if moving is None else moving @ self.to_lucerna
+            if moving is not None and g.kind not in ("mesh", "camera"):
+                self.warn(self._group_name(g), "moves while the shutter is open: only meshes and "
+                          "cameras are blurred, it stays where it is at the frame")
             if g.kind == "mesh":
                 mesh, name = g.payload
-                self.writer.add_instances(name, mesh, world)
+                self.writer.add_instances(name, mesh, world, world_motion)
             elif g.kind == "sphere":
                 radius, material, name = g.payload
                 for k, m in enumerate(world):
@@ -166,8 +188,9 @@ class Converter:
                     self.writer.add_volume(name if len(world) == 1 else f"{name}[{k}]", file, grid,
                                            matrix(m), material, fields)
             elif g.kind == "camera":
-                for m in world:
-                    self._isolated(g.payload.GetPath(), self._camera, g.payload, m)
+                for k, m in enumerate(world):
+                    keys = None if world_motion is None else world_motion[:, k]
+                    self._isolated(g.payload.GetPath(), self._camera, g.payload, m, keys)
             elif g.kind == "light":
                 self._isolated(g.payload.GetPath(), lights.convert, self.writer, g.payload,
                                list(world_usd), self.to_lucerna, self.time, self.warn)
@@ -180,12 +203,15 @@ class Converter:
     def _children(self, children, inherited):
         groups = []
         for child in children:
-            local, resets = np.identity(4), False
+            local, resets, local_motion = np.identity(4), False, None
             if child.IsA(UsdGeom.Xformable):
                 xformable = UsdGeom.Xformable(child)
                 local = _np(xformable.GetLocalTransformation(self.time))
                 resets = xformable.GetResetXformStack()
-            groups.extend(g.placed(local, resets) for g in self._flatten(child, inherited))
+                if self.shutter_times and xformable.TransformMightBeTimeVarying():
+                    local_motion = np.stack([_np(xformable.GetLocalTransformation(t))
+                                             for t in self.shutter_times])
+            groups.extend(g.placed(local, resets, local_motion) for g in self._flatten(child, inherited))
         return groups
 
     def _flatten(self, prim, inherited):
@@ -464,7 +490,15 @@ class Converter:
         return None
 
     # ---- cameras ---------------------------------------------------------------------
-    def _camera(self, prim, world):
+    @staticmethod
+    def _group_name(g):
+        """The prim a group of a sphere, points, volume or light comes from, for a message."""
+        payload = g.payload
+        if hasattr(payload, "GetPath"):
+            return str(payload.GetPath())
+        return next((str(x) for x in reversed(payload) if isinstance(x, str)), "stage")
+
+    def _camera(self, prim, world, motion=None):
         path = str(prim.GetPath())
         cam = UsdGeom.Camera(prim).GetCamera(self.time)
         h_ap, v_ap = cam.horizontalAperture, cam.verticalAperture
@@ -480,8 +514,12 @@ class Converter:
         else:
             projection = {"perspective": {"yfov": 2 * math.atan(v_ap / (2 * cam.focalLength)),
                                           "aspect": h_ap / v_ap}}
-        transform = np.array(world, dtype=np.float64)
-        transform[:3, :3] /= np.linalg.norm(transform[:3, :3], axis=1, keepdims=True)
+        def unscaled(m):
+            m = np.array(m, dtype=np.float64)
+            m[:3, :3] /= np.linalg.norm(m[:3, :3], axis=1, keepdims=True)
+            return m
+
+        transform = unscaled(world)
         near, far = cam.clippingRange.min, cam.clippingRange.max
         aperture = cam.focalLength * 0.1 / (2 * cam.fStop) * mpu if cam.fStop > 0 else 0.0
         self.writer.cameras.append({
@@ -495,6 +533,8 @@ class Converter:
             # USD's default aspectRatioConformPolicy: the whole aperture stays in view.
             "fit": "expand_aperture",
         })
+        if motion is not None:
+            self.writer.cameras[-1]["motion"] = [matrix(unscaled(m)) for m in motion]
 
     # ---- meshes ----------------------------------------------------------------------
     def _mesh(self, prim, inherited):

@@ -142,14 +142,17 @@ class SceneWriter:
             entry["colors"] = self._view(cage.colors, "<f4", 4)
         self.subdivision_surfaces.append(entry)
 
-    def add_instances(self, name, mesh, matrices):
-        """Places `mesh` once per row-vector matrix in `matrices` (shape (K, 4, 4))."""
+    def add_instances(self, name, mesh, matrices, motion=None):
+        """Places `mesh` once per row-vector matrix in `matrices` (shape (K, 4, 4)); `motion`
+        (S, K, 4, 4): each placement's matrices over the shutter, kept where they change."""
         for k, m in enumerate(np.asarray(matrices, dtype=np.float64).reshape(-1, 4, 4)):
             self.instances.append({
                 "name": name if len(matrices) == 1 else f"{name}[{k}]",
                 "mesh": int(mesh),
                 "transform": matrix(m),
             })
+            if motion is not None and not np.allclose(motion[:, k], motion[:1, k], rtol=0, atol=1e-12):
+                self.instances[-1]["motion"] = [matrix(key) for key in motion[:, k]]
 
     def add_volume(self, name, file, grid, to_world, material, fields=None):
         """Adds a volume: grid `grid` of the OpenVDB `file` (an absolute path), its index

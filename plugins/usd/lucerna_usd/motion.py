@@ -1,0 +1,64 @@
+"""Motion blur: the shutter a stage is rendered with and the time codes within it at which
+moving transforms are sampled.
+
+The shutter is `--shutter OPEN,CLOSE` when given, else the render camera's (UsdGeom.Camera
+`shutter:open` and `shutter:close`, in frames relative to the frame; their defaults 0 and 0
+leave it closed): the camera of the render settings (`--render-settings`, the stage's
+`renderSettingsPrimPath`, its first RenderSettings prim), else the stage's first camera.
+RenderSettings' `disableMotionBlur` (and the older `instantaneousShutter`) close it.
+
+Transforms are sampled at `KEYS` evenly spaced time codes from the shutter's opening to its
+closing; lucerna interpolates between them (translation and stretch linearly, rotation by
+slerp).
+"""
+
+from pxr import Usd, UsdGeom
+
+from . import render_settings as usd_render
+
+#: Time codes a moving transform is sampled at over the shutter.
+KEYS = 9
+
+
+def parse(text):
+    """`OPEN,CLOSE` as two floats (argparse's type)."""
+    parts = text.split(",")
+    if len(parts) != 2:
+        raise ValueError(f"OPEN,CLOSE in frames relative to the frame, got {text!r}")
+    return float(parts[0]), float(parts[1])
+
+
+def shutter(stage, explicit_settings, override):
+    """The open shutter (open, close) in frames relative to the frame, or None where it is
+    closed."""
+    if override is not None:
+        open_, close = override
+        return (open_, close) if close > open_ else None
+    settings = usd_render.find(stage, explicit_settings)
+    camera = None
+    if settings is not None:
+        if settings.GetDisableMotionBlurAttr().Get() or settings.GetInstantaneousShutterAttr().Get():
+            return None
+        targets = settings.GetCameraRel().GetForwardedTargets()
+        if targets:
+            camera = stage.GetPrimAtPath(targets[0])
+    if not camera or not camera.IsA(UsdGeom.Camera):
+        camera = next((p for p in stage.Traverse() if p.IsA(UsdGeom.Camera)), None)
+    if camera is None:
+        return None
+    cam = UsdGeom.Camera(camera)
+    open_ = cam.GetShutterOpenAttr().Get()
+    close = cam.GetShutterCloseAttr().Get()
+    if open_ is None or close is None or not close > open_:
+        return None
+    return float(open_), float(close)
+
+
+def times(time, open_close):
+    """The time codes at which moving transforms are sampled for the frame at `time`, or
+    None for a closed shutter (or a frame that is not a number: the earliest time)."""
+    if open_close is None or time.IsEarliestTime() or time.IsDefault():
+        return None
+    open_, close = open_close
+    base = time.GetValue()
+    return [Usd.TimeCode(base + open_ + (close - open_) * k / (KEYS - 1)) for k in range(KEYS)]
