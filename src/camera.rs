@@ -307,20 +307,60 @@ impl Camera {
     /// (its frame's axes made orthonormal, as [`Camera::new`] makes them).
     #[inline]
     pub fn generate_ray_at(&self, film: Vec2, lens: Vec2, time: f32) -> Ray {
-        let Some(motion) = &self.motion else {
+        if self.motion.is_none() {
             return self.generate_ray(film, lens).at_time(time);
+        }
+        self.ray_from(&self.pose_at(time), film, lens).at_time(time)
+    }
+
+    /// Where the camera is at shutter time `time`.
+    fn pose_at(&self, time: f32) -> Pose {
+        let Some(motion) = &self.motion else {
+            return Pose {
+                origin: self.origin,
+                right: self.right,
+                up: self.up,
+                forward: self.forward,
+            };
         };
         let m = motion.at(time);
         let right = m.transform_vector3(DVec3::X).normalize();
         let forward = (-m.transform_vector3(DVec3::Z)).normalize();
         let up = right.cross(forward).normalize();
-        let pose = Pose {
+        Pose {
             origin: m.transform_point3(DVec3::ZERO).as_vec3(),
             right: forward.cross(up).as_vec3(),
             up: up.as_vec3(),
             forward: forward.as_vec3(),
+        }
+    }
+
+    /// The film position (pixels of the image proper, as [`Camera::generate_ray`] takes
+    /// them) where render-space point `p` appears at shutter time `time`, through the
+    /// lens's centre; `None` for a point at or behind a perspective camera's plane.
+    pub fn film_position_at(&self, p: Vec3, time: f32) -> Option<Vec2> {
+        let pose = self.pose_at(time);
+        let d = p - pose.origin;
+        let (x, y, z) = (d.dot(pose.right), d.dot(pose.up), d.dot(pose.forward));
+        let ndc = match self.kind {
+            Kind::Perspective {
+                tan_half_x,
+                tan_half_y,
+            } => {
+                if !(z > 0.0) {
+                    return None;
+                }
+                Vec2::new(x / (z * tan_half_x), y / (z * tan_half_y))
+            }
+            Kind::Orthographic {
+                half_width,
+                half_height,
+            } => Vec2::new(x / half_width, y / half_height),
         };
-        self.ray_from(&pose, film, lens).at_time(time)
+        Some(Vec2::new(
+            (ndc.x + 1.0) / self.film_to_ndc.x,
+            (1.0 - ndc.y) / self.film_to_ndc.y,
+        ))
     }
 
     /// The camera rendering `overscan` pixels beyond the edges of its image as well: the

@@ -140,6 +140,10 @@ struct LoadArgs {
     /// it (frame 0 without --frame). [default: closed: no motion blur]
     #[arg(long, allow_hyphen_values = true)]
     shutter: Option<String>,
+    /// Render the frame's instant, not the blur over the shutter: what moves keeps its
+    /// motion for the motion and velocity layers (Nuke's VectorBlur).
+    #[arg(long)]
+    no_motion_blur: bool,
     /// Skip usd-core's validators (USD stages; faster on large stages).
     #[arg(long, conflicts_with = "strict")]
     no_validate: bool,

@@ -46,6 +46,10 @@ pub enum Aov {
     Normal,
     Depth,
     Position,
+    /// Screen-space motion at the first hit: pixels a frame, forward in time (on request).
+    Motion,
+    /// World-space velocity at the first hit: world units a frame (on request).
+    Velocity,
     Spp,
     Variance,
     /// Directional albedo of each lobe kind at the first surface (on request).
@@ -71,6 +75,9 @@ pub const LOBES: [Aov; 11] = [
     Aov::GlossyColor,
     Aov::TransmissionColor,
 ];
+
+/// The motion layers (on request): where the first hit moves on screen and in the world.
+pub const MOTION: [Aov; 2] = [Aov::Motion, Aov::Velocity];
 
 /// Every AOV written by default (`all`), in canonical order; per-depth layers come only on
 /// request.
@@ -123,6 +130,8 @@ impl Aov {
             Self::Normal => "normal",
             Self::Depth => "depth",
             Self::Position => "position",
+            Self::Motion => "motion",
+            Self::Velocity => "velocity",
             Self::Spp => "spp",
             Self::Variance => "variance",
             Self::DiffuseDirect => "diffuse_direct",
@@ -147,7 +156,9 @@ impl Aov {
     pub fn channels(self) -> &'static [&'static str] {
         match self {
             Self::Beauty | Self::Crypto(..) => &["R", "G", "B", "A"],
-            Self::Normal | Self::Position => &["X", "Y", "Z"],
+            Self::Normal | Self::Position | Self::Velocity => &["X", "Y", "Z"],
+            // Nuke's motion layer: u right, v up.
+            Self::Motion => &["u", "v"],
             Self::Depth => &["Z"],
             Self::Spp => &["Y"],
             _ => &["R", "G", "B"],
@@ -176,6 +187,8 @@ impl Aov {
                 | Self::Normal
                 | Self::Depth
                 | Self::Position
+                | Self::Motion
+                | Self::Velocity
                 | Self::Spp
                 | Self::Variance
                 | Self::DiffuseColor
@@ -219,7 +232,11 @@ impl Aov {
         if let Some(k) = depth("bsdf_d") {
             return Some(Self::BsdfDepth(k));
         }
-        ALL.iter().chain(&LOBES).copied().find(|a| a.name() == name)
+        ALL.iter()
+            .chain(&LOBES)
+            .chain(&MOTION)
+            .copied()
+            .find(|a| a.name() == name)
     }
 
     /// The lobe (0 diffuse, 1 glossy, 2 transmission, 3 a medium) and whether indirect, of
@@ -403,18 +420,20 @@ impl AovSet {
 
 /// The data AOVs that are means of a first-hit vector over the pixel's samples, in the
 /// order of [`mean_data`].
-pub const MEAN_DATA: [Aov; 6] = [
+pub const MEAN_DATA: [Aov; 8] = [
     Aov::Albedo,
     Aov::Normal,
     Aov::Position,
     Aov::DiffuseColor,
     Aov::GlossyColor,
     Aov::TransmissionColor,
+    Aov::Motion,
+    Aov::Velocity,
 ];
 
 /// The values of [`MEAN_DATA`] at a first hit.
 #[inline]
-pub(super) fn mean_data(hit: &FirstHit) -> [Vec3; 6] {
+pub(super) fn mean_data(hit: &FirstHit) -> [Vec3; 8] {
     let [diffuse, glossy, transmission] = hit.lobe_albedo;
     [
         hit.albedo,
@@ -423,5 +442,7 @@ pub(super) fn mean_data(hit: &FirstHit) -> [Vec3; 6] {
         diffuse,
         glossy,
         transmission,
+        hit.motion.extend(0.0),
+        hit.velocity,
     ]
 }

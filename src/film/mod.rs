@@ -201,8 +201,14 @@ impl Film {
                     let p = (ty * tile.width + tx) as usize;
                     let i = window.index(tile.x0 + tx, tile.y0 + ty);
                     let n = spp[i];
-                    let vec3 =
-                        |planes: &[&[f32]]| Vec3::new(planes[0][i], planes[1][i], planes[2][i]);
+                    // Two-channel layers (motion) leave z at zero.
+                    let vec3 = |planes: &[&[f32]]| {
+                        Vec3::new(
+                            planes[0][i],
+                            planes[1][i],
+                            planes.get(2).map_or(0.0, |p| p[i]),
+                        )
+                    };
                     tile.samples[p] = n as u32;
                     for (slot, planes) in light.iter().enumerate() {
                         tile.light[slot * tn + p] = vec3(planes) * n;

@@ -47,6 +47,10 @@ pub struct FirstHit {
     pub depth: f32,
     /// World-space position.
     pub position: Vec3,
+    /// How the point moves on screen (pixels a frame, u right and v up) and in the world
+    /// (units a frame) while the shutter is open; zero where nothing moves.
+    pub motion: glam::Vec2,
+    pub velocity: Vec3,
     /// Directional albedo of each lobe kind.
     pub lobe_albedo: PerLobe,
     /// The object and the material hit (indices: `World::objects`, the materials).

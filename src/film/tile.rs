@@ -14,7 +14,7 @@ pub struct PixelAccumulator {
     beauty_squares: DVec3,
     coverage: f64,
     /// Sums of [`MEAN_DATA`].
-    data: [DVec3; 6],
+    data: [DVec3; MEAN_DATA.len()],
     /// Samples per object and per material hit (Cryptomatte only).
     crypto: Option<[crypto::Counts; 2]>,
     depth: f32,
@@ -33,7 +33,7 @@ impl PixelAccumulator {
             light: vec![DVec3::ZERO; slots],
             beauty_squares: DVec3::ZERO,
             coverage: 0.0,
-            data: [DVec3::ZERO; 6],
+            data: [DVec3::ZERO; MEAN_DATA.len()],
             depth: f32::INFINITY,
             samples: 0,
             rays: 0,
@@ -46,7 +46,7 @@ impl PixelAccumulator {
         self.light.fill(DVec3::ZERO);
         self.beauty_squares = DVec3::ZERO;
         self.coverage = 0.0;
-        self.data = [DVec3::ZERO; 6];
+        self.data = [DVec3::ZERO; MEAN_DATA.len()];
         if let Some(c) = &mut self.crypto {
             c[0].clear();
             c[1].clear();
@@ -114,7 +114,7 @@ pub struct Tile {
     pub(super) rays: Vec<u64>,
     pub(super) coverage: Vec<f32>,
     /// Sums of [`MEAN_DATA`] (empty where not requested).
-    pub(super) data: [Vec<Vec3>; 6],
+    pub(super) data: [Vec<Vec3>; MEAN_DATA.len()],
     /// Per pixel, samples per object and per material (empty without Cryptomatte).
     pub(super) crypto: [Vec<crypto::Counts>; 2],
     pub(super) depth: Vec<f32>,

@@ -42,6 +42,9 @@ pub struct LoadOptions {
     /// The shutter's opening and closing in frames relative to the frame, where the
     /// stage does not say (or to override it); an open shutter blurs what moves.
     pub shutter: Option<(f64, f64)>,
+    /// Blur over the open shutter (else the frame's instant is rendered and the motion
+    /// over the shutter serves the motion and velocity layers alone).
+    pub motion_blur: bool,
     /// Run usd-core's validators (USD stages); their findings are warnings...
     pub validate: bool,
     /// ...unless strict: then an error refuses the stage.
@@ -73,6 +76,7 @@ impl Default for LoadOptions {
             frame: None,
             fps: DEFAULT_FPS,
             shutter: None,
+            motion_blur: true,
             validate: true,
             strict: false,
             variants: Vec::new(),
@@ -88,6 +92,22 @@ impl Default for LoadOptions {
 
 /// Loads a scene file, choosing the importer by extension.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
+    let mut scene = load_format(path, options)?;
+    if let Some((open, close)) = options.shutter.filter(|(open, close)| close > open) {
+        scene.shutter = Some(scene::Shutter {
+            open,
+            close,
+            blur: true,
+        });
+    }
+    if let Some(shutter) = &mut scene.shutter {
+        shutter.blur &= options.motion_blur;
+    }
+    Ok(scene)
+}
+
+/// [`load`] by the file's format.
+fn load_format(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let ext = path
         .extension()
         .and_then(|e| e.to_str())

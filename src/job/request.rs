@@ -97,12 +97,13 @@ impl Default for RenderJob {
 /// Settings of a job beyond [`RenderOptions`]'s (whose names [`RenderOptions::set`]
 /// takes): the keys a settings file, a batch job's `settings` and the Python API accept, as
 /// the command line's flags without `--`.
-pub const JOB_SETTINGS: [&str; 43] = [
+pub const JOB_SETTINGS: [&str; 44] = [
     "output",
     "frames",
     "frame",
     "fps",
     "shutter",
+    "no-motion-blur",
     "no-validate",
     "strict",
     "variant",
@@ -254,6 +255,7 @@ impl RenderJob {
                     })?
             }
             "shutter" => self.load.shutter = Some(parse_shutter(value)?),
+            "no-motion-blur" => self.load.motion_blur = !parse_bool(value)?,
             "no-validate" => self.load.validate = !parse_bool(value)?,
             "strict" => self.load.strict = parse_bool(value)?,
             "variant" => self.load.variants.push(value.into()),

@@ -86,8 +86,13 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
         .selecting_lights_by(lights);
     let window = film.window;
     let camera = &world.camera;
-    // Rays carry a time in the shutter only where something moves.
+    // Rays carry a time in the shutter only where something moves: drawn per sample for
+    // motion blur, else the frame's instant (the motion then serves the motion layers).
     let moving = world.features.moves();
+    let instant = world
+        .shutter
+        .filter(|s| !s.blur)
+        .map(|s| s.frame_time().clamp(0.0, 1.0) as f32);
     let interrupt = options.interrupt.as_deref();
     film.tiles
         .par_iter_mut()
@@ -124,7 +129,8 @@ pub(super) fn run_pass<const ROUTED: bool, const EMITTERS: bool, const DATA: boo
                         let cs = sampler.camera();
                         let film_position = centre + options.filter.sample(cs.film);
                         let ray = if moving {
-                            camera.generate_ray_at(film_position, cs.lens, sampler.time())
+                            let time = instant.unwrap_or_else(|| sampler.time());
+                            camera.generate_ray_at(film_position, cs.lens, time)
                         } else {
                             camera.generate_ray(film_position, cs.lens)
                         };

@@ -71,6 +71,9 @@ struct Manifest {
     grids: Vec<GridEntry>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     volumes: Vec<VolumeEntry>,
+    /// The interval the motion keys span.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    shutter: Option<super::Shutter>,
 }
 
 /// A volume whose grid is read from an OpenVDB file (USD `Volume` prims): the grid `grid`
@@ -342,6 +345,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
         // Volumes read from OpenVDB files are written as the grids, meshes and instances
         // they became.
         volumes: Vec::new(),
+        shutter: scene.shutter,
     };
     let json = serde_json::to_vec_pretty(&manifest)
         .map_err(|e| Error::other(path, "manifest", e.to_string()))?;
@@ -626,6 +630,7 @@ pub fn parse(
         subdivision_surfaces: Vec::new(),
         subdivision_level: None,
         grids: Vec::new(),
+        shutter: manifest.shutter,
     };
     let mut scene = scene;
     for (i, entry) in manifest.grids.iter().enumerate() {
@@ -1242,6 +1247,14 @@ fn validate(scene: &Scene) -> std::result::Result<(), (String, String)> {
                 "material index out of range",
             );
         }
+    }
+    if let Some(s) = scene.shutter
+        && !(s.open.is_finite() && s.close.is_finite() && s.open < s.close && s.frames() <= 2e3)
+    {
+        return fail(
+            "shutter".into(),
+            "open and close must be finite, open before close",
+        );
     }
     for (i, inst) in scene.instances.iter().enumerate() {
         if inst.mesh as usize >= scene.meshes.len() {

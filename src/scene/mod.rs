@@ -53,6 +53,37 @@ pub struct Scene {
     /// A fixed refinement level for every subdivision surface (`--subdiv-level`); `None`
     /// chooses each surface's level by its size on screen.
     pub subdivision_level: Option<u32>,
+    /// The interval the motion keys span (`Instance::motion`, `Camera::motion`), where the
+    /// scene was read with one.
+    pub shutter: Option<Shutter>,
+}
+
+/// The interval over which moving things have keys, in frames relative to the frame
+/// (`open` < `close`), and whether the image is blurred over it: without blur the image is
+/// the frame's instant, and the keys serve the motion and velocity layers alone.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Shutter {
+    pub open: f64,
+    pub close: f64,
+    #[serde(default = "blurs")]
+    pub blur: bool,
+}
+
+fn blurs() -> bool {
+    true
+}
+
+impl Shutter {
+    /// Frames from its opening to its closing.
+    pub fn frames(&self) -> f64 {
+        self.close - self.open
+    }
+
+    /// Where the frame lies in the shutter, as a shutter time (0 at its opening, 1 at its
+    /// closing; outside that range for a shutter that does not contain the frame).
+    pub fn frame_time(&self) -> f64 {
+        -self.open / self.frames()
+    }
 }
 
 /// A subdivision scheme (USD's subdivisionScheme; `none` meshes are plain meshes).

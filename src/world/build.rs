@@ -764,6 +764,7 @@ impl World {
             light_groups: std::mem::take(&mut scene.light_groups),
             objects,
             footprints: super::footprint::Footprints::OFF,
+            shutter: scene.shutter,
             #[cfg(target_arch = "x86_64")]
             area_lights: std::sync::OnceLock::new(),
         })

@@ -52,6 +52,8 @@ pub struct World {
     /// How paths size their texture footprints (off until a render sets them:
     /// [`World::set_footprints`]).
     pub footprints: footprint::Footprints,
+    /// The interval the motion keys span and whether the image blurs over it.
+    pub shutter: Option<crate::scene::Shutter>,
     /// The lights as the packet kernel's lanes sample them, built when it first runs.
     #[cfg(target_arch = "x86_64")]
     area_lights: std::sync::OnceLock<crate::light::lanes::AreaLights>,
@@ -317,6 +319,46 @@ impl World {
         for (t, srgb) in tiled {
             textures[t].build_mips(srgb);
         }
+    }
+
+    /// How shading point `it`, met at shutter time `time`, moves while the shutter is
+    /// open: on screen in pixels a frame (u right, v up: Nuke's motion vectors) and in the
+    /// world in units a frame, from the shutter's opening to its closing (the point carried
+    /// by its placement's motion, seen by the camera where it is then). Zero without a
+    /// shutter, and on screen for a point behind the camera at either end.
+    pub fn motion_of(&self, it: &Interaction, time: f32) -> (glam::Vec2, Vec3) {
+        let Some(shutter) = self.shutter else {
+            return (glam::Vec2::ZERO, Vec3::ZERO);
+        };
+        let moving = (it.instance != NOT_PLACED)
+            .then(|| self.surfaces.placements[it.instance as usize].motion)
+            .filter(|&m| m != crate::geometry::instances::STILL)
+            .map(|m| &self.surfaces.motions[m as usize]);
+        let (open, close) = match moving {
+            Some(motion) => {
+                let object = motion.at(time).inverse().transform_point3(it.p.as_dvec3());
+                (
+                    motion.at(0.0).transform_point3(object).as_vec3(),
+                    motion.at(1.0).transform_point3(object).as_vec3(),
+                )
+            }
+            None => (it.p, it.p),
+        };
+        let frames = shutter.frames();
+        let velocity =
+            ((self.space.to_world(close) - self.space.to_world(open)) / frames).as_vec3();
+        let screen = match (
+            self.camera.film_position_at(open, 0.0),
+            self.camera.film_position_at(close, 1.0),
+        ) {
+            (Some(a), Some(b)) => {
+                let d = (b - a) / frames as f32;
+                // Film y grows downwards; Nuke's v upwards.
+                glam::Vec2::new(d.x, -d.y)
+            }
+            _ => glam::Vec2::ZERO,
+        };
+        (screen, velocity)
     }
 
     /// The shading point of `hit` along `ray`, its textures looked up at the point.

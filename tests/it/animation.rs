@@ -331,6 +331,30 @@ fn shutter_blurs_a_sliding_quad() {
         smeared >= sharp + 8,
         "{sharp} columns sharp, {smeared} blurred"
     );
+    // Without blur: the frame's image, and the quad's motion in the motion layer (the
+    // quad slides 6 units a second, 0.25 units a frame at 24 fps).
+    let out = dir.join("vectors.exr");
+    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
+        .args(["--env", "1,1,1", "--frame", "12", "--shutter", "-0.5,0.5"])
+        .args(["--no-motion-blur", "--aov", "motion", "-o"])
+        .arg(&out)
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let vectors = lucerna::output::exr::read(&out).unwrap().0;
+    assert_eq!(dark_columns(&vectors), sharp);
+    let u = vectors.channel("motion.u").unwrap();
+    let fastest = u.iter().cloned().fold(0.0f32, f32::max);
+    assert!(
+        fastest > 1.0,
+        "the quad's motion: at most {fastest} pixels a frame"
+    );
     let closed = render("closed.exr", Some("0,0"));
     assert_eq!(frame.channel("R").unwrap(), closed.channel("R").unwrap());
     let refused = Command::new(env!("CARGO_BIN_EXE_lucerna"))

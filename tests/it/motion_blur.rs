@@ -5,12 +5,12 @@
 
 use crate::common;
 
-use common::scenes::{material, ortho_camera, quad, render, scene};
+use common::scenes::{material, ortho_camera, quad, render, render_aovs, scene};
 use glam::{DMat4, DQuat, DVec3, Vec3};
 use lucerna::film::Film;
-use lucerna::film::aov::Aov;
+use lucerna::film::aov::{Aov, AovSet};
 use lucerna::integrator::Settings;
-use lucerna::scene::{BsdfModel, Instance, Scene};
+use lucerna::scene::{BsdfModel, Instance, Scene, Shutter};
 
 /// Keys of a motion: `at(t)` at `n` evenly spaced times of the shutter.
 fn keys(n: usize, at: impl Fn(f64) -> DMat4) -> Vec<DMat4> {
@@ -254,5 +254,70 @@ fn motion_blur_is_identical_with_one_and_two_threads() {
     .0;
     for c in 0..3 {
         assert_eq!(one.planes(Aov::Beauty)[c], two.planes(Aov::Beauty)[c]);
+    }
+}
+
+/// The motion and velocity layers of the sliding bar rendered at the frame's instant (no
+/// blur, a shutter of one frame around it): where the bar covers a pixel throughout, the
+/// bar's known motion, 1 unit a frame to the right, which is 32 pixels a frame on the
+/// 64-pixel view of 2 units (v 0); the sky has none. A camera panning the other way
+/// gives the bar the same motion, and the frame's image is the still bar's.
+#[test]
+fn motion_vectors_are_the_known_pixel_motion() {
+    let aovs = AovSet::parse("motion,velocity").unwrap();
+    let res = (BAR_IMAGE.0 as u32, BAR_IMAGE.1 as u32);
+    let instant = Shutter {
+        open: -0.5,
+        close: 0.5,
+        blur: false,
+    };
+    let mut moving_bar = sliding_bar(true);
+    moving_bar.shutter = Some(instant);
+    let mut panning = sliding_bar(false);
+    panning.instances[0].transform = DMat4::from_scale(DVec3::new(0.1, 2.0, 1.0));
+    let at = panning.cameras[0].transform;
+    panning.cameras[0].motion = keys(2, |t| {
+        DMat4::from_translation(DVec3::new(0.5 - t, 0.0, 0.0)) * at
+    });
+    panning.shutter = Some(instant);
+    let still = render(sliding_bar(false), res, 4, Settings::default(), 2).0;
+    for (name, scene) in [("moving bar", moving_bar), ("panning camera", panning)] {
+        let film = render_aovs(scene, res, 4, Settings::default(), 2, aovs.clone()).0;
+        let (motion, velocity) = (film.planes(Aov::Motion), film.planes(Aov::Velocity));
+        let width = BAR_IMAGE.0;
+        for y in [0, 17, 40, 63] {
+            // The bar covers x in [-0.1, 0.1]: columns 29 to 34 whole.
+            for x in 29..=34 {
+                let i = y * width + x;
+                let expected_u = 32.0;
+                assert!(
+                    (motion[0][i] - expected_u).abs() < 0.01 && motion[1][i].abs() < 0.01,
+                    "{name}: pixel ({x}, {y}): motion ({}, {})",
+                    motion[0][i],
+                    motion[1][i]
+                );
+                let expected_velocity = if name == "moving bar" { 1.0 } else { 0.0 };
+                assert!(
+                    (velocity[0][i] - expected_velocity).abs() < 1e-4,
+                    "{name}: velocity {}",
+                    velocity[0][i]
+                );
+                assert!(velocity[1][i].abs() < 1e-4 && velocity[2][i].abs() < 1e-4);
+            }
+            for x in [0, 10, 50, 63] {
+                assert_eq!(motion[0][y * width + x], 0.0, "{name}: the sky moved");
+            }
+        }
+        // Without blur the image is the frame's instant: the still bar's.
+        let (a, b) = (film.planes(Aov::Beauty), still.planes(Aov::Beauty));
+        let differing = a[0]
+            .iter()
+            .zip(&b[0])
+            .filter(|(p, q)| (*p - *q).abs() > 1e-4)
+            .count();
+        assert_eq!(
+            differing, 0,
+            "{name}: {differing} pixels differ from the still bar"
+        );
     }
 }

@@ -217,9 +217,12 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             time = _time(stage, frame)
             from . import motion
 
-            shutter_times = motion.times(time, motion.shutter(stage, render_settings, shutter))
+            open_close = motion.shutter(stage, render_settings, shutter)
+            shutter_times = motion.times(time, open_close)
             converter = Converter(stage, path, time, purposes, shutter_times)
             writer = converter.run()
+            if shutter_times:
+                writer.shutter = {"open": open_close[0], "close": open_close[1]}
             # Frame tokens of product names: the frame rendered, else the stage's start, else 1
             # (husk's default frame).
             number = frame if frame is not None else (

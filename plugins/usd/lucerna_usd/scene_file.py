@@ -86,6 +86,8 @@ class SceneWriter:
         self.warnings = []
         # The stage's UsdRender settings and products (render_settings.convert), or None.
         self.render_settings = None
+        # The open shutter the motion keys span: {"open": frames, "close": frames}, or None.
+        self.shutter = None
         # Textures added so far under a caller's key (an image several materials pass
         # through unchanged is stored once): {(key, wrap): index}.
         self._texels = {}
@@ -243,6 +245,8 @@ class SceneWriter:
         }
         if self.volumes:
             manifest["volumes"] = self.volumes
+        if self.shutter is not None:
+            manifest["shutter"] = self.shutter
         _check_numbers(manifest)
         text = json.dumps(manifest, indent=1, allow_nan=False)
         self._spool.seek(0)

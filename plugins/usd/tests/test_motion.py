@@ -59,6 +59,7 @@ def test_the_camera_shutter_samples_moving_transforms(stage_file, converted):
     # The frame's transform is kept; what does not move gets no keys.
     assert np.allclose(_matrix(blade["transform"]), _matrix(blade["motion"][KEYS // 2]), atol=1e-9)
     assert "motion" not in _instance(scene, "/World/Floor")
+    assert scene["shutter"] == {"open": -0.25, "close": 0.25}
     camera = scene["cameras"][0]
     assert [_matrix(k)[3, 2] for k in camera["motion"]] == [
         5 + 4 - 0.25 + 0.5 * k / (KEYS - 1) for k in range(KEYS)]

@@ -484,11 +484,14 @@ impl<'a, const EMITTERS: bool, const DATA: bool> PathTracer<'a, EMITTERS, DATA> 
                 path.first_hit_recorded = true;
                 rec.first_hit(DATA.then(|| {
                     let lobe_albedo = bsdf.albedo_lobes(wo);
+                    let (motion, velocity) = world.motion_of(&it, path.time);
                     FirstHit {
                         albedo: lobe_albedo.iter().sum(),
                         normal: it.frame.n,
                         depth: world.camera.depth(it.p),
                         position: world.space.to_world(it.p).as_vec3(),
+                        motion,
+                        velocity,
                         lobe_albedo,
                         object: world.object_of(&it),
                         material: it.material,
