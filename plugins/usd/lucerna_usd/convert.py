@@ -375,6 +375,7 @@ class Converter:
                       "or scales disagree with protoIndices): the PointInstancer is skipped")
             return []
         mats = np.array(xforms, dtype=np.float64).reshape(-1, 4, 4)
+        motion = self._instancer_motion(pi, path, len(mats))
         groups = []
         for p, target in enumerate(prototypes):
             proto = self.stage.GetPrimAtPath(target)
@@ -389,8 +390,29 @@ class Converter:
                     groups.append(g)
                     continue
                 combined = (g.mats[None, :, :, :] @ placements[:, None, :, :]).reshape(-1, 4, 4)
-                groups.append(Group(g.kind, g.payload, combined))
+                combined_motion = None
+                if motion is not None or g.motion is not None:
+                    own = g.motion if g.motion is not None else g.mats[None]
+                    at = motion[:, indices == p] if motion is not None else placements[None]
+                    combined_motion = (own[:, None] @ at[:, :, None]).reshape(
+                        max(len(own), len(at)), -1, 4, 4)
+                groups.append(Group(g.kind, g.payload, combined, motion=combined_motion))
         return groups
+
+    def _instancer_motion(self, pi, path, count):
+        """The instances' transforms at the shutter's time codes, (S, count, 4, 4), where the
+        shutter is open: position and orientation samples interpolated, or velocities and
+        angular velocities from the frame's samples (UsdGeom's rules). None if closed, or
+        (with a warning) where the instances cannot be followed over the shutter."""
+        if not self.shutter_times:
+            return None
+        at_times = pi.ComputeInstanceTransformsAtTimes(self.shutter_times, self.time)
+        if at_times is None or len(at_times) != len(self.shutter_times) or any(
+                x is None or len(x) != count for x in at_times):
+            self.warn(path, "its instances cannot be followed over the shutter (their number "
+                      "changes): they are not blurred")
+            return None
+        return np.array([np.array(x, dtype=np.float64).reshape(-1, 4, 4) for x in at_times])
 
     # ---- implicit gprims -------------------------------------------------------------
     def _curves(self, prim, inherited):

@@ -82,3 +82,47 @@ def "Render" {
 '''
     scene = converted(stage_file(disabled, name="disabled.usda"), frame=4)
     assert "motion" not in _instance(scene, "/World/Rig/Spinner/Blade")
+
+
+INSTANCER = '''def Xform "World" {
+    def PointInstancer "Crowd" {
+        rel prototypes = [</World/Crowd/Protos/Quad>]
+        int[] protoIndices = [0, 0]
+        point3f[] positions.timeSamples = { 0: [(0, 0, 0), (0, 5, 0)], 10: [(10, 0, 0), (0, 5, 0)] }
+        def Scope "Protos" {
+            def Mesh "Quad" {
+                int[] faceVertexCounts = [4]
+                int[] faceVertexIndices = [0, 1, 2, 3]
+                point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+            }
+        }
+    }
+    def PointInstancer "Fliers" {
+        rel prototypes = [</World/Fliers/Protos/Quad>]
+        int[] protoIndices = [0]
+        point3f[] positions.timeSamples = { 0: [(0, 0, 0)] }
+        vector3f[] velocities.timeSamples = { 0: [(0, 24, 0)] }
+        def Scope "Protos" {
+            def Mesh "Quad" {
+                int[] faceVertexCounts = [4]
+                int[] faceVertexIndices = [0, 1, 2, 3]
+                point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+            }
+        }
+    }
+}
+'''
+
+
+def test_point_instancers_move_by_position_samples_and_velocities(stage_file, converted):
+    scene = converted(stage_file(INSTANCER, name="instancer.usda"), frame=4, shutter=(-0.5, 0.5))
+    crowd = [i for i in scene["instances"] if i["name"].startswith("/World/Crowd")]
+    moving, still = crowd
+    assert len(moving["motion"]) == KEYS and "motion" not in still
+    # Position samples interpolated: x = t at time code t.
+    assert [round(_matrix(k)[3, 0], 9) for k in moving["motion"]] == [
+        round(3.5 + k / (KEYS - 1), 9) for k in range(KEYS)]
+    flier = next(i for i in scene["instances"] if i["name"].startswith("/World/Fliers"))
+    # 24 units a second at 24 time codes a second from the sample at 0: y = t at time code t.
+    assert np.allclose([_matrix(k)[3, 1] for k in flier["motion"]],
+                       [3.5 + k / (KEYS - 1) for k in range(KEYS)], atol=1e-6)
