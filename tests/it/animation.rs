@@ -394,3 +394,35 @@ fn a_moving_emitter_is_named_in_a_warning() {
         "{stderr}"
     );
 }
+
+/// A node scaled to nothing while the shutter is open cannot be interpolated (its keys do
+/// not decompose): its mesh keeps the frame's transform, unblurred, with a warning naming
+/// the mesh's node.
+#[test]
+fn a_node_that_vanishes_during_the_shutter_is_not_blurred() {
+    let mut b = animated_scene([0.0, 1.0]);
+    let input = b.floats("SCALAR", &[0.0, 1.0]);
+    let scales = b.floats("VEC3", &[1.0, 1.0, 1.0, 0.0, 0.0, 0.0]);
+    b.json["animations"][0]["samplers"][2] =
+        json!({"input": input, "output": scales, "interpolation": "LINEAR"});
+    let scene = lucerna::ingest::gltf::import_with(
+        &b.glb(),
+        "vanishing.glb",
+        None,
+        Some(0.9),
+        lucerna::ingest::gltf::Choices {
+            shutter: Some((0.8, 1.0)),
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    assert!(scene.instances[0].motion.is_empty());
+    assert!(
+        scene
+            .warnings
+            .iter()
+            .any(|w| w.contains("nodes[0]") && w.contains("singular during the shutter")),
+        "{:?}",
+        scene.warnings
+    );
+}

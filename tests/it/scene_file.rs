@@ -377,6 +377,46 @@ fn malformed_scene_files_are_rejected_with_the_element() {
             }),
             "materials[0].transmission_texture",
         ),
+        // Motion keys (the time samples of moving things): 2 to 64 keys that decompose,
+        // and a shutter that opens before it closes.
+        (
+            "motion-one-key",
+            Box::new(|m, _| {
+                m["instances"][0]["motion"] = json!([m["instances"][0]["transform"].clone()])
+            }),
+            "instances[0].motion",
+        ),
+        (
+            "motion-too-many-keys",
+            Box::new(|m, _| {
+                m["instances"][0]["motion"] =
+                    json!(vec![m["instances"][0]["transform"].clone(); 65])
+            }),
+            "instances[0].motion",
+        ),
+        (
+            "motion-singular-key",
+            Box::new(|m, _| {
+                let key = m["instances"][0]["transform"].clone();
+                m["instances"][0]["motion"] = json!([key, vec![0.0; 16]])
+            }),
+            "instances[0].motion",
+        ),
+        (
+            "camera-motion-singular",
+            Box::new(|m, _| m["cameras"][0]["motion"] = json!([vec![0.0; 16], vec![0.0; 16]])),
+            "cameras[0].motion",
+        ),
+        (
+            "shutter-backwards",
+            Box::new(|m, _| m["shutter"] = json!({"open": 0.5, "close": -0.5})),
+            "shutter",
+        ),
+        (
+            "shutter-huge",
+            Box::new(|m, _| m["shutter"] = json!({"open": -1e30, "close": 1e30})),
+            "shutter",
+        ),
     ];
     for (name, corrupt, element) in cases {
         let error = error_after(name, corrupt);
