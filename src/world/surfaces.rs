@@ -478,12 +478,11 @@ impl Surfaces {
         let mut placed = &self.placements[hit.instance as usize];
         let moved;
         if placed.motion != crate::geometry::instances::STILL {
-            let m = self.motions[placed.motion as usize].at(time);
+            // The transform traversal entered the placement with.
+            let m = self.motions[placed.motion as usize].affine_at(time);
             moved = PlacedMesh {
-                to_render: Affine3A::from_mat4(m.as_mat4()),
-                normal_matrix: Mat3A::from(
-                    glam::DMat3::from_mat4(m).inverse().transpose().as_mat3(),
-                ),
+                to_render: m,
+                normal_matrix: m.matrix3.inverse().transpose(),
                 ..*placed
             };
             placed = &moved;
