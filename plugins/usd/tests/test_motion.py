@@ -126,3 +126,32 @@ def test_point_instancers_move_by_position_samples_and_velocities(stage_file, co
     # 24 units a second at 24 time codes a second from the sample at 0: y = t at time code t.
     assert np.allclose([_matrix(k)[3, 1] for k in flier["motion"]],
                        [3.5 + k / (KEYS - 1) for k in range(KEYS)], atol=1e-6)
+
+
+def test_lucerna_renders_the_stage_blurred_with_its_vectors(stage_file, tmp_path):
+    """End to end: `lucerna render` of a stage whose camera's shutter is open blurs the
+    moving blade and writes its motion (the rig's 1 unit a frame to the right: u > 0); with
+    --shutter 0,0 nothing moves."""
+    import subprocess
+
+    import OpenImageIO as oiio
+
+    from conftest import lucerna_bin
+
+    text = STAGE.replace("double3 xformOp:translate.timeSamples = { 0: (0, 1, 5), 10: (0, 1, 15) }",
+                         "double3 xformOp:translate = (4.5, 0.5, 4)")
+    path = stage_file(text, name="shot.usda")
+
+    def render(name, *flags):
+        out = tmp_path / name
+        subprocess.run([lucerna_bin(), "render", str(path), "--frame", "4", "--resolution", "64x48",
+                        "--spp", "8", "--env", "0.2,0.2,0.2", "--aov", "motion", "-q", "-o", str(out),
+                        *flags], check=True, capture_output=True)
+        image = oiio.ImageBuf(str(out))
+        names = list(image.spec().channelnames)
+        return image.get_pixels(oiio.FLOAT)[:, :, names.index("motion.u")]
+
+    blurred = render("blurred.exr")
+    assert blurred.max() > 1.0, blurred.max()
+    closed = render("closed.exr", "--shutter", "0,0")
+    assert np.all(closed == 0.0)
