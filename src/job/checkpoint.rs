@@ -21,11 +21,12 @@ pub(super) struct Resumed {
 }
 
 /// Reads the render to continue from `path`, checking that it is this render's (same
-/// scene, settings, AOVs, window and pass); `None` if there is no file yet.
+/// scene, shutter, settings, AOVs, window and pass); `None` if there is no file yet.
 pub(super) fn read_checkpoint(
     path: &Path,
     source: &str,
     identity: Option<&(String, String)>,
+    shutter: Option<&str>,
     options: &RenderOptions,
 ) -> Result<Option<Resumed>> {
     if !path.exists() {
@@ -74,6 +75,18 @@ pub(super) fn read_checkpoint(
             format!(
                 "a render of {:?}, not of {source:?}",
                 header.text("lucerna/scene").unwrap_or("an unknown scene")
+            ),
+        ));
+    }
+    // The same instants: another shutter (or blur) is another image.
+    if header.text("lucerna/shutter") != shutter {
+        let describe = |s: Option<&str>| s.map_or_else(|| "closed".to_string(), str::to_string);
+        return Err(bad(
+            "lucerna/shutter",
+            format!(
+                "it was rendered with the shutter {}, this render's is {}: it cannot be continued",
+                describe(header.text("lucerna/shutter")),
+                describe(shutter)
             ),
         ));
     }

@@ -79,6 +79,9 @@ impl HeaderFacts<'_> {
         if let Some(f) = self.frame {
             header.set("lucerna/frame", Attribute::Double(f));
         }
+        if let Some(shutter) = world.shutter {
+            header.set("lucerna/shutter", Attribute::Text(shutter.describe()));
+        }
         if let Some(split) = stats.learned_split {
             header.set("lucerna/split_learned", Attribute::Text(split.describe()));
         }

@@ -179,7 +179,14 @@ pub(super) fn prepare(
     exr::check_names(film.channel_names(&[Aov::Spp]).iter().map(|n| n.as_str()))
         .map_err(|reason| Error::bad_input(&source, "light groups", reason))?;
     let resumed = if job.resume {
-        read_checkpoint(output, &source, identity.as_ref(), options)?
+        let shutter = world.shutter.map(|s| s.describe());
+        read_checkpoint(
+            output,
+            &source,
+            identity.as_ref(),
+            shutter.as_deref(),
+            options,
+        )?
     } else {
         None
     };

@@ -137,6 +137,15 @@ fn check(parts: &[Part]) -> Result<()> {
                 format!("a render of another scene than {}", first.path.display()),
             ));
         }
+        if part.header.text("lucerna/shutter") != first.header.text("lucerna/shutter") {
+            return Err(bad(
+                "lucerna/shutter",
+                format!(
+                    "rendered with another shutter than {}",
+                    first.path.display()
+                ),
+            ));
+        }
         let other = shared_settings(&part.header);
         if let Some(key) = settings
             .keys()

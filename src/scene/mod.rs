@@ -79,6 +79,13 @@ impl Shutter {
         self.close - self.open
     }
 
+    /// The shutter as the EXR header records it (`lucerna/shutter`): `OPEN,CLOSE` in frames,
+    /// followed by ` without blur` where the image is the frame's instant.
+    pub fn describe(&self) -> String {
+        let blur = if self.blur { "" } else { " without blur" };
+        format!("{},{}{blur}", self.open, self.close)
+    }
+
     /// Where the frame lies in the shutter, as a shutter time (0 at its opening, 1 at its
     /// closing; outside that range for a shutter that does not contain the frame).
     pub fn frame_time(&self) -> f64 {

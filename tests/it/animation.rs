@@ -426,3 +426,57 @@ fn a_node_that_vanishes_during_the_shutter_is_not_blurred() {
         scene.warnings
     );
 }
+
+/// A render is continued (`--resume`) only with the shutter it was made with: the header
+/// records it (`lucerna/shutter`), and another shutter, or none, is refused naming it.
+#[test]
+fn a_render_resumes_only_with_its_shutter() {
+    let dir = temp_dir("resume-shutter");
+    let scene = animated_scene([0.0, 1.0]).write_glb(&dir, "slide");
+    let out = dir.join("out.exr");
+    let render = |spp: &str, shutter: &[&str], resume: bool| {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_lucerna"));
+        cmd.args([
+            "render",
+            "-q",
+            "--resolution",
+            "16x8",
+            "--frame",
+            "12",
+            "--aov",
+            "spp",
+        ])
+        .args(["--spp", spp])
+        .args(shutter)
+        .arg("-o")
+        .arg(&out)
+        .arg(&scene);
+        if resume {
+            cmd.arg("--resume");
+        }
+        cmd.output().unwrap()
+    };
+    assert!(
+        render("2", &["--shutter", "-0.5,0.5"], false)
+            .status
+            .success()
+    );
+    let (_, header) = lucerna::output::exr::read(&out).unwrap();
+    assert_eq!(header.text("lucerna/shutter"), Some("-0.5,0.5"));
+    for other in [
+        &["--shutter", "0,0.5"][..],
+        &[],
+        &["--shutter", "-0.5,0.5", "--no-motion-blur"],
+    ] {
+        let refused = render("4", other, true);
+        assert_eq!(refused.status.code(), Some(2), "{other:?}");
+        let stderr = String::from_utf8_lossy(&refused.stderr);
+        assert!(stderr.contains("lucerna/shutter"), "{other:?}: {stderr}");
+    }
+    let resumed = render("4", &["--shutter", "-0.5,0.5"], true);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+}
