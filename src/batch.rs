@@ -300,7 +300,8 @@ enum OutputState {
 }
 
 /// Reads the output of `task` back whole (header and every pixel) and compares how it was
-/// made with what the job asks: settings, scene file (by content), frame and resolution.
+/// made with what the job asks: settings, shutter, scene file (by content), frame and
+/// resolution.
 fn output_state(task: &Task) -> OutputState {
     let path = &task.output;
     if !path.exists() {
@@ -319,6 +320,21 @@ fn output_state(task: &Task) -> OutputState {
             .is_err()
     {
         return OutputState::Stale("its settings cannot be read".into());
+    }
+    // A shutter the job names must be the one the output was made with (a stage's own
+    // shutter, which only the stage knows, is not checked here).
+    if let Some((open, close)) = asked.load.shutter {
+        let wanted = (close > open).then(|| {
+            crate::scene::Shutter {
+                open,
+                close,
+                blur: asked.load.motion_blur,
+            }
+            .describe()
+        });
+        if header.text("lucerna/shutter") != wanted.as_deref() {
+            return OutputState::Stale("it was rendered with another shutter".into());
+        }
     }
     let job = asked.options;
     let complete = header.number("lucerna/complete") == Some(1.0);

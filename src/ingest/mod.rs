@@ -93,6 +93,12 @@ impl Default for LoadOptions {
 /// Loads a scene file, choosing the importer by extension.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     let mut scene = load_format(path, options)?;
+    set_shutter(&mut scene, options);
+    Ok(scene)
+}
+
+/// The shutter of `options` (where it is open) as the scene's, and its blur.
+fn set_shutter(scene: &mut Scene, options: &LoadOptions) {
     if let Some((open, close)) = options.shutter.filter(|(open, close)| close > open) {
         scene.shutter = Some(scene::Shutter {
             open,
@@ -103,7 +109,6 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     if let Some(shutter) = &mut scene.shutter {
         shutter.blur &= options.motion_blur;
     }
-    Ok(scene)
 }
 
 /// [`load`] by the file's format.
@@ -154,7 +159,11 @@ fn load_format(path: &Path, options: &LoadOptions) -> Result<Scene> {
 pub fn load_scene(path: Option<&Path>, options: &LoadOptions) -> Result<Scene> {
     let scene = match path {
         Some(p) => load(p, options)?,
-        None => default_scene()?,
+        None => {
+            let mut scene = default_scene()?;
+            set_shutter(&mut scene, options);
+            scene
+        }
     };
     for w in &scene.warnings {
         log::warn!("{w}");

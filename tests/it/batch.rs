@@ -121,3 +121,46 @@ fn malformed_jobs_are_refused_before_rendering() {
     }
     assert!(!dir.join("a.exr").exists());
 }
+
+/// A rerun after the job's shutter changed renders the frame again (the scene file is the
+/// same); with the shutter unchanged it is skipped.
+#[test]
+fn a_changed_shutter_renders_again() {
+    let dir = temp_dir("batch-shutter");
+    let job = dir.join("job.toml");
+    let write = |shutter: &str| {
+        std::fs::write(
+            &job,
+            format!(
+                "[settings]\nspp = 2\nshutter = \"{shutter}\"\n\n[[render]]\noutput = \"out/still.exr\"\nresolution = \"8x8\"\n"
+            ),
+        )
+        .unwrap()
+    };
+    let statuses = || {
+        let run = batch(&job);
+        assert_eq!(
+            run.status.code(),
+            Some(0),
+            "{}",
+            String::from_utf8_lossy(&run.stderr)
+        );
+        summary(&dir)["frames"][0]["status"]
+            .as_str()
+            .unwrap()
+            .to_string()
+    };
+    write("-0.5,0.5");
+    assert_eq!(statuses(), "rendered");
+    assert_eq!(statuses(), "skipped");
+    write("-0.25,0.25");
+    assert_eq!(statuses(), "rendered");
+    let summary = summary(&dir);
+    assert!(
+        summary["frames"][0]["note"]
+            .as_str()
+            .unwrap_or_default()
+            .contains("shutter"),
+        "{summary}"
+    );
+}
