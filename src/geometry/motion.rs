@@ -286,6 +286,21 @@ mod tests {
         a.abs_diff_eq(b, tolerance)
     }
 
+    /// `n` keys of random scale (0.5 to 1.5 per axis), rotation (Euler angles up to `turn`)
+    /// and translation (within `reach` of the origin per axis).
+    fn random_keys(rng: &mut Pcg32, n: usize, turn: f64, reach: f64) -> Vec<DMat4> {
+        let mut u = || rng.next_f32() as f64;
+        (0..n)
+            .map(|_| {
+                DMat4::from_scale_rotation_translation(
+                    DVec3::new(0.5 + u(), 0.5 + u(), 0.5 + u()),
+                    DQuat::from_euler(glam::EulerRot::XYZ, turn * u(), turn * u(), turn * u()),
+                    (DVec3::new(u(), u(), u()) * 2.0 - 1.0) * reach,
+                )
+            })
+            .collect()
+    }
+
     /// The keys come back at their times, sheared and mirrored ones too.
     #[test]
     fn keys_are_reproduced() {
@@ -327,16 +342,7 @@ mod tests {
     fn bounds_hold_the_swept_box() {
         let mut rng = Pcg32::new(7, 1);
         for case in 0..20 {
-            let mut u = || rng.next_f32() as f64;
-            let keys: Vec<DMat4> = (0..2 + case % 3)
-                .map(|_| {
-                    DMat4::from_scale_rotation_translation(
-                        DVec3::new(0.5 + u(), 0.5 + u(), 0.5 + u()),
-                        DQuat::from_euler(glam::EulerRot::XYZ, 3.0 * u(), 3.0 * u(), 3.0 * u()),
-                        DVec3::new(u(), u(), u()) * 2.0 - 1.0,
-                    )
-                })
-                .collect();
+            let keys = random_keys(&mut rng, 2 + case % 3, 3.0, 1.0);
             let motion = MotionTransform::new(&keys).unwrap();
             let (lo, hi) = (Vec3::new(-1.0, -0.5, 0.0), Vec3::new(1.0, 0.5, 2.0));
             let (blo, bhi) = motion.bounds(lo, hi);
@@ -359,17 +365,8 @@ mod tests {
     fn single_precision_follows_double() {
         let mut rng = Pcg32::new(5, 2);
         for case in 0..40 {
-            let mut u = || rng.next_f32() as f64;
             let turn = if case % 2 == 0 { 3.0 } else { 1e-5 };
-            let keys: Vec<DMat4> = (0..3)
-                .map(|_| {
-                    DMat4::from_scale_rotation_translation(
-                        DVec3::new(0.5 + u(), 0.5 + u(), 0.5 + u()),
-                        DQuat::from_euler(glam::EulerRot::XYZ, turn * u(), turn * u(), turn * u()),
-                        DVec3::new(u(), u(), u()) * 4.0 - 2.0,
-                    )
-                })
-                .collect();
+            let keys = random_keys(&mut rng, 3, turn, 2.0);
             let motion = MotionTransform::new(&keys).unwrap();
             for k in 0..=16 {
                 let t = k as f32 / 16.0;

@@ -61,6 +61,24 @@ fn scene_at(b: &Builder, time: Option<f64>) -> lucerna::Result<lucerna::scene::S
     lucerna::ingest::gltf::import_at(&b.glb(), "animated.glb", None, time)
 }
 
+/// [`scene_at`] `time` with the shutter open from `shutter.0` to `shutter.1` seconds.
+fn with_shutter(
+    b: &Builder,
+    time: f64,
+    shutter: Option<(f64, f64)>,
+) -> lucerna::Result<lucerna::scene::Scene> {
+    lucerna::ingest::gltf::import_with(
+        &b.glb(),
+        "animated.glb",
+        None,
+        Some(time),
+        lucerna::ingest::gltf::Choices {
+            shutter,
+            ..Default::default()
+        },
+    )
+}
+
 /// The quad's placement follows each channel's interpolation, through the hierarchy.
 #[test]
 fn channels_pose_the_nodes_at_the_frame_time() {
@@ -257,19 +275,7 @@ fn an_open_shutter_samples_the_motion() {
     let prim = b.quad_primitive(None);
     let still = b.mesh(json!([prim]));
     b.root(json!({"name": "still", "mesh": still}));
-    let import = |shutter: Option<(f64, f64)>| {
-        lucerna::ingest::gltf::import_with(
-            &b.glb(),
-            "animated.glb",
-            None,
-            Some(0.3),
-            lucerna::ingest::gltf::Choices {
-                shutter,
-                ..Default::default()
-            },
-        )
-        .unwrap()
-    };
+    let import = |shutter| with_shutter(&b, 0.3, shutter).unwrap();
     let scene = import(Some((0.2, 0.4)));
     let moving = &scene.instances[0];
     assert_eq!(moving.motion.len(), 9);
@@ -405,17 +411,7 @@ fn a_node_that_vanishes_during_the_shutter_is_not_blurred() {
     let scales = b.floats("VEC3", &[1.0, 1.0, 1.0, 0.0, 0.0, 0.0]);
     b.json["animations"][0]["samplers"][2] =
         json!({"input": input, "output": scales, "interpolation": "LINEAR"});
-    let scene = lucerna::ingest::gltf::import_with(
-        &b.glb(),
-        "vanishing.glb",
-        None,
-        Some(0.9),
-        lucerna::ingest::gltf::Choices {
-            shutter: Some((0.8, 1.0)),
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let scene = with_shutter(&b, 0.9, Some((0.8, 1.0))).unwrap();
     assert!(scene.instances[0].motion.is_empty());
     assert!(
         scene

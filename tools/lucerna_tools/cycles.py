@@ -3,7 +3,8 @@ tools/compare/cycles share. A comparison writes the part of a Blender script tha
 its scene; `render` runs it between a common beginning (Cycles on the CPU, fixed samples and
 seed, no adaptive sampling, denoiser or clamping, bounce limits of 1024, a 1-pixel box
 filter unless `box_filter` is false, the Standard view, a linear 32-bit EXR, a uniform world
-of radiance `sky`; helpers `material`, `grey_floor`, `camera`) and the render call, with
+of radiance `sky`; helpers `material`, `grey_floor`, `blender` (glTF's Y up to Blender's Z
+up), `sun`, `camera`) and the render call, with
 the job's values in `job`. `figures` compares two seeds of each renderer."""
 
 import json
@@ -66,6 +67,25 @@ def grey_floor(half, height, albedo):
     diffuse.inputs["Color"].default_value = (albedo,) * 3 + (1,)
     grey.node_tree.links.new(diffuse.outputs[0], out.inputs["Surface"])
     floor.data.materials.append(grey)
+
+
+def blender(p):
+    """A glTF point or direction (Y up) in Blender's Z-up coordinates."""
+    return (p[0], -p[2], p[1])
+
+
+def sun(direction, irradiance):
+    """A sun (no angle) shining along glTF `direction` with `irradiance`, which is Cycles'
+    sun strength, as a glTF directional light of that many lux."""
+    from mathutils import Vector
+
+    data = bpy.data.lights.new("sun", "SUN")
+    data.energy = irradiance
+    data.angle = 0.0
+    obj = bpy.data.objects.new("sun", data)
+    obj.rotation_mode = "QUATERNION"
+    obj.rotation_quaternion = Vector(blender(direction)).to_track_quat("-Z", "Y")
+    scene.collection.objects.link(obj)
 
 
 def camera(position, vfov, near=None):

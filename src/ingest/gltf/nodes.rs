@@ -371,40 +371,36 @@ impl<'a> Importer<'a> {
             .into_iter()
             .zip(camera_keys)
         {
-            if crate::geometry::motion::keys_move(&keys) {
-                if crate::geometry::motion::MotionTransform::new(&keys).is_none() {
-                    self.warn(
-                        format!("nodes[{node}]"),
-                        "the camera's transform is singular during the shutter; it does not move",
-                    );
-                    continue;
-                }
-                self.scene.cameras[camera].motion = keys;
-            }
+            self.scene.cameras[camera].motion = self.motion_of(node, keys)?;
         }
         for ((instance, node, _), keys) in std::mem::take(&mut self.placed).into_iter().zip(keys) {
-            if !keys.iter().all(DMat4::is_finite) {
-                return Err(self.err(
-                    format!("nodes[{node}]"),
-                    "the transform over the shutter is not finite",
-                ));
-            }
-            if crate::geometry::motion::keys_move(&keys) {
-                if crate::geometry::motion::MotionTransform::new(&keys).is_none() {
-                    self.warn(
-                        format!("nodes[{node}]"),
-                        "its transform is singular during the shutter; it is not blurred",
-                    );
-                    continue;
-                }
-                self.scene.instances[instance].motion = keys;
-            }
+            self.scene.instances[instance].motion = self.motion_of(node, keys)?;
         }
         Ok(())
     }
 
-    /// Selects KHR_materials_variants variant `name`; without one, a file with variants gets
-    /// a warning naming them.
+    /// The motion of what node `node` places, from its transforms `keys` over the shutter:
+    /// none where they do not change, or (with a warning) where they cannot be interpolated
+    /// (a scale of zero); an error where they are not finite.
+    fn motion_of(&mut self, node: usize, keys: Vec<DMat4>) -> Result<Vec<DMat4>> {
+        use crate::geometry::motion::{MotionTransform, keys_move};
+        let element = format!("nodes[{node}]");
+        if !keys.iter().all(DMat4::is_finite) {
+            return Err(self.err(element, "the transform over the shutter is not finite"));
+        }
+        if !keys_move(&keys) {
+            return Ok(Vec::new());
+        }
+        if MotionTransform::new(&keys).is_none() {
+            self.warn(
+                element,
+                "its transform is singular during the shutter; it is not blurred",
+            );
+            return Ok(Vec::new());
+        }
+        Ok(keys)
+    }
+
     /// Chooses the animation that plays, by name or index; an unknown one is refused with
     /// the file's animations listed.
     pub(super) fn select_animation(&mut self, wanted: Option<&str>) -> Result<()> {

@@ -47,9 +47,6 @@ VFOV = 0.6  # radians
 CAMERA = (0.0, 0.8, 5.0)  # glTF (Y up), looking down -Z
 
 SCENE_SCRIPT = r'''
-from mathutils import Vector
-
-
 def translucent(name, base, share, colour):
     m, out = material(name)
     nodes, links = m.node_tree.nodes, m.node_tree.links
@@ -65,11 +62,6 @@ def translucent(name, base, share, colour):
     return m
 
 
-def blender(p):
-    """A glTF point (Y up) in Blender's Z-up coordinates."""
-    return (p[0], -p[2], p[1])
-
-
 (x0, x1), (y0, y1), z = job["panel"]["x"], job["panel"]["y"], job["panel"]["z"]
 corners = [blender(p) for p in [(x0, y0, z), (x1, y0, z), (x1, y1, z), (x0, y1, z)]]
 mesh = bpy.data.meshes.new("panel")
@@ -83,13 +75,7 @@ shade = bpy.context.active_object
 bpy.ops.object.shade_smooth()
 shade.data.materials.append(translucent("shade", job["shade_base"], job["shade_share"], job["shade_colour"]))
 grey_floor(20.0, 0.0, job["floor"])
-sun_data = bpy.data.lights.new("sun", "SUN")
-sun_data.energy = job["sun"]
-sun_data.angle = 0.0
-sun = bpy.data.objects.new("sun", sun_data)
-sun.rotation_mode = "QUATERNION"
-sun.rotation_quaternion = Vector(blender(job["sun_direction"])).to_track_quat("-Z", "Y")
-scene.collection.objects.link(sun)
+sun(job["sun_direction"], job["sun"])
 camera(job["camera"], job["vfov"])
 '''
 

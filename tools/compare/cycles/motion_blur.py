@@ -51,17 +51,11 @@ CAMERA = (0.0, 0.8, 4.5)
 
 SCENE_SCRIPT = r'''
 from bpy_extras import anim_utils
-from mathutils import Vector
 
 scene.render.fps = job["fps"]
 scene.render.use_motion_blur = True
 scene.render.motion_blur_shutter = job["shutter"][1] - job["shutter"][0]
 scene.render.motion_blur_position = "CENTER"
-
-
-def blender(p):
-    """A glTF point (Y up) in Blender's Z-up coordinates."""
-    return (p[0], -p[2], p[1])
 
 
 def coloured_box(name, lo, hi, colour):
@@ -99,13 +93,7 @@ for obj in (slider, blade):
         for key in curve.keyframe_points:
             key.interpolation = "LINEAR"
 grey_floor(20.0, 0.0, job["floor"])
-sun_data = bpy.data.lights.new("sun", "SUN")
-sun_data.energy = job["sun"]
-sun_data.angle = 0.0
-sun = bpy.data.objects.new("sun", sun_data)
-sun.rotation_mode = "QUATERNION"
-sun.rotation_quaternion = Vector(blender(job["sun_direction"])).to_track_quat("-Z", "Y")
-scene.collection.objects.link(sun)
+sun(job["sun_direction"], job["sun"])
 camera(job["camera"], job["vfov"])
 scene.frame_set(job["frame"])
 '''
