@@ -476,3 +476,27 @@ fn a_render_resumes_only_with_its_shutter() {
         String::from_utf8_lossy(&resumed.stderr)
     );
 }
+
+/// A light that moves while the shutter is open stays where it is at the frame, with a
+/// warning naming its node (lights do not move yet); a still one is not warned about.
+#[test]
+fn a_moving_light_is_named_in_a_warning() {
+    let mut b = animated_scene([0.0, 1.0]);
+    b.json["extensionsUsed"] = json!(["KHR_lights_punctual"]);
+    b.json["extensions"] =
+        json!({"KHR_lights_punctual": {"lights": [{"type": "point", "intensity": 10.0}]}});
+    let lamp = b.node(json!({"extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    b.json["nodes"][1]["children"]
+        .as_array_mut()
+        .unwrap()
+        .push(json!(lamp));
+    b.root(json!({"name": "fixed", "extensions": {"KHR_lights_punctual": {"light": 0}}}));
+    let scene = with_shutter(&b, 0.3, Some((0.2, 0.4))).unwrap();
+    let warned: Vec<&String> = scene
+        .warnings
+        .iter()
+        .filter(|w| w.contains("the light moves while the shutter is open"))
+        .collect();
+    assert_eq!(warned.len(), 1, "{:?}", scene.warnings);
+    assert!(warned[0].contains(&format!("nodes[{lamp}]")), "{warned:?}");
+}

@@ -112,6 +112,7 @@ pub fn import_with(
         shutter: choices.shutter.filter(|(open, close)| close > open),
         placed: Vec::new(),
         placed_cameras: Vec::new(),
+        unblurred: Vec::new(),
         unsupported_material_extensions: Default::default(),
         texture_plan: Default::default(),
     };
@@ -159,6 +160,9 @@ pub(crate) struct Importer<'a> {
     placed: Vec<(usize, usize, DMat4)>,
     /// With a shutter, each camera: its index in the scene and its node.
     placed_cameras: Vec<(usize, usize)>,
+    /// With a shutter, the nodes of lights and analytic spheres (which do not move), and
+    /// what they are, for a warning where they would.
+    unblurred: Vec<(usize, &'static str)>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
     /// Which images are read through a tile cache (the textures do not fit in the texture

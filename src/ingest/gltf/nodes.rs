@@ -282,6 +282,9 @@ impl<'a> Importer<'a> {
                 self.skinned.push((node.index(), name.clone()));
             } else if self.is_sphere(&mesh)? {
                 self.sphere(&mesh, world, &name)?;
+                if self.shutter.is_some() {
+                    self.unblurred.push((node.index(), "the sphere"));
+                }
             } else {
                 let locals = self.instance_transforms(&node, DMat4::IDENTITY)?;
                 for primitive in mesh.primitives() {
@@ -317,6 +320,9 @@ impl<'a> Importer<'a> {
         }
         if let Some(light) = node.light() {
             self.light(&light, world, &name)?;
+            if self.shutter.is_some() {
+                self.unblurred.push((node.index(), "the light"));
+            }
         }
         path.push(node.index());
         for child in node.children() {
@@ -326,16 +332,17 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
-    /// Gives each instance that moves while the shutter (`open`, `close`, seconds) is open
-    /// its transforms at [`MOTION_KEYS`] evenly spaced times of it: the animations sampled
-    /// there, the node hierarchy composed again. Skinned and morphed shapes keep the
-    /// frame's (deformation is not blurred); the frame's pose is restored after.
+    /// Gives each instance and camera that moves while the shutter (`open`, `close`,
+    /// seconds) is open its transforms at [`MOTION_KEYS`] evenly spaced times of it: the
+    /// animations sampled there, the node hierarchy composed again. Skinned and morphed
+    /// shapes keep the frame's (deformation is not blurred), and so do lights and analytic
+    /// spheres, with a warning where they move; the frame's pose is restored after.
     pub(super) fn sample_motion(
         &mut self,
         scene: gltf::Scene<'a>,
         (open, close): (f64, f64),
     ) -> Result<()> {
-        if self.placed.is_empty() && self.placed_cameras.is_empty() {
+        if self.placed.is_empty() && self.placed_cameras.is_empty() && self.unblurred.is_empty() {
             return Ok(());
         }
         // Sampling again would repeat the frame's warnings about clips.
@@ -346,6 +353,7 @@ impl<'a> Importer<'a> {
         );
         let mut keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed.len()];
         let mut camera_keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed_cameras.len()];
+        let mut unblurred_keys = vec![Vec::with_capacity(MOTION_KEYS); self.unblurred.len()];
         for k in 0..MOTION_KEYS {
             let time = open + (close - open) * k as f64 / (MOTION_KEYS - 1) as f64;
             self.pose.clear();
@@ -364,6 +372,9 @@ impl<'a> Importer<'a> {
             for (&(_, node), keys) in self.placed_cameras.iter().zip(&mut camera_keys) {
                 keys.push(world[&node]);
             }
+            for (&(node, _), keys) in self.unblurred.iter().zip(&mut unblurred_keys) {
+                keys.push(world[&node]);
+            }
         }
         self.scene.warnings.truncate(warnings);
         (self.pose, self.morph_weights) = (pose, weights);
@@ -375,6 +386,17 @@ impl<'a> Importer<'a> {
         }
         for ((instance, node, _), keys) in std::mem::take(&mut self.placed).into_iter().zip(keys) {
             self.scene.instances[instance].motion = self.motion_of(node, keys)?;
+        }
+        for ((node, what), keys) in std::mem::take(&mut self.unblurred)
+            .into_iter()
+            .zip(unblurred_keys)
+        {
+            if crate::geometry::motion::keys_move(&keys) {
+                self.warn(
+                    format!("nodes[{node}]"),
+                    format!("{what} moves while the shutter is open: lights and analytic spheres are not blurred, it stays where it is at the frame"),
+                );
+            }
         }
         Ok(())
     }
