@@ -45,6 +45,9 @@ pub struct LoadOptions {
     /// Blur over the open shutter (else the frame's instant is rendered and the motion
     /// over the shutter serves the motion and velocity layers alone).
     pub motion_blur: bool,
+    /// The motion or velocity layer is asked for: where the shutter is closed, what moves
+    /// gets its motion over [`VECTOR_INTERVAL`] anyway, without blur.
+    pub vectors: bool,
     /// Run usd-core's validators (USD stages); their findings are warnings...
     pub validate: bool,
     /// ...unless strict: then an error refuses the stage.
@@ -66,6 +69,11 @@ pub struct LoadOptions {
     pub plugin_timeout: std::time::Duration,
 }
 
+/// The interval (frames around the frame) over which motion is taken for the motion and
+/// velocity layers where the shutter is closed: Cycles' vector pass likewise looks half a
+/// frame each way.
+pub const VECTOR_INTERVAL: (f64, f64) = (-0.5, 0.5);
+
 /// Default of [`LoadOptions::plugin_timeout`]: generous for the largest stages, finite for
 /// a plugin that hangs.
 pub const DEFAULT_PLUGIN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(1800);
@@ -77,6 +85,7 @@ impl Default for LoadOptions {
             fps: DEFAULT_FPS,
             shutter: None,
             motion_blur: true,
+            vectors: false,
             validate: true,
             strict: false,
             variants: Vec::new(),
@@ -97,7 +106,8 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     Ok(scene)
 }
 
-/// The shutter of `options` (where it is open) as the scene's, and its blur.
+/// The shutter of `options` (where it is open) as the scene's, and its blur; for the
+/// motion layers, [`VECTOR_INTERVAL`] without blur where there is none.
 fn set_shutter(scene: &mut Scene, options: &LoadOptions) {
     if let Some((open, close)) = options.shutter.filter(|(open, close)| close > open) {
         scene.shutter = Some(scene::Shutter {
@@ -108,7 +118,23 @@ fn set_shutter(scene: &mut Scene, options: &LoadOptions) {
     }
     if let Some(shutter) = &mut scene.shutter {
         shutter.blur &= options.motion_blur;
+    } else if options.vectors {
+        let (open, close) = VECTOR_INTERVAL;
+        scene.shutter = Some(scene::Shutter {
+            open,
+            close,
+            blur: false,
+        });
     }
+}
+
+/// The shutter the glTF importer samples motion over, frames relative to the frame: the
+/// open one asked for, else [`VECTOR_INTERVAL`] for the motion layers.
+fn motion_interval(options: &LoadOptions) -> Option<(f64, f64)> {
+    options
+        .shutter
+        .filter(|(open, close)| close > open)
+        .or(options.vectors.then_some(VECTOR_INTERVAL))
 }
 
 /// [`load`] by the file's format.
@@ -124,12 +150,12 @@ fn load_format(path: &Path, options: &LoadOptions) -> Result<Scene> {
             // An open shutter opens around frame 0 where no frame is given.
             options
                 .frame
-                .or(options.shutter.map(|_| 0.0))
+                .or(motion_interval(options).map(|_| 0.0))
                 .map(|f| f / options.fps),
             gltf::Choices {
                 material_variant: options.material_variant.as_deref(),
                 animation: options.animation.as_deref(),
-                shutter: options.shutter.map(|(open, close)| {
+                shutter: motion_interval(options).map(|(open, close)| {
                     let frame = options.frame.unwrap_or(0.0);
                     ((frame + open) / options.fps, (frame + close) / options.fps)
                 }),

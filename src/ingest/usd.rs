@@ -4,10 +4,9 @@
 //!
 //! The plugin runs as `PYTHON -m lucerna_usd convert STAGE -o TMP.lucerna [--frame F]
 //! [--no-validate | --strict] [--variant SET=NAME]... [--purpose LIST] [--no-payloads]
-//! [--render-settings PRIM] [--shutter OPEN,CLOSE] [--max-memory BYTES]` with the plugin
-//! folder on `PYTHONPATH`
-//! (before any `PYTHONPATH` already set). The plugin is embedded in the binary; PYTHON and
-//! the plugin folder are found as src/install.rs says.
+//! [--render-settings PRIM] [--shutter OPEN,CLOSE] [--vectors] [--max-memory BYTES]` with the
+//! plugin folder on `PYTHONPATH` (before any `PYTHONPATH` already set). The plugin is
+//! embedded in the binary; PYTHON and the plugin folder are found as src/install.rs says.
 //!
 //! The plugin writes into a scratch folder made by `tempfile` (a unique name, mode 0700)
 //! that is removed afterwards, also when a signal ends lucerna (src/interrupt.rs kills the
@@ -92,6 +91,9 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<Scene> {
     }
     if let Some((open, close)) = options.shutter {
         command.arg(format!("--shutter={open},{close}"));
+    }
+    if options.vectors {
+        command.arg("--vectors");
     }
     if !options.validate {
         command.arg("--no-validate");

@@ -26,8 +26,10 @@ pub(super) fn render_frame(
     several_frames: bool,
     outcome: &mut Outcome,
 ) -> Result<()> {
+    use crate::film::aov::Aov;
     let load = ingest::LoadOptions {
         frame,
+        vectors: options.aovs.contains(Aov::Motion) || options.aovs.contains(Aov::Velocity),
         ..job.load.clone()
     };
     let mut scene = ingest::load_scene(job.scene.as_deref(), &load)?;

@@ -361,6 +361,27 @@ fn shutter_blurs_a_sliding_quad() {
         fastest > 1.0,
         "the quad's motion: at most {fastest} pixels a frame"
     );
+    // Without a shutter, asking for the motion layer takes the motion over half a frame
+    // each way, without blur, and says so in the header.
+    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
+        .args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
+        .args(["--env", "1,1,1", "--frame", "12", "--aov", "motion", "-o"])
+        .arg(dir.join("implicit.exr"))
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let (implicit, header) = lucerna::output::exr::read(&dir.join("implicit.exr")).unwrap();
+    assert_eq!(
+        header.text("lucerna/shutter"),
+        Some("-0.5,0.5 without blur")
+    );
+    assert_eq!(dark_columns(&implicit), sharp);
+    assert_eq!(implicit.channel("motion.u"), vectors.channel("motion.u"));
     let closed = render("closed.exr", Some("0,0"));
     assert_eq!(frame.channel("R").unwrap(), closed.channel("R").unwrap());
     let refused = Command::new(env!("CARGO_BIN_EXE_lucerna"))

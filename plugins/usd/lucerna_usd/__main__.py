@@ -159,13 +159,14 @@ def _validate(stage, path, strict, warnings):
 
 
 def convert(path, output, frame=None, no_validate=False, quiet=False, strict=False,
-            variants=(), purposes=("render",), payloads=True, render_settings=None, shutter=None):
+            variants=(), purposes=("render",), payloads=True, render_settings=None, shutter=None,
+            vectors=False):
     """Converts `path` to the scene file `output`; returns the exit status."""
     from pxr import Tf
 
     try:
         return _convert(path, output, frame, no_validate, quiet, strict, variants, purposes,
-                        payloads, render_settings, shutter)
+                        payloads, render_settings, shutter, vectors)
     except Tf.ErrorException as e:
         # usd-core raises on layers it cannot parse when composition reaches them.
         _error(path, "stage", _tf_reason(e))
@@ -179,7 +180,7 @@ def _tf_reason(error):
 
 
 def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purposes=("render",),
-             payloads=True, render_settings=None, shutter=None):
+             payloads=True, render_settings=None, shutter=None, vectors=False):
     from . import StageError
     from .convert import Converter
 
@@ -218,11 +219,16 @@ def _convert(path, output, frame, no_validate, quiet, strict, variants=(), purpo
             from . import motion
 
             open_close = motion.shutter(stage, render_settings, shutter)
+            blur = open_close is not None
+            if open_close is None and vectors:
+                open_close = motion.VECTOR_INTERVAL
             shutter_times = motion.times(time, open_close)
             converter = Converter(stage, path, time, purposes, shutter_times)
             writer = converter.run()
             if shutter_times:
                 writer.shutter = {"open": open_close[0], "close": open_close[1]}
+                if not blur:
+                    writer.shutter["blur"] = False
             # Frame tokens of product names: the frame rendered, else the stage's start, else 1
             # (husk's default frame).
             number = frame if frame is not None else (
@@ -286,6 +292,9 @@ def main(argv=None):
     c.add_argument("--shutter", metavar="OPEN,CLOSE", type=_shutter,
                    help="the shutter in frames relative to the frame (default: the render "
                         "camera's shutter:open and shutter:close)")
+    c.add_argument("--vectors", action="store_true",
+                   help="the motion layers are asked for: where the shutter is closed, take "
+                        "motion over half a frame each way, without blur")
     c.add_argument("--max-memory", type=int, metavar="BYTES",
                    help="refuse to decode an image that alone needs more (lucerna's --max-memory)")
     v = commands.add_parser("validate", help="print the validators' findings")
@@ -326,7 +335,7 @@ def main(argv=None):
             return EXIT_BAD_INPUT
         return convert(args.stage, args.output, args.frame, args.no_validate, args.quiet,
                        args.strict, args.variant, purposes, not args.no_payloads,
-                       args.render_settings, args.shutter)
+                       args.render_settings, args.shutter, args.vectors)
     except Exception as e:  # a bug of the plugin: one line, the traceback on request
         if os.environ.get("LUCERNA_USD_DEBUG"):
             raise

@@ -19,6 +19,11 @@ from . import render_settings as usd_render
 #: Time codes a moving transform is sampled at over the shutter.
 KEYS = 9
 
+#: Where the shutter is closed and the motion layers are asked for (`--vectors`): the
+#: interval, frames around the frame, that motion is taken over without blur (lucerna's
+#: VECTOR_INTERVAL).
+VECTOR_INTERVAL = (-0.5, 0.5)
+
 
 def parse(text):
     """`OPEN,CLOSE` as two floats (argparse's type)."""

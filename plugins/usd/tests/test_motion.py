@@ -131,7 +131,8 @@ def test_point_instancers_move_by_position_samples_and_velocities(stage_file, co
 def test_lucerna_renders_the_stage_blurred_with_its_vectors(stage_file, tmp_path):
     """End to end: `lucerna render` of a stage whose camera's shutter is open blurs the
     moving blade and writes its motion (the rig's 1 unit a frame to the right: u > 0); with
-    --shutter 0,0 nothing moves."""
+    the shutter closed (--shutter 0,0) the image is sharp and the motion layer still holds
+    the motion, taken over half a frame each way (`--vectors`)."""
     import subprocess
 
     import OpenImageIO as oiio
@@ -149,9 +150,10 @@ def test_lucerna_renders_the_stage_blurred_with_its_vectors(stage_file, tmp_path
                         *flags], check=True, capture_output=True)
         image = oiio.ImageBuf(str(out))
         names = list(image.spec().channelnames)
-        return image.get_pixels(oiio.FLOAT)[:, :, names.index("motion.u")]
+        pixels = image.get_pixels(oiio.FLOAT)
+        return image.spec().getattribute("lucerna/shutter"), pixels[:, :, names.index("motion.u")]
 
-    blurred = render("blurred.exr")
-    assert blurred.max() > 1.0, blurred.max()
-    closed = render("closed.exr", "--shutter", "0,0")
-    assert np.all(closed == 0.0)
+    shutter, blurred_u = render("blurred.exr")
+    assert shutter == "-0.25,0.25" and blurred_u.max() > 1.0, (shutter, blurred_u.max())
+    shutter, sharp_u = render("closed.exr", "--shutter", "0,0")
+    assert shutter == "-0.5,0.5 without blur" and sharp_u.max() > 1.0, (shutter, sharp_u.max())
