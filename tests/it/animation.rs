@@ -305,23 +305,17 @@ fn shutter_blurs_a_sliding_quad() {
     let mut b = animated_scene([0.0, 1.0]);
     b.json["materials"][0] = json!({"pbrMetallicRoughness": {"baseColorFactor": [0, 0, 0, 1]}});
     let scene = b.write_glb(&dir, "slide");
-    let render = |name: &str, shutter: Option<&str>| {
+    // Frame 12 of the scene into `name` with the options `extra`: its pixels and header.
+    let render = |name: &str, extra: &[&str]| {
         let out = dir.join(name);
-        let mut cmd = Command::new(env!("CARGO_BIN_EXE_lucerna"));
-        cmd.args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
-            .args(["--env", "1,1,1", "--frame", "12", "-o"])
-            .arg(&out)
-            .arg(&scene);
-        if let Some(s) = shutter {
-            cmd.args(["--shutter", s]);
-        }
-        let run = cmd.output().unwrap();
-        assert!(
-            run.status.success(),
-            "{}",
-            String::from_utf8_lossy(&run.stderr)
-        );
-        lucerna::output::exr::read(&out).unwrap().0
+        let (out_text, scene_text) = (out.to_str().unwrap(), scene.to_str().unwrap());
+        let mut args = vec!["render", "-q", "--resolution", "64x32", "--spp", "16"];
+        args.extend([
+            "--env", "1,1,1", "--frame", "12", "-o", out_text, scene_text,
+        ]);
+        args.extend(extra);
+        common::cli::lucerna_ok(&args);
+        lucerna::output::exr::read(&out).unwrap()
     };
     let dark_columns = |planes: &lucerna::film::planes::Planes| {
         let r = planes.channel("R").unwrap();
@@ -330,8 +324,8 @@ fn shutter_blurs_a_sliding_quad() {
             .filter(|&x| r.iter().skip(x).step_by(w).any(|&v| v < 0.9))
             .count()
     };
-    let frame = render("frame.exr", None);
-    let blurred = render("blurred.exr", Some("-6,6"));
+    let frame = render("frame.exr", &[]).0;
+    let blurred = render("blurred.exr", &["--shutter", "-6,6"]).0;
     let (sharp, smeared) = (dark_columns(&frame), dark_columns(&blurred));
     assert!(
         smeared >= sharp + 8,
@@ -339,21 +333,17 @@ fn shutter_blurs_a_sliding_quad() {
     );
     // Without blur: the frame's image, and the quad's motion in the motion layer (the
     // quad slides 6 units a second, 0.25 units a frame at 24 fps).
-    let out = dir.join("vectors.exr");
-    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
-        .args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
-        .args(["--env", "1,1,1", "--frame", "12", "--shutter", "-0.5,0.5"])
-        .args(["--no-motion-blur", "--aov", "motion", "-o"])
-        .arg(&out)
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let vectors = lucerna::output::exr::read(&out).unwrap().0;
+    let vectors = render(
+        "vectors.exr",
+        &[
+            "--shutter",
+            "-0.5,0.5",
+            "--no-motion-blur",
+            "--aov",
+            "motion",
+        ],
+    )
+    .0;
     assert_eq!(dark_columns(&vectors), sharp);
     let u = vectors.channel("motion.u").unwrap();
     let fastest = u.iter().cloned().fold(0.0f32, f32::max);
@@ -363,26 +353,14 @@ fn shutter_blurs_a_sliding_quad() {
     );
     // Without a shutter, asking for the motion layer takes the motion over half a frame
     // each way, without blur, and says so in the header.
-    let run = Command::new(env!("CARGO_BIN_EXE_lucerna"))
-        .args(["render", "-q", "--resolution", "64x32", "--spp", "16"])
-        .args(["--env", "1,1,1", "--frame", "12", "--aov", "motion", "-o"])
-        .arg(dir.join("implicit.exr"))
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
-    let (implicit, header) = lucerna::output::exr::read(&dir.join("implicit.exr")).unwrap();
+    let (implicit, header) = render("implicit.exr", &["--aov", "motion"]);
     assert_eq!(
         header.text("lucerna/shutter"),
         Some("-0.5,0.5 without blur")
     );
     assert_eq!(dark_columns(&implicit), sharp);
     assert_eq!(implicit.channel("motion.u"), vectors.channel("motion.u"));
-    let closed = render("closed.exr", Some("0,0"));
+    let closed = render("closed.exr", &["--shutter", "0,0"]).0;
     assert_eq!(frame.channel("R").unwrap(), closed.channel("R").unwrap());
     let refused = Command::new(env!("CARGO_BIN_EXE_lucerna"))
         .args(["render", "-q", "--shutter", "0.5,-0.5"])
