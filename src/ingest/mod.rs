@@ -118,7 +118,7 @@ fn set_shutter(scene: &mut Scene, options: &LoadOptions) {
     }
     if let Some(shutter) = &mut scene.shutter {
         shutter.blur &= options.motion_blur;
-    } else if options.vectors {
+    } else if vectors_around_the_frame(options) {
         let (open, close) = VECTOR_INTERVAL;
         scene.shutter = Some(scene::Shutter {
             open,
@@ -134,7 +134,14 @@ fn motion_interval(options: &LoadOptions) -> Option<(f64, f64)> {
     options
         .shutter
         .filter(|(open, close)| close > open)
-        .or(options.vectors.then_some(VECTOR_INTERVAL))
+        .or(vectors_around_the_frame(options).then_some(VECTOR_INTERVAL))
+}
+
+/// Whether the motion layers take their motion over [`VECTOR_INTERVAL`]: they are asked
+/// for and a frame is given. Without a frame a glTF file shows its rest transforms, which
+/// lie at no time of its animations (and asking for a layer must not change the image).
+fn vectors_around_the_frame(options: &LoadOptions) -> bool {
+    options.vectors && options.frame.is_some()
 }
 
 /// [`load`] by the file's format.

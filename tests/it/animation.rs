@@ -360,6 +360,31 @@ fn shutter_blurs_a_sliding_quad() {
     );
     assert_eq!(dark_columns(&implicit), sharp);
     assert_eq!(implicit.channel("motion.u"), vectors.channel("motion.u"));
+    // Without a frame the rest transforms are rendered, whatever the layers asked for.
+    let rest = |name: &str, aov: &str| {
+        let out = dir.join(name);
+        let (out_text, scene_text) = (out.to_str().unwrap(), scene.to_str().unwrap());
+        common::cli::lucerna_ok(&[
+            "render",
+            "-q",
+            "--resolution",
+            "16x8",
+            "--spp",
+            "2",
+            "--aov",
+            aov,
+            "-o",
+            out_text,
+            scene_text,
+        ]);
+        lucerna::output::exr::read(&out).unwrap()
+    };
+    let (with_motion, header) = rest("rest-motion.exr", "motion");
+    assert_eq!(header.text("lucerna/shutter"), None);
+    assert_eq!(
+        with_motion.channel("R"),
+        rest("rest.exr", "albedo").0.channel("R")
+    );
     let closed = render("closed.exr", &["--shutter", "0,0"]).0;
     assert_eq!(frame.channel("R").unwrap(), closed.channel("R").unwrap());
     let refused = Command::new(env!("CARGO_BIN_EXE_lucerna"))
