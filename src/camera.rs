@@ -323,15 +323,16 @@ impl Camera {
                 forward: self.forward,
             };
         };
-        let m = motion.at(time);
-        let right = m.transform_vector3(DVec3::X).normalize();
-        let forward = (-m.transform_vector3(DVec3::Z)).normalize();
+        // Once per camera sample: the single-precision interpolation traversal uses.
+        let m = motion.affine_at(time);
+        let right = m.transform_vector3(Vec3::X).normalize();
+        let forward = (-m.transform_vector3(Vec3::Z)).normalize();
         let up = right.cross(forward).normalize();
         Pose {
-            origin: m.transform_point3(DVec3::ZERO).as_vec3(),
-            right: forward.cross(up).as_vec3(),
-            up: up.as_vec3(),
-            forward: forward.as_vec3(),
+            origin: m.translation.into(),
+            right: forward.cross(up),
+            up,
+            forward,
         }
     }
 

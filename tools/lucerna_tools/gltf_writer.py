@@ -114,6 +114,15 @@ class GltfWriter:
         forward = unit([t - e for t, e in zip(target, translation)])
         return self.node(name=name, camera=cam, translation=list(translation), rotation=look_rotation(forward))
 
+    def sun(self, direction, intensity):
+        """A KHR_lights_punctual directional light of `intensity` lux shining along unit
+        `direction` (the file's only punctual light)."""
+        self.doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "directional",
+                                                                      "intensity": intensity}]}}
+        self._use("KHR_lights_punctual")
+        return self.node(name="sun", extensions={"KHR_lights_punctual": {"light": 0}},
+                         rotation=rotation_between([0, 0, -1], direction))
+
     def sphere(self, name, centre, radius, material, subdivisions=2):
         """An analytic sphere for lucerna; other viewers see the icosphere fallback."""
         verts, faces = icosphere(subdivisions)

@@ -31,7 +31,7 @@ import numpy as np
 
 import lucerna_tools as lt
 from lucerna_tools import cycles
-from lucerna_tools.gltf_writer import GltfWriter, box, rotation_between, unit
+from lucerna_tools.gltf_writer import GltfWriter, box, unit
 
 FPS = 24
 FLOOR = 0.4
@@ -120,13 +120,8 @@ def write_gltf(path, width, height):
                      {"input": times, "output": turns, "interpolation": "LINEAR"}],
         "channels": [{"sampler": 0, "target": {"node": slider, "path": "translation"}},
                      {"sampler": 1, "target": {"node": blade, "path": "rotation"}}]})
-    w.doc["extensions"] = {"KHR_lights_punctual": {"lights": [{"type": "directional", "intensity": SUN}]}}
-    w._use("KHR_lights_punctual")
-    w.node(name="sun", extensions={"KHR_lights_punctual": {"light": 0}},
-           rotation=rotation_between([0, 0, -1], SUN_DIRECTION))
-    cam = w._list("cameras", {"name": "camera", "type": "perspective",
-                              "perspective": {"yfov": VFOV, "aspectRatio": width / height, "znear": 0.01}})
-    w.node(name="camera", camera=cam, translation=list(CAMERA))
+    w.sun(SUN_DIRECTION, SUN)
+    w.camera("camera", VFOV, width / height, CAMERA, (CAMERA[0], CAMERA[1], CAMERA[2] - 1.0))
     w.write_gltf(path)
 
 
