@@ -1,11 +1,13 @@
 //! Geometry in render space: render space itself (`space`), the primitives (`triangle`,
 //! `sphere`, `quadric`) and what a BVH holds of them (`primitive`), the BVH (`bvh`, over
 //! eight-wide nodes of `wide`), placements of shared meshes through a top-level BVH
-//! (`instances`) and their motion over the shutter (`motion`), rays and hits, ray cones (`cone`), shading frames, and subdivision surfaces refined into
-//! triangles.
+//! (`instances`) and their motion over the shutter (`motion`), meshes that change shape
+//! over it (`deformation`), rays and hits, ray cones (`cone`), shading frames, and
+//! subdivision surfaces refined into triangles.
 
 pub mod bvh;
 pub mod cone;
+pub mod deformation;
 pub mod frame;
 pub mod hit;
 pub mod instances;

@@ -771,6 +771,7 @@ fn triangulate(
         colors,
         triangles,
         material,
+        deformation: None,
     }
 }
 
@@ -815,6 +816,7 @@ mod tests {
             })
             .collect();
         SubdivisionSurface {
+            point_keys: Vec::new(),
             mesh: 0,
             scheme: SubdivisionScheme::CatmullClark,
             boundary: BoundaryInterpolation::EdgeAndCorner,

@@ -98,6 +98,40 @@ pub fn skin(mesh: &mut Mesh, influences: &[Influences], joint_matrices: &[DMat4]
     bad
 }
 
+/// What a deformed mesh is made from, so that it can be posed again at other times (the
+/// keys of its deformation over the shutter): its vertices at rest, its morph targets and
+/// its joint influences.
+pub struct Deformer {
+    pub positions: Vec<Vec3>,
+    pub normals: Option<Vec<Vec3>>,
+    pub targets: Vec<MorphTarget>,
+    /// Per vertex, for a skinned mesh.
+    pub influences: Option<Vec<Influences>>,
+}
+
+impl Deformer {
+    /// The positions and normals with morph target `weights`, skinned by `joint_matrices`
+    /// (for a skinned mesh).
+    pub fn pose(
+        &self,
+        weights: &[f32],
+        joint_matrices: Option<&[DMat4]>,
+    ) -> (Vec<Vec3>, Option<Vec<Vec3>>) {
+        let mut mesh = Mesh {
+            positions: self.positions.clone(),
+            normals: self.normals.clone(),
+            ..Mesh::default()
+        };
+        if !self.targets.is_empty() {
+            morph(&mut mesh, &self.targets, weights);
+        }
+        if let (Some(influences), Some(joints)) = (&self.influences, joint_matrices) {
+            skin(&mut mesh, influences, joints);
+        }
+        (mesh.positions, mesh.normals)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -113,6 +147,7 @@ mod tests {
             colors: None,
             triangles: vec![],
             material: 0,
+            deformation: None,
         }
     }
 

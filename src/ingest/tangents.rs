@@ -99,6 +99,13 @@ pub fn generate(mesh: &mut Mesh, uv_set: usize) -> bool {
     mesh.normals = mesh.normals.as_ref().map(|v| gather(v, &source));
     mesh.uvs = [0, 1].map(|s| mesh.uvs[s].as_ref().map(|v| gather(v, &source)));
     mesh.colors = mesh.colors.as_ref().map(|v| gather(v, &source));
+    if let Some(d) = &mut mesh.deformation {
+        fn keys(keys: &[Vec<Vec3>], source: &[u32]) -> Vec<Vec<Vec3>> {
+            keys.iter().map(|k| gather(k, source)).collect()
+        }
+        d.positions = keys(&d.positions, &source);
+        d.normals = d.normals.as_deref().map(|n| keys(n, &source));
+    }
     mesh.tangents = Some(tangents);
     mesh.triangles = triangles;
     true
@@ -129,6 +136,38 @@ mod tests {
         assert_eq!(mesh.positions.len(), 4, "no seams, no split");
         for t in tangents {
             assert!((t.truncate() - Vec3::X).length() < 1e-4, "{t}");
+        }
+    }
+
+    /// Two triangles sharing an edge whose texture coordinates run opposite ways (a mirrored
+    /// seam): the shared vertices split, and a deformation's keys split with them.
+    #[test]
+    fn a_split_vertex_keeps_its_deformation_keys() {
+        use crate::geometry::deformation::Deformation;
+        let positions = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0)];
+        let moved: Vec<Vec3> = positions.iter().map(|p| *p * 2.0 + Vec3::Z).collect();
+        let mut mesh = Mesh {
+            positions: positions.clone(),
+            uvs: [
+                Some(vec![Vec2::ZERO, Vec2::X, Vec2::Y, Vec2::new(-1.0, 1.0)]),
+                None,
+            ],
+            triangles: vec![[0, 1, 2], [2, 1, 3]],
+            deformation: Some(Deformation {
+                positions: vec![positions, moved],
+                normals: None,
+            }),
+            ..Default::default()
+        };
+        assert!(generate(&mut mesh, 0));
+        assert!(
+            mesh.positions.len() > 4,
+            "the mirrored seam splits vertices"
+        );
+        let d = mesh.deformation.as_ref().unwrap();
+        assert_eq!(d.positions[0], mesh.positions);
+        for (p, q) in mesh.positions.iter().zip(&d.positions[1]) {
+            assert_eq!(*q, *p * 2.0 + Vec3::Z);
         }
     }
 }

@@ -90,8 +90,10 @@ pub(super) fn prepare(
         .instances
         .iter()
         .filter(|i| {
-            crate::geometry::motion::keys_move(&i.motion)
-                && scene.materials[scene.meshes[i.mesh as usize].material as usize].is_emissive()
+            let mesh = &scene.meshes[i.mesh as usize];
+            (crate::geometry::motion::keys_move(&i.motion)
+                || mesh.deformation.as_ref().is_some_and(|d| d.moves()))
+                && scene.materials[mesh.material as usize].is_emissive()
         })
         .map(|i| i.name.as_str())
         .collect();

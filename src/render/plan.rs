@@ -237,9 +237,14 @@ impl fmt::Display for RenderPlan {
         if s.moves() {
             writeln!(
                 f,
-                "  motion blur: {} moving instance{}{} (rendered by the scalar kernel)",
+                "  motion blur: {} moving instance{}{}{} (rendered by the scalar kernel)",
                 s.moving_instances,
                 if s.moving_instances == 1 { "" } else { "s" },
+                match s.deforming_meshes {
+                    0 => String::new(),
+                    1 => ", 1 deforming mesh".into(),
+                    n => format!(", {n} deforming meshes"),
+                },
                 if s.moving_camera {
                     ", the camera moves"
                 } else {

@@ -136,12 +136,15 @@ pub struct SceneFeatures {
     /// The render camera moves over the shutter (the scene's first camera here; the world
     /// sets it for the camera it renders through).
     pub moving_camera: bool,
+    /// Meshes placed by some instance that change shape over the shutter (deformation
+    /// blur).
+    pub deforming_meshes: usize,
 }
 
 impl SceneFeatures {
     /// True if something moves over the shutter: rays then carry a time.
     pub fn moves(&self) -> bool {
-        self.moving_instances > 0 || self.moving_camera
+        self.moving_instances > 0 || self.moving_camera || self.deforming_meshes > 0
     }
 
     /// Analyses `scene`: only materials that some geometry uses count.
@@ -251,6 +254,17 @@ impl SceneFeatures {
                 .instances
                 .iter()
                 .filter(|i| crate::geometry::motion::keys_move(&i.motion))
+                .count(),
+            deforming_meshes: scene
+                .meshes
+                .iter()
+                .zip(&instanced)
+                .filter(|&(m, &placed)| {
+                    // Emitters keep the frame's shape (`world::build`).
+                    placed
+                        && m.deformation.as_ref().is_some_and(|d| d.moves())
+                        && !scene.materials[m.material as usize].is_emissive()
+                })
                 .count(),
             // The default camera's (the world sets the render camera's).
             moving_camera: scene

@@ -1,7 +1,7 @@
 //! The scene file: the internal [`Scene`] on disk, so that other programs (the USD plugin,
 //! the benchmark's Mitsuba exporter) can write or read exactly what the renderer sees.
 //!
-//! One concept in one file (some 1280 lines): the format, read and written here side by side so
+//! One concept in one file (some 1300 lines): the format, read and written here side by side so
 //! that every field's validation sits next to its writing.
 //!
 //! Two files: a JSON manifest `NAME.lucerna` and one little-endian binary buffer beside it
@@ -14,7 +14,10 @@
 //! Density grids are either in the buffer (`grids`, dense f32) or read from OpenVDB files
 //! (`volumes`: file, grid, transform and the interface material whose medium they scale;
 //! the reader adds the grid and a box of that material around it, and writes them back as
-//! `grids`, meshes and instances).
+//! `grids`, meshes and instances). Things that move over the shutter carry keys at evenly
+//! spaced times from its opening to its closing: instances' and cameras' `motion`
+//! (matrices), and a mesh's `deformation` (a view of positions per key, and of normals per
+//! key where the mesh has normals; the mesh's own arrays are the frame's).
 //!
 //! A scene file is untrusted input: [`read`] checks the format and version, every view
 //! against the buffer, every count, index and range, and that every number is finite,
@@ -26,6 +29,7 @@ use super::{BoundaryInterpolation, SubdivisionScheme, SubdivisionSurface};
 use super::{Camera, Environment, Light, LightKind, Material, Mesh, Projection, Scene};
 use super::{Cylinder, Disk, Instance, LightGroup, RenderSettings, Sphere, Texels, Texture, Wrap};
 use crate::error::{Error, Result};
+use crate::geometry::deformation::Deformation;
 use glam::{Vec2, Vec3, Vec4};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -143,6 +147,9 @@ struct SubdivisionEntry {
     colors: Option<View>,
     #[serde(default)]
     keep: Option<View>,
+    /// The points at the shutter's keys, where the cage deforms.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    point_keys: Vec<View>,
 }
 
 /// `count` elements starting `offset` bytes into the buffer.
@@ -164,6 +171,18 @@ struct MeshEntry {
     uvs: [Option<View>; 2],
     colors: Option<View>,
     triangles: View,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    deformation: Option<DeformationEntry>,
+}
+
+/// A mesh's vertex keys over the shutter (`geometry::deformation`): positions, and normals
+/// where the mesh has them, one view a key.
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct DeformationEntry {
+    positions: Vec<View>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    normals: Option<Vec<View>>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -264,6 +283,13 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
             uvs: m.uvs.clone().map(|uv| uv.map(|uv| buffer.floats(&v2(&uv)))),
             colors: m.colors.as_deref().map(|c| buffer.floats(&v4(c))),
             triangles: buffer.push(m.triangles.iter().copied()),
+            deformation: m.deformation.as_ref().map(|d| DeformationEntry {
+                positions: d.positions.iter().map(|k| buffer.floats(&v3(k))).collect(),
+                normals: d
+                    .normals
+                    .as_ref()
+                    .map(|n| n.iter().map(|k| buffer.floats(&v3(k))).collect()),
+            }),
         })
         .collect();
     // Texel arrays shared between textures are written once.
@@ -309,6 +335,7 @@ pub fn write(scene: &Scene, path: &Path) -> Result<()> {
                 let faces: Vec<u32> = (0..k.len() as u32).filter(|&f| k[f as usize]).collect();
                 buffer.push(faces.iter().map(|&f| [f]))
             }),
+            point_keys: s.point_keys.iter().map(|k| buffer.floats(&v3(k))).collect(),
         })
         .collect();
     let grids = scene
@@ -479,6 +506,30 @@ pub fn parse(
                 format!("vertex index out of range (the mesh has {n} vertices)"),
             ));
         }
+        let deformation = match &m.deformation {
+            None => None,
+            Some(d) => {
+                let keys = |views: &[View], what: &str| -> Result<Vec<Vec<Vec3>>> {
+                    (views.iter().enumerate())
+                        .map(|(k, &v)| {
+                            buffer.vertices(v, n, &element(&format!("deformation.{what}[{k}]")))
+                        })
+                        .collect()
+                };
+                let deformation = Deformation {
+                    positions: keys(&d.positions, "positions")?,
+                    normals: d
+                        .normals
+                        .as_deref()
+                        .map(|v| keys(v, "normals"))
+                        .transpose()?,
+                };
+                deformation
+                    .check(n, m.normals.is_some())
+                    .map_err(|reason| bad(&element("deformation"), reason))?;
+                Some(deformation)
+            }
+        };
         meshes.push(Mesh {
             name: m.name.clone(),
             positions,
@@ -504,6 +555,7 @@ pub fn parse(
                 .transpose()?,
             triangles,
             material: m.material,
+            deformation,
         });
     }
     let mut textures = Vec::with_capacity(manifest.textures.len());
@@ -938,6 +990,7 @@ fn enclosure(to_world: glam::DMat4, name: &str, material: u32) -> (Mesh, Instanc
         colors: None,
         triangles,
         material,
+        deformation: None,
     };
     let instance = Instance {
         name: name.to_string(),
@@ -1053,6 +1106,18 @@ fn read_subdivision(
         }
         None => None,
     };
+    let point_keys = (e.point_keys.iter().enumerate())
+        .map(|(k, &v)| buffer.vertices(v, points.len(), &field(&format!("point_keys[{k}]"))))
+        .collect::<Result<Vec<Vec<Vec3>>>>()
+        .map_err(lift)?;
+    let keys = Deformation {
+        positions: point_keys,
+        normals: None,
+    };
+    if !keys.positions.is_empty() {
+        keys.check(points.len(), false)
+            .map_err(|reason| (field("point_keys"), reason))?;
+    }
     let finite_uvs = uvs.as_ref().is_none_or(|u| u.iter().all(|v| v.is_finite()));
     if !finite_uvs || !points.iter().all(|p| p.is_finite()) {
         return Err((
@@ -1072,6 +1137,7 @@ fn read_subdivision(
         uvs,
         colors,
         keep,
+        point_keys: keys.positions,
     })
 }
 

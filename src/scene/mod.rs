@@ -136,6 +136,10 @@ pub struct SubdivisionSurface {
     /// Which faces are rendered (a material subset); all when `None`. The other faces
     /// still shape the surface.
     pub keep: Option<Vec<bool>>,
+    /// The points at evenly spaced times of the shutter, where the cage changes shape over
+    /// it (empty otherwise): each key is refined as `points` is, into the surface's
+    /// deformation.
+    pub point_keys: Vec<Vec<Vec3>>,
 }
 
 /// A scene's declared render: the settings prim it came from and its products.
@@ -234,6 +238,9 @@ pub struct Mesh {
     /// Counter-clockwise triangles (the front side faces the viewer).
     pub triangles: Vec<[u32; 3]>,
     pub material: u32,
+    /// Positions (and normals) over the shutter of a mesh that changes shape while it is
+    /// open; `positions` and `normals` are the frame's.
+    pub deformation: Option<crate::geometry::deformation::Deformation>,
 }
 
 impl Mesh {
@@ -258,13 +265,20 @@ impl Mesh {
             + self.uvs.iter().map(bytes).sum::<usize>()
             + bytes(&self.colors)
             + std::mem::size_of_val(self.triangles.as_slice())) as u64
+            + self.deformation.as_ref().map_or(0, |d| d.bytes())
     }
 
-    /// Object-space bounds of the vertices, or `None` for a mesh without any.
+    /// Object-space bounds of the vertices (at every key of a deformation too), or `None`
+    /// for a mesh without any.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let keys = self
+            .deformation
+            .iter()
+            .flat_map(|d| d.positions.iter().flatten());
         (!self.positions.is_empty()).then(|| {
             self.positions
                 .iter()
+                .chain(keys)
                 .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), p| {
                     (lo.min(*p), hi.max(*p))
                 })

@@ -9,7 +9,9 @@ use super::surfaces::{NO_LIGHT, PlacedMesh, PrimRef, RenderQuadric, RenderSphere
 use super::{Objects, World};
 use crate::camera::{self, Camera};
 use crate::error::{Error, Result};
+use crate::geometry::deformation::Deformation;
 use crate::geometry::instances::Placement;
+use crate::geometry::motion::MotionTransform;
 use crate::geometry::quadric::Quadric;
 use crate::geometry::space::RenderSpace;
 use crate::geometry::triangle::geometric_normal;
@@ -94,15 +96,52 @@ pub fn refine_subdivision_surfaces(
         // Bytes per refined face: four corners' positions, normals and attributes, and
         // two triangles, plus the refinement's working copies.
         let faces = subdivision::refined_face_count(surface, level);
+        let keys = surface.point_keys.len() as u64;
         crate::memory::check_allocation(
-            faces.saturating_mul(200),
+            faces.saturating_mul(200 + 48 * keys),
             &format!("subdivision surface {} at level {level}", placeholder.name),
         )
         .map_err(|r| Error::bad_input(&scene.source, &placeholder.name, r))?;
-        let refined = subdivision::refine(surface, level, &placeholder.name, placeholder.material);
+        let mut refined =
+            subdivision::refine(surface, level, &placeholder.name, placeholder.material);
+        refined.deformation = refined_keys(surface, level, &refined);
         scene.meshes[surface.mesh as usize] = refined;
     }
     Ok(())
+}
+
+/// The deformation of subdivision surface `surface` refined at `level` into `refined`: each
+/// of its point keys refined as its points were (the same topology gives the same vertices
+/// in the same order), positions and normals; `None` for a cage that keeps its shape.
+fn refined_keys(
+    surface: &scene::SubdivisionSurface,
+    level: u32,
+    refined: &Mesh,
+) -> Option<Deformation> {
+    use crate::geometry::subdivision;
+    if surface.point_keys.is_empty() {
+        return None;
+    }
+    let (mut positions, mut normals) = (Vec::new(), Vec::new());
+    for key in &surface.point_keys {
+        let at_key = scene::SubdivisionSurface {
+            points: key.clone(),
+            point_keys: Vec::new(),
+            ..surface.clone()
+        };
+        let mesh = subdivision::refine(&at_key, level, "", refined.material);
+        positions.push(mesh.positions);
+        normals.extend(mesh.normals);
+    }
+    let deformation = Deformation {
+        normals: (normals.len() == positions.len() && refined.normals.is_some()).then_some(normals),
+        positions,
+    };
+    deformation
+        .check(refined.positions.len(), refined.normals.is_some())
+        .ok()
+        .filter(|_| deformation.moves())
+        .map(|()| deformation)
 }
 
 /// `mesh` moved by `to_render` (object space to render space), in place: positions, normals
@@ -111,6 +150,9 @@ fn transform_mesh(mut mesh: Mesh, to_render: &DMat4) -> Mesh {
     let linear = DMat3::from_mat4(*to_render);
     let mirrored = linear.determinant() < 0.0;
     let normal_matrix = linear.inverse().transpose();
+    if let Some(d) = &mut mesh.deformation {
+        d.transform(to_render, &normal_matrix);
+    }
     for p in &mut mesh.positions {
         *p = to_render.transform_point3(p.as_dvec3()).as_vec3();
     }
@@ -131,6 +173,46 @@ fn transform_mesh(mut mesh: Mesh, to_render: &DMat4) -> Mesh {
         }
     }
     mesh
+}
+
+/// Carries the keys of `deformation` (object space of an instance placed by `transform`)
+/// along the instance's `motion` over the shutter: key `k` moves to where the motion puts
+/// the object at its time, relative to `transform` (which places the mesh afterwards).
+fn follow_motion(deformation: &mut Deformation, transform: &DMat4, motion: &[DMat4]) {
+    let Some(motion) = MotionTransform::new(motion) else {
+        return;
+    };
+    let keys = deformation.keys();
+    let to_object = transform.inverse();
+    for k in 0..keys {
+        let m = to_object * motion.at(k as f32 / (keys - 1) as f32);
+        let normal_matrix = DMat3::from_mat4(m).inverse().transpose();
+        for p in &mut deformation.positions[k] {
+            *p = m.transform_point3(p.as_dvec3()).as_vec3();
+        }
+        for n in deformation.normals.iter_mut().flat_map(|n| &mut n[k]) {
+            *n = (normal_matrix * n.as_dvec3()).normalize_or_zero().as_vec3();
+        }
+    }
+}
+
+/// The corners of the triangles of `meshes` that deform, at their keys (triangle by
+/// triangle, key by key), and for each mesh the index there of its first triangle's first
+/// key (`None` for a mesh that keeps its shape).
+fn deforming_corners(meshes: &[Mesh]) -> (Vec<[Vec3; 3]>, Vec<Option<u32>>) {
+    let mut corners = Vec::new();
+    let firsts = meshes
+        .iter()
+        .map(|mesh| {
+            let d = mesh.deformation.as_ref()?;
+            let first = corners.len() as u32;
+            for t in &mesh.triangles {
+                corners.extend((d.positions.iter()).map(|key| t.map(|i| key[i as usize])));
+            }
+            Some(first)
+        })
+        .collect();
+    (corners, firsts)
 }
 
 /// The mean emission of emitters with emissive textures, for their selection by power:
@@ -336,6 +418,9 @@ pub fn estimate_memory(scene: &Scene) -> MemoryEstimate {
             flat_prims += mesh.triangles.len() as u64;
             if scene.materials[mesh.material as usize].is_emissive() {
                 emitters += mesh.triangles.len() as u64;
+            } else if let Some(d) = &mesh.deformation {
+                // The BVH's copy of each triangle's corners at every key.
+                geometry += (mesh.triangles.len() * d.keys() * size_of::<[Vec3; 3]>()) as u64;
             }
         } else {
             // The placement as traced and as shaded, and its bounds.
@@ -485,6 +570,7 @@ fn area_lights(
                 two_sided: m.double_sided,
                 mean_radiance,
             }),
+            Primitive::Deforming { .. } => unreachable!("`primitive` makes still triangles"),
         });
     }
     (lights, prim_light)
@@ -594,6 +680,15 @@ impl World {
                 "geometry is not finite",
             ));
         }
+        // Emitters keep the frame's shape (their light samples are made from it), and so
+        // do meshes whose keys are all alike.
+        for mesh in &mut scene.meshes {
+            if mesh.deformation.as_ref().is_some_and(|d| {
+                !d.moves() || scene.materials[mesh.material as usize].is_emissive()
+            }) {
+                mesh.deformation = None;
+            }
+        }
         let mut features = SceneFeatures::of(&scene);
         let space = RenderSpace::from_bounds(lo, hi);
         let to_render = space.matrix();
@@ -608,10 +703,15 @@ impl World {
             .filter(|inst| shared_index[inst.mesh as usize] == NOT_SHARED)
             .map(|inst| {
                 let mesh = &mut scene.meshes[inst.mesh as usize];
-                let mesh = match flat_uses[inst.mesh as usize] {
+                let mut mesh = match flat_uses[inst.mesh as usize] {
                     1 => std::mem::take(mesh),
                     _ => mesh.clone(),
                 };
+                if let Some(d) = &mut mesh.deformation
+                    && !inst.motion.is_empty()
+                {
+                    follow_motion(d, &inst.transform, &inst.motion);
+                }
                 transform_mesh(mesh, &(to_render * inst.transform))
             })
             .collect();
@@ -628,7 +728,8 @@ impl World {
         let quadrics = render_quadrics(&scene, &space);
         let radius = meshes
             .iter()
-            .flat_map(|m| m.positions.iter().map(|p| p.length()))
+            .filter_map(Mesh::bounds)
+            .map(|(lo, hi)| lo.abs().max(hi.abs()).length())
             .chain(spheres.iter().map(|s| s.centre.length() + s.radius))
             .chain(quadrics.iter().map(|q| {
                 let (lo, hi) = q.quadric.bounds();
@@ -675,9 +776,24 @@ impl World {
         lights.extend(punctual_lights(&scene, &space));
         light_names.extend(scene.lights.iter().map(|l| l.name.clone()));
         let bvh_start = std::time::Instant::now();
-        let bvh = Bvh::build_from(&flags, |i| {
-            primitive(refs[i as usize], &meshes, &spheres, &quadrics)
-        });
+        let (corners, deforming) = deforming_corners(&meshes);
+        let bvh = Bvh::build_deforming(
+            &flags,
+            |i| match refs[i as usize] {
+                PrimRef::Triangle { mesh, tri } if let Some(first) = deforming[mesh as usize] => {
+                    let keys = meshes[mesh as usize]
+                        .deformation
+                        .as_ref()
+                        .map_or(0, |d| d.keys());
+                    Primitive::Deforming {
+                        first: first + tri * keys as u32,
+                        keys: keys as u32,
+                    }
+                }
+                r => primitive(r, &meshes, &spheres, &quadrics),
+            },
+            corners,
+        );
         let (placed_bvh, placements) = placed.build(&scene.materials, intersection_flags);
         let bvh_seconds = bvh_start.elapsed().as_secs_f64();
 

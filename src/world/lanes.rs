@@ -208,6 +208,7 @@ mod tests {
                 colors: None,
                 triangles: vec![[0, 1, 2]],
                 material: 0,
+                deformation: None,
             });
         }
         let surfaces = Surfaces::for_tests(meshes, vec![Material::default()]);
@@ -287,6 +288,7 @@ mod tests {
             colors: None,
             triangles: vec![[0, 1, 2]],
             material,
+            deformation: None,
         };
         let surfaces = Surfaces::for_tests(vec![], vec![lambert, emissive, black]);
         match surfaces.uniform_bsdf(&mesh(0)) {

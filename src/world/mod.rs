@@ -342,7 +342,7 @@ impl World {
                     motion.at(1.0).transform_point3(object).as_vec3(),
                 )
             }
-            None => (it.p, it.p),
+            None => self.deformed_ends(it, time).unwrap_or((it.p, it.p)),
         };
         let frames = shutter.frames();
         let velocity =
@@ -359,6 +359,35 @@ impl World {
             _ => glam::Vec2::ZERO,
         };
         (screen, velocity)
+    }
+
+    /// Where shading point `it` of a deforming mesh, met at shutter time `time`, is at the
+    /// shutter's opening and closing: the same barycentrics on its triangle then. `None`
+    /// for a point of a mesh that keeps its shape.
+    fn deformed_ends(&self, it: &Interaction, time: f32) -> Option<(Vec3, Vec3)> {
+        if it.instance != NOT_PLACED {
+            return None;
+        }
+        let PrimRef::Triangle { mesh, tri } = self.surfaces.prims[it.prim as usize] else {
+            return None;
+        };
+        let mesh = &self.surfaces.meshes[mesh as usize];
+        let d = mesh.deformation.as_ref()?;
+        let corners = mesh.triangles[tri as usize].map(|i| i as usize);
+        let [a, b, c] = corners.map(|i| d.position(i, time));
+        // Barycentrics of the point from the areas it spans with the edges.
+        let n = (b - a).cross(c - a);
+        let area = n.length_squared();
+        if !(area > 0.0) {
+            return None;
+        }
+        let b1 = (it.p - a).cross(c - a).dot(n) / area;
+        let b2 = (b - a).cross(it.p - a).dot(n) / area;
+        let at = |time: f32| {
+            let [a, b, c] = corners.map(|i| d.position(i, time));
+            a * (1.0 - b1 - b2) + b * b1 + c * b2
+        };
+        Some((at(0.0), at(1.0)))
     }
 
     /// The shading point of `hit` along `ray`, its textures looked up at the point.

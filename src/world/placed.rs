@@ -15,7 +15,8 @@ pub(super) const NOT_SHARED: u32 = u32::MAX;
 /// For each scene mesh, its index among the shared meshes, or [`NOT_SHARED`]. A mesh is
 /// shared (traced once in object space, placed through the top-level BVH) when several
 /// instances place it and it does not emit: emitters are flattened so that every emitting
-/// triangle is a light of its own.
+/// triangle is a light of its own, and so are meshes that deform (their triangles move
+/// each on its own).
 pub(super) fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
     let mut uses = vec![0u32; scene.meshes.len()];
     for inst in &scene.instances {
@@ -28,7 +29,10 @@ pub(super) fn shared_mesh_indices(scene: &Scene) -> Vec<u32> {
         .iter()
         .zip(uses)
         .map(|(mesh, uses)| {
-            if uses >= 2 && !scene.materials[mesh.material as usize].is_emissive() {
+            if uses >= 2
+                && !scene.materials[mesh.material as usize].is_emissive()
+                && mesh.deformation.is_none()
+            {
                 next += 1;
                 next - 1
             } else {

@@ -415,9 +415,14 @@ impl Surfaces {
                 self.placed_surface(hit, cone, ray.time)
             } else {
                 match self.prims[hit.prim as usize] {
-                    PrimRef::Triangle { mesh, tri } => {
-                        self.triangle_surface(&self.meshes[mesh as usize], tri, hit, cone, None)
-                    }
+                    PrimRef::Triangle { mesh, tri } => self.triangle_surface(
+                        &self.meshes[mesh as usize],
+                        tri,
+                        hit,
+                        cone,
+                        None,
+                        ray.time,
+                    ),
                     PrimRef::Sphere(s) => {
                         let s = &self.spheres[s as usize];
                         // Back onto the sphere: the hit point along the ray carries t's rounding.
@@ -489,7 +494,7 @@ impl Surfaces {
         }
         let mesh = &self.shared_meshes[placed.mesh as usize];
         let (p, n, ns, attrs, material, tangents, magnitude) =
-            self.triangle_surface(mesh, hit.prim, hit, cone, Some(&placed.to_render));
+            self.triangle_surface(mesh, hit.prim, hit, cone, Some(&placed.to_render), time);
         let n = (placed.normal_matrix * n).normalize_or_zero();
         let tangents = tangents.map(|[t, b, normal]| {
             let linear = |v: Vec3| placed.to_render.transform_vector3(v).normalize_or_zero();
@@ -514,7 +519,7 @@ impl Surfaces {
     /// normal-mapped), attributes, material and tangent frame (where the mesh has tangents)
     /// of a triangle hit. With `cone` (the render-space ray direction and the cone's width),
     /// the attributes carry the footprint of each UV set; `to_render` places an object-space
-    /// mesh.
+    /// mesh. A mesh that deforms is taken where it is at shutter time `time`.
     fn triangle_surface(
         &self,
         mesh: &Mesh,
@@ -522,9 +527,13 @@ impl Surfaces {
         hit: &Hit,
         cone: Option<Cone>,
         to_render: Option<&Affine3A>,
+        time: f32,
     ) -> SurfacePoint {
         let tri = mesh.triangles[tri as usize];
-        let [p0, p1, p2] = tri.map(|i| mesh.positions[i as usize]);
+        let ([p0, p1, p2], deformed_normals) = match &mesh.deformation {
+            None => (tri.map(|i| mesh.positions[i as usize]), None),
+            Some(d) => deformed_corners(d, tri, time),
+        };
         // The corners in render space (where the placement moves them): the magnitude of
         // the point's data, and the footprint's triangle.
         let corners = match to_render {
@@ -556,12 +565,12 @@ impl Surfaces {
                 }
             }
         }
-        let mut ns = mesh
-            .normals
-            .as_ref()
-            .map(|n| (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero())
-            .filter(|n| *n != Vec3::ZERO)
-            .unwrap_or(n_front);
+        let interpolated = match deformed_normals {
+            Some(n) => Some((n[0] * b0 + n[1] * b1 + n[2] * b2).normalize_or_zero()),
+            None => (mesh.normals.as_ref())
+                .map(|n| (n[i0] * b0 + n[i1] * b1 + n[i2] * b2).normalize_or_zero()),
+        };
+        let mut ns = interpolated.filter(|n| *n != Vec3::ZERO).unwrap_or(n_front);
         let mut frame = None;
         if let Some(tangents) = mesh.tangents.as_ref() {
             let t = (tangents[i0] * b0 + tangents[i1] * b1 + tangents[i2] * b2).truncate();
@@ -616,6 +625,23 @@ impl Surfaces {
             material::emission(mat, &self.textures, &attrs)
         })
     }
+}
+
+/// The corners of triangle `tri` of a mesh that deforms by `d`, and their shading normals
+/// where it has them, at shutter time `time`. Out of line: still meshes never call it.
+#[cold]
+#[inline(never)]
+fn deformed_corners(
+    d: &crate::geometry::deformation::Deformation,
+    tri: [u32; 3],
+    time: f32,
+) -> ([Vec3; 3], Option<[Vec3; 3]>) {
+    let corners = tri.map(|i| d.position(i as usize, time));
+    let normals = d
+        .normals
+        .as_ref()
+        .map(|_| tri.map(|i| d.normal(i as usize, time).unwrap_or(Vec3::ZERO)));
+    (corners, normals)
 }
 
 /// Bends a shading normal towards the geometric normal until the viewer is above its

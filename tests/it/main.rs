@@ -11,6 +11,7 @@ mod batch;
 mod chi2;
 mod cli;
 mod convergence;
+mod deformation_blur;
 mod determinism;
 mod furnace;
 mod fuzz_regressions;

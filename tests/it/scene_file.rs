@@ -408,6 +408,23 @@ fn malformed_scene_files_are_rejected_with_the_element() {
             "cameras[0].motion",
         ),
         (
+            "deformation-one-key",
+            Box::new(|m, _| {
+                let positions = m["meshes"][0]["positions"].clone();
+                m["meshes"][0]["deformation"] = json!({"positions": [positions]})
+            }),
+            "meshes[0].deformation",
+        ),
+        (
+            "deformation-key-count",
+            Box::new(|m, _| {
+                let positions = m["meshes"][0]["positions"].clone();
+                m["meshes"][0]["deformation"] =
+                    json!({"positions": [positions, {"offset": 0, "count": 1}]})
+            }),
+            "meshes[0].deformation.positions[1]",
+        ),
+        (
             "shutter-backwards",
             Box::new(|m, _| m["shutter"] = json!({"open": 0.5, "close": -0.5})),
             "shutter",
@@ -438,6 +455,33 @@ fn malformed_scene_files_are_rejected_with_the_element() {
     );
 }
 
+/// A mesh's deformation keys (positions and normals) survive a round trip.
+#[test]
+fn deformation_keys_round_trip() {
+    use glam::Vec3;
+    use lucerna::geometry::deformation::Deformation;
+    let mut scene = ingest::default_scene().unwrap();
+    let mesh = &mut scene.meshes[0];
+    let shifted = |d: f32| {
+        mesh.positions
+            .iter()
+            .map(|p| *p + Vec3::new(d, 0.0, 0.0))
+            .collect()
+    };
+    let normals = mesh.normals.clone();
+    let deformation = Deformation {
+        positions: vec![shifted(-1.0), shifted(0.0), shifted(2.0)],
+        normals: normals.map(|n| vec![n.clone(), n.clone(), n]),
+    };
+    mesh.deformation = Some(deformation.clone());
+    let dir = temp_dir("deformation");
+    let path = dir.join("moving.lucerna");
+    file::write(&scene, &path).unwrap();
+    let read = ingest::load(&path, &Default::default()).unwrap();
+    assert_eq!(read.meshes[0].deformation.as_ref(), Some(&deformation));
+    assert!(read.meshes[1..].iter().all(|m| m.deformation.is_none()));
+}
+
 /// A subdivision surface (cage, creases, corners, per-corner uvs and colours, kept faces)
 /// survives a round trip, and its refinement renders the same image; a cage index out of
 /// range is refused naming the surface.
@@ -455,6 +499,7 @@ fn subdivision_surfaces_round_trip() {
     let face_indices = vec![0, 2, 3, 1, 4, 5, 7, 6, 0, 1, 5, 4, 2, 6, 7, 3, 0, 4, 6, 2, 1, 3, 7, 5];
     let corners = face_indices.len();
     scene.subdivision_surfaces.push(SubdivisionSurface {
+        point_keys: Vec::new(),
         mesh: 0,
         scheme: SubdivisionScheme::CatmullClark,
         boundary: BoundaryInterpolation::EdgeOnly,

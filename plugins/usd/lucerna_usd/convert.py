@@ -18,7 +18,7 @@ import math
 import numpy as np
 from pxr import Usd, UsdGeom, UsdLux, UsdShade, UsdSkel, UsdVol
 
-from . import curves, lights, volumes
+from . import curves, lights, motion, volumes
 from .materials import MaterialConverter
 from .mesh import MeshData
 from .skel import Skinning
@@ -134,11 +134,37 @@ class Converter:
         self._flat = {}
         self._warned = set()
         self._skel = None
+        # Skinning at the shutter's time codes, for deformation blur.
+        self._skel_at = {}
 
     def _skinning(self):
         if self._skel is None:
             self._skel = Skinning(self.stage, self.time, self.warn)
         return self._skel
+
+    def _skinning_at(self, time):
+        """Skinning at shutter time code `time`."""
+        key = time.GetValue()
+        if key not in self._skel_at:
+            self._skel_at[key] = Skinning(self.stage, time, self.warn)
+        return self._skel_at[key]
+
+    def _point_keys(self, prim, mesh, skinned, data):
+        """The mesh's points at the open shutter's time codes where they move (its
+        deformation blur), or None."""
+        if not self.shutter_times:
+            return None
+        skinned_points = None
+        if skinned:
+            def skinned_points(time, rest):
+                return self._skinning_at(time).points(prim, rest)
+        keys, reason = motion.point_keys(mesh, self.shutter_times, self.time, skinned_points)
+        if keys is not None and len(keys[0]) != len(data.points):
+            keys, reason = None, (f"its points over the shutter number {len(keys[0])}, "
+                                  f"at the frame {len(data.points)}")
+        if reason:
+            self.warn(str(prim.GetPath()), f"{reason}: it keeps the frame's shape (no deformation blur)")
+        return keys
 
     def warn(self, element, message):
         text = f"{element}: {message}"
@@ -569,6 +595,7 @@ class Converter:
         data = MeshData.read(mesh, self.time, self.warn, deform)
         if data is None:
             return []
+        keys = self._point_keys(prim, mesh, skinned, data)
         subdivided = data.subdivided()
         if (subdivided and not mesh.GetSubdivisionSchemeAttr().HasAuthoredValue()
                 and (mesh.GetNormalsAttr().HasAuthoredValue()
@@ -602,13 +629,15 @@ class Converter:
                 color_primvar = None if color is not None else "displayColor"
                 mat = (mat[0], None, color_primvar)
             index, st_name, color_primvar = mat
-            built = data.build(faces, st_name, color_primvar, name)
+            built = data.build(faces, st_name, color_primvar, name, None if subdivided else keys)
             if built is None:
                 continue
-            positions, triangles, normals, uvs, colors = built
-            mesh_index = self.writer.add_mesh(name, index, positions, triangles, normals, uvs, colors)
+            positions, triangles, normals, uvs, colors, deformation = built
+            mesh_index = self.writer.add_mesh(name, index, positions, triangles, normals, uvs,
+                                              colors, deformation)
             if subdivided:
-                self.writer.add_subdivision(mesh_index, data.cage(faces, st_name, color_primvar, name))
+                self.writer.add_subdivision(
+                    mesh_index, data.cage(faces, st_name, color_primvar, name, keys))
             groups.append(Group("mesh", (mesh_index, name)))
         return groups
 

@@ -34,6 +34,8 @@ class Cage:
         self.corner_sharpness = np.zeros(0)
         self.uvs = None
         self.colors = None
+        # The points at the shutter's keys, where the cage deforms over it.
+        self.point_keys = None
 
 
 class MeshData:
@@ -145,12 +147,14 @@ class MeshData:
         scheme = self.mesh.GetSubdivisionSchemeAttr().Get(self.time) or "catmullClark"
         return scheme != "none"
 
-    def _smooth_normals(self):
+    def _smooth_normals(self, points=None):
         """Per-corner smooth normals: the area-weighted mean of the faces around each point
         (a subdivision cage's placeholder, whose authored normals USD ignores, and a
-        deformed mesh, whose authored normals are the rest pose's). None for flat shading."""
+        deformed mesh, whose authored normals are the rest pose's), of the mesh's points or
+        of `points` (the same count). None for flat shading."""
+        points = self.points if points is None else points
         tri_points = self.indices[self.corner_triangles]
-        p = self.points[tri_points]
+        p = points[tri_points]
         # Each polygon's area vector (the sum over its fan, outward: corner_triangles are
         # wound counter-clockwise already) goes once to every point it has; faces on NaN
         # points (skipped by read) weigh nothing.
@@ -158,17 +162,18 @@ class MeshData:
         faces = np.stack([np.bincount(self.face_of_triangle, tri[:, k], self.face_count)
                           for k in range(3)], 1)
         per_corner = faces[self.face_of_corner]
-        normals = np.stack([np.bincount(self.indices, per_corner[:, k], len(self.points))
+        normals = np.stack([np.bincount(self.indices, per_corner[:, k], len(points))
                             for k in range(3)], 1)
         length = np.linalg.norm(normals, axis=1, keepdims=True)
         if (length[self.indices] == 0).any():
             return None  # a corner with no area around its point: flat shading
         return normals[self.indices] / length[self.indices]
 
-    def cage(self, face_mask, st_name, color_primvar, name):
+    def cage(self, face_mask, st_name, color_primvar, name, keys=None):
         """The subdivision cage (Cage) whose faces in `face_mask` this part renders: faces of
         fewer than 3 points and faces on NaN points leave the topology; holes and the other
-        parts' faces stay in it (they shape the surface) but are not rendered."""
+        parts' faces stay in it (they shape the surface) but are not rendered. `keys`: the
+        points at the shutter's keys, where they move."""
         mesh, time = self.mesh, self.time
         scheme = mesh.GetSubdivisionSchemeAttr().Get(time) or "catmullClark"
         counts = self.counts
@@ -205,6 +210,7 @@ class MeshData:
         points = np.where(finite[:, None], self.points, 0.0)
         c = Cage(scheme, _BOUNDARY.get(boundary, "edge_and_corner"), points, face_counts,
                  indices, (face_mask & self.face_keep)[usable])
+        c.point_keys = keys
         crease_indices = np.asarray(mesh.GetCreaseIndicesAttr().Get(time) or [], np.int64)
         lengths = np.asarray(mesh.GetCreaseLengthsAttr().Get(time) or [], np.int64)
         sharpness = np.asarray(mesh.GetCreaseSharpnessesAttr().Get(time) or [], np.float64)
@@ -244,14 +250,17 @@ class MeshData:
             c.colors = np.concatenate([colors[order], np.ones((len(order), 1))], 1)
         return c
 
-    def build(self, face_mask, st_name, color_primvar, name):
-        """(positions, triangles, normals, uvs, colors) of the faces in `face_mask`, welded,
-        or None when no triangle is left."""
+    def build(self, face_mask, st_name, color_primvar, name, keys=None):
+        """(positions, triangles, normals, uvs, colors, deformation) of the faces in
+        `face_mask`, welded, or None when no triangle is left. With `keys` (the points at the
+        shutter's keys), the deformation is (positions, normals) at each key, normals None
+        where the mesh keeps its authored ones; else None."""
         tri = self.corner_triangles[face_mask[self.face_of_triangle]]
         if not len(tri):
             return None
         normals = None if self.deformed or self.subdivided() else self._primvar("normals", 3)
-        if normals is None and (self.deformed or self.subdivided()):
+        smooth = normals is None and (self.deformed or self.subdivided())
+        if smooth:
             normals = self._smooth_normals()
         uvs = self._primvar(st_name, 2) if st_name else None
         if st_name and uvs is None:
@@ -289,7 +298,20 @@ class MeshData:
         out_colors = None
         if colors is not None:
             out_colors = np.concatenate([colors[corners], np.ones((len(corners), 1))], 1)
-        return positions, triangles, out_normals, out_uvs, out_colors
+        deformation = None
+        if keys is not None:
+            point_of_vertex = self.indices[corners]
+            key_normals = None
+            if out_normals is not None and smooth:
+                key_normals = []
+                for k in keys:
+                    n = self._smooth_normals(k)
+                    if n is None:
+                        key_normals = None
+                        break
+                    key_normals.append(n[corners])
+            deformation = ([k[point_of_vertex] for k in keys], key_normals)
+        return positions, triangles, out_normals, out_uvs, out_colors, deformation
 
 
     def _weld_by_point(self, used, key):

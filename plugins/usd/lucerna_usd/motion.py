@@ -9,9 +9,12 @@ RenderSettings' `disableMotionBlur` (and the older `instantaneousShutter`) close
 
 Transforms are sampled at `KEYS` evenly spaced time codes from the shutter's opening to its
 closing; lucerna interpolates between them (translation and stretch linearly, rotation by
-slerp).
+slerp). A mesh's points are sampled at the same time codes where they change (points time
+samples, `velocities` and `accelerations` by UsdGeom's rules, skinning) and interpolated
+linearly (deformation blur).
 """
 
+import numpy as np
 from pxr import Usd, UsdGeom
 
 from . import render_settings as usd_render
@@ -67,3 +70,35 @@ def times(time, open_close):
     open_, close = open_close
     base = time.GetValue()
     return [Usd.TimeCode(base + open_ + (close - open_) * k / (KEYS - 1)) for k in range(KEYS)]
+
+
+def point_keys(mesh, times, base, skinned_points):
+    """The points of UsdGeom.Mesh `mesh` at the shutter's time codes `times`, in its own space
+    ((N, 3) float64 arrays), or None where they do not move. A skinned mesh's are
+    `skinned_points(time, rest)` of its points at each time; others' follow their time
+    samples, or their `velocities` and `accelerations` from the frame's sample at `base`
+    (UsdGeom.PointBased.ComputePointsAtTimes). Returns (keys, reason): keys None and a reason
+    where they change their count (the topology changes), which is not blurred."""
+    attr = mesh.GetPointsAttr()
+    if skinned_points is not None:
+        keys = [skinned_points(t, np.asarray(attr.Get(t) or [], np.float64).reshape(-1, 3))
+                for t in times]
+    elif attr.ValueMightBeTimeVarying() or mesh.GetVelocitiesAttr().HasAuthoredValue():
+        # UsdGeom holds the frame's points where the samples' counts differ: say so.
+        counts = {len(attr.Get(t) or []) for t in times}
+        if len(counts) != 1:
+            return None, f"its point count changes over the shutter ({min(counts)} to {max(counts)})"
+        computed = mesh.ComputePointsAtTimes(times, base)
+        if not computed or len(computed) != len(times):
+            return None, "its points cannot be computed over the shutter"
+        keys = [np.asarray(k, np.float64).reshape(-1, 3) for k in computed]
+    else:
+        return None, None
+    counts = {len(k) for k in keys}
+    if len(counts) != 1:
+        return None, f"its point count changes over the shutter ({min(counts)} to {max(counts)})"
+    if any(not np.isfinite(k).all() for k in keys):
+        return None, "its points over the shutter are not finite"
+    if all(np.array_equal(k, keys[0]) for k in keys[1:]):
+        return None, None
+    return keys, None

@@ -100,9 +100,11 @@ class SceneWriter:
         self._size += raw.nbytes
         return view
 
-    def add_mesh(self, name, material, positions, triangles, normals=None, uvs=None, colors=None):
+    def add_mesh(self, name, material, positions, triangles, normals=None, uvs=None, colors=None,
+                 deformation=None):
         """Adds a triangle mesh (object space, counter-clockwise front faces); returns its
-        index. `uvs` are glTF-style (v down), `colors` linear RGBA."""
+        index. `uvs` are glTF-style (v down), `colors` linear RGBA; `deformation` is
+        (positions, normals or None) at the shutter's keys for a mesh that deforms."""
         self.meshes.append({
             "name": name,
             "material": int(material),
@@ -113,6 +115,12 @@ class SceneWriter:
             "colors": None if colors is None else self._view(colors, "<f4", 4),
             "triangles": self._view(triangles, "<u4", 3),
         })
+        if deformation is not None:
+            key_positions, key_normals = deformation
+            entry = {"positions": [self._view(k, "<f4", 3) for k in key_positions]}
+            if key_normals is not None and normals is not None:
+                entry["normals"] = [self._view(k, "<f4", 3) for k in key_normals]
+            self.meshes[-1]["deformation"] = entry
         return len(self.meshes) - 1
 
     def add_subdivision(self, mesh, cage):
@@ -142,6 +150,8 @@ class SceneWriter:
             entry["uvs"] = self._view(cage.uvs, "<f4", 2)
         if cage.colors is not None:
             entry["colors"] = self._view(cage.colors, "<f4", 4)
+        if cage.point_keys is not None:
+            entry["point_keys"] = [self._view(k, "<f4", 3) for k in cage.point_keys]
         self.subdivision_surfaces.append(entry)
 
     def add_instances(self, name, mesh, matrices, motion=None):

@@ -3,6 +3,7 @@ while it is open are sampled at evenly spaced time codes over it, through the hi
 for meshes (instances) and cameras; what does not move gets no keys."""
 
 import numpy as np
+import pytest
 
 from lucerna_usd.motion import KEYS
 
@@ -157,3 +158,141 @@ def test_lucerna_renders_the_stage_blurred_with_its_vectors(stage_file, tmp_path
     assert shutter == "-0.25,0.25" and blurred_u.max() > 1.0, (shutter, blurred_u.max())
     shutter, sharp_u = render("closed.exr", "--shutter", "0,0")
     assert shutter == "-0.5,0.5 without blur" and sharp_u.max() > 1.0, (shutter, sharp_u.max())
+
+
+DEFORMING = '''def Xform "World" {
+    def Mesh "Sampled" {
+        uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points.timeSamples = {
+            0: [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)],
+            10: [(0, 0, 0), (11, 0, 0), (11, 1, 0), (0, 1, 0)],
+        }
+    }
+    def Mesh "Flowing" {
+        uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points.timeSamples = { 4: [(0, 0, 2), (1, 0, 2), (1, 1, 2), (0, 1, 2)] }
+        vector3f[] velocities.timeSamples = { 4: [(0, 0, 0), (0, 0, 0), (0, 24, 0), (0, 24, 0)] }
+        vector3f[] accelerations.timeSamples = { 4: [(0, 0, 0), (0, 0, 0), (0, 0, 0), (576, 0, 0)] }
+    }
+    def Mesh "Cage" {
+        int[] faceVertexCounts = [4]
+        int[] faceVertexIndices = [0, 1, 2, 3]
+        point3f[] points.timeSamples = {
+            0: [(0, 0, 4), (1, 0, 4), (1, 1, 4), (0, 1, 4)],
+            10: [(0, 0, 14), (1, 0, 14), (1, 1, 14), (0, 1, 14)],
+        }
+    }
+    def Mesh "Growing" {
+        uniform token subdivisionScheme = "none"
+        int[] faceVertexCounts.timeSamples = { 0: [3], 4.25: [4] }
+        int[] faceVertexIndices.timeSamples = { 0: [0, 1, 2], 4.25: [0, 1, 2, 3] }
+        point3f[] points.timeSamples = {
+            0: [(0, 0, 6), (1, 0, 6), (1, 1, 6)],
+            4.25: [(0, 0, 6), (1, 0, 6), (1, 1, 6), (0, 1, 6)],
+        }
+    }
+}
+'''
+
+
+def _keys(scene, mesh):
+    return [scene.array(v, "<f4", 3) for v in mesh["deformation"]["positions"]]
+
+
+def test_deforming_points_are_sampled_over_the_shutter(stage_file, converted):
+    """Points time samples are interpolated at the shutter's keys, velocities and
+    accelerations extrapolate from the frame's sample (UsdGeom: p + v dt + a dt^2 / 2, in
+    seconds at 24 time codes a second), a subdivision cage carries its point keys, and a
+    mesh whose point count changes over the shutter keeps the frame's shape with a
+    warning."""
+    scene = converted(stage_file(DEFORMING, name="deforming.usda"), frame=4, shutter=(-0.5, 0.5))
+    times = [3.5 + k / (KEYS - 1) for k in range(KEYS)]
+    sampled = scene.mesh("/World/Sampled")
+    keys = _keys(scene, sampled)
+    assert len(keys) == KEYS
+    frame = scene.positions(sampled)
+    for key, t in zip(keys, times):
+        # The vertices sit where the frame's do, moved along x as the samples move them.
+        moved = frame.copy()
+        moved[frame[:, 0] > 0.5, 0] = 1 + t
+        assert np.allclose(key, moved, atol=1e-5), (t, key)
+    flowing = scene.mesh("/World/Flowing")
+    frame = scene.positions(flowing)
+    for key, t in zip(_keys(scene, flowing), times):
+        dt = (t - 4) / 24
+        top = frame[:, 1] > 0.5
+        expected = frame.copy()
+        expected[top, 1] += 24 * dt
+        # Only the vertex at (0, 1) accelerates, along x.
+        accelerated = top & (frame[:, 0] < 0.5)
+        expected[accelerated, 0] += 0.5 * 576 * dt * dt
+        assert np.allclose(key, expected, atol=1e-5), (t, key, expected)
+    cage = next(s for s in scene["subdivision_surfaces"]
+                if scene["meshes"][s["mesh"]]["name"] == "/World/Cage")
+    cage_keys = [scene.array(v, "<f4", 3) for v in cage["point_keys"]]
+    assert [round(float(k[0, 2]), 5) for k in cage_keys] == [round(4 + t, 5) for t in times]
+    assert "deformation" not in scene.mesh("/World/Growing")
+    assert scene.warnings_about("point count changes over the shutter")
+    still = converted(stage_file(DEFORMING, name="still.usda"), frame=4, shutter=(0.0, 0.0))
+    assert all("deformation" not in m for m in still["meshes"])
+
+
+@pytest.mark.parametrize("scheme", ["none", "catmullClark"])
+def test_lucerna_renders_deforming_points_as_moving_xforms(stage_file, tmp_path, scheme):
+    """End to end: a quad whose points slide over the shutter renders the image of the same
+    quad slid by its transform (both keyed at 9 time codes, the same linear motion), and
+    not the frame's sharp one; as a polygon mesh and as a subdivision surface (whose point
+    keys lucerna refines)."""
+    import subprocess
+
+    import OpenImageIO as oiio
+
+    from conftest import lucerna_bin
+
+    camera = '''    def Camera "Shot" {
+        double shutter:open = -0.5
+        double shutter:close = 0.5
+        double3 xformOp:translate = (0.5, 0.5, 6)
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }
+'''
+    quad = "int[] faceVertexCounts = [4]\n        int[] faceVertexIndices = [0, 1, 2, 3]"
+    by_points = f'''def Xform "World" {{
+    def Mesh "Quad" {{
+        uniform token subdivisionScheme = "{scheme}"
+        {quad}
+        point3f[] points.timeSamples = {{
+            0: [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)],
+            10: [(2, 0, 0), (3, 0, 0), (3, 1, 0), (2, 1, 0)],
+        }}
+    }}
+{camera}}}
+'''
+    by_xform = f'''def Xform "World" {{
+    def Mesh "Quad" {{
+        uniform token subdivisionScheme = "{scheme}"
+        {quad}
+        point3f[] points = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+        double3 xformOp:translate.timeSamples = {{ 0: (0, 0, 0), 10: (2, 0, 0) }}
+        uniform token[] xformOpOrder = ["xformOp:translate"]
+    }}
+{camera}}}
+'''
+
+    def render(text, name, *flags):
+        path = stage_file(text, name=f"{name}-{scheme}.usda")
+        out = tmp_path / f"{name}-{scheme}.exr"
+        subprocess.run([lucerna_bin(), "render", str(path), "--frame", "4", "--resolution", "48x48",
+                        "--spp", "16", "--env", "1,1,1", "-q", "-o", str(out), *flags],
+                       check=True, capture_output=True)
+        return oiio.ImageBuf(str(out)).get_pixels(oiio.FLOAT)[:, :, :3]
+
+    points = render(by_points, "points")
+    xform = render(by_xform, "xform")
+    sharp = render(by_points, "sharp", "--shutter", "0,0")
+    assert np.abs(points - xform).max() < 1e-3, np.abs(points - xform).max()
+    assert np.abs(points - sharp).max() > 0.1

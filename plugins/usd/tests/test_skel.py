@@ -122,3 +122,23 @@ def test_the_arm_bends_between_frames_as_computed_by_hand(stage_file, converted)
     assert has(bent, (4.75, 0.75, 0))
     assert has(bent, (4.5, 0, 0.5))
     assert not has(bent, (4.5, 2, 0))
+
+
+def test_an_open_shutter_gives_the_skinned_points_at_its_keys(stage_file, converted):
+    """Deformation blur: with the shutter open, the strip's points at each key are the
+    points a conversion at that key's time gives (same vertices, same order), and the
+    frame's own points are the middle key."""
+    from lucerna_usd.motion import KEYS
+
+    path = stage_file(ARM)
+    blurred = converted(path, frame=5, shutter=(-0.5, 0.5))
+    mesh = blurred.mesh("/World/Strip")
+    keys = [blurred.array(v, "<f4", 3) for v in mesh["deformation"]["positions"]]
+    assert len(keys) == KEYS
+    assert np.array_equal(keys[KEYS // 2], blurred.positions(mesh))
+    for k, key in enumerate(keys):
+        at = converted(path, frame=4.5 + k / (KEYS - 1))
+        expected = at.positions(at.mesh("/World/Strip"))
+        assert np.allclose(key, expected, atol=1e-5), (k, key, expected)
+    # The strip's normals are recomputed from each key's points (it is skinned).
+    assert len(mesh["deformation"]["normals"]) == KEYS

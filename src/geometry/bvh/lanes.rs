@@ -176,7 +176,10 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
                     let closest = &mut self.closest[lane];
-                    if let Some(hit) = s.shape.intersect(&self.rays.ray(lane), closest.bound()) {
+                    if let Some(hit) =
+                        s.shape
+                            .intersect(&self.rays.ray(lane), closest.bound(), &self.bvh.corners)
+                    {
                         let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
                         closest.consider(hit, s.prim, s.flags, accept);
                         self.bound[lane] = closest.bound();
@@ -280,7 +283,7 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
                 for lane in Lanes::new(active) {
                     let ray = self.rays.ray(lane);
                     let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                    if let Some(hit) = s.shape.intersect(&ray, ray.tmax)
+                    if let Some(hit) = s.shape.intersect(&ray, ray.tmax, &self.bvh.corners)
                         && accepted(&hit, s.prim, s.flags, accept)
                     {
                         self.answer(lane);

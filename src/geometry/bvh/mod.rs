@@ -51,11 +51,13 @@ struct LeafShape {
     flags: u8,
 }
 
-/// The analytic shapes.
+/// The shapes tested one by one: the analytic ones, and triangles that change shape over
+/// the shutter (their corners at `keys` keys from [`Bvh::corners`]`[first]` on).
 #[derive(Clone, Copy, Debug)]
 enum Shape {
     Sphere { centre: Vec3, radius: f32 },
     Quadric(quadric::Quadric),
+    Deforming { first: u32, keys: u32 },
 }
 
 /// A leaf's label in the wide BVH: its blocks (or, without triangles, its shapes) start at
@@ -69,8 +71,10 @@ pub struct Bvh {
     bvh: WideBvh,
     /// Leaves' triangles, in leaf order.
     blocks: Vec<LeafTriangles>,
-    /// Leaves' spheres and quadrics, in leaf order.
+    /// Leaves' spheres, quadrics and deforming triangles, in leaf order.
     shapes: Vec<LeafShape>,
+    /// The corners of deforming triangles at their keys (`geometry::deformation`).
+    corners: Vec<[Vec3; 3]>,
 }
 
 impl Bvh {
@@ -85,10 +89,20 @@ impl Bvh {
     /// the build needs them (their bounds, then the leaves) instead of held in an array
     /// through the build's peak: 40 bytes a primitive less at that peak.
     pub fn build_from(flags: &[u8], primitive: impl Fn(u32) -> Primitive + Sync) -> Self {
+        Self::build_deforming(flags, primitive, Vec::new())
+    }
+
+    /// [`Bvh::build_from`] where some primitives are deforming triangles
+    /// ([`Primitive::Deforming`]), whose corners at their keys `corners` holds.
+    pub fn build_deforming(
+        flags: &[u8],
+        primitive: impl Fn(u32) -> Primitive + Sync,
+        corners: Vec<[Vec3; 3]>,
+    ) -> Self {
         use rayon::prelude::*;
         let aabbs: Vec<Aabb> = (0..flags.len() as u32)
             .into_par_iter()
-            .map(|i| primitive(i).aabb())
+            .map(|i| primitive(i).aabb(&corners))
             .collect();
         let mut bvh = WideBvh::build(&aabbs, PRIMITIVES_PER_LEAF, NODE_COST);
         drop(aabbs);
@@ -109,6 +123,11 @@ impl Bvh {
                     }),
                     Primitive::Quadric(q) => shapes.push(LeafShape {
                         shape: Shape::Quadric(q),
+                        prim,
+                        flags,
+                    }),
+                    Primitive::Deforming { first, keys, .. } => shapes.push(LeafShape {
+                        shape: Shape::Deforming { first, keys },
                         prim,
                         flags,
                     }),
@@ -143,6 +162,7 @@ impl Bvh {
             bvh,
             blocks,
             shapes,
+            corners,
         }
     }
 
@@ -152,6 +172,7 @@ impl Bvh {
         self.bvh.bytes()
             + self.blocks.len() * size_of::<LeafTriangles>()
             + self.shapes.len() * size_of::<LeafShape>()
+            + self.corners.len() * size_of::<[Vec3; 3]>()
     }
 
     /// A leaf's triangle blocks and shapes from its label.
@@ -252,7 +273,7 @@ impl Bvh {
                 }
             }
         }
-        shapes_closest(shapes, ray, closest, accept);
+        shapes_closest(shapes, &self.corners, ray, closest, accept);
         if closest.tmax < before {
             LeafResult::Closer(closest.tmax)
         } else {
@@ -282,7 +303,7 @@ impl Bvh {
                 }
             }
         }
-        shapes_occlude(shapes, ray, accept)
+        shapes_occlude(shapes, &self.corners, ray, accept)
     }
 }
 
@@ -290,12 +311,13 @@ impl Bvh {
 #[inline(always)]
 fn shapes_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
     shapes: &[LeafShape],
+    corners: &[[Vec3; 3]],
     ray: &Ray,
     closest: &mut Closest,
     accept: &mut F,
 ) {
     for s in shapes {
-        if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
+        if let Some(hit) = s.shape.intersect(ray, closest.bound(), corners) {
             closest.consider(hit, s.prim, s.flags, accept);
         }
     }
@@ -305,12 +327,13 @@ fn shapes_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
 #[inline(always)]
 fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
     shapes: &[LeafShape],
+    corners: &[[Vec3; 3]],
     ray: &Ray,
     accept: &mut F,
 ) -> bool {
     shapes.iter().any(|s| {
         s.shape
-            .intersect(ray, ray.tmax)
+            .intersect(ray, ray.tmax, corners)
             .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
     })
 }
@@ -379,14 +402,29 @@ impl Closest {
 }
 
 impl Shape {
-    /// The shape's hit along `ray` in `(0, tmax)`.
+    /// The shape's hit along `ray` in `(0, tmax)`; a deforming triangle's is where it is
+    /// at the ray's time (its corners at its keys in `corners`).
     #[inline(always)]
-    fn intersect(&self, ray: &Ray, tmax: f32) -> Option<PrimitiveHit> {
+    fn intersect(&self, ray: &Ray, tmax: f32, corners: &[[Vec3; 3]]) -> Option<PrimitiveHit> {
         match *self {
             Self::Sphere { centre, radius } => sphere::intersect(ray, centre, radius, tmax),
             Self::Quadric(q) => q.intersect(ray, tmax),
+            Self::Deforming { first, keys } => {
+                deforming_hit(ray, tmax, &corners[first as usize..(first + keys) as usize])
+            }
         }
     }
+}
+
+/// The hit along `ray` in `(0, tmax)` of the deforming triangle whose corners at its keys
+/// are `keys`, where it is at the ray's time. Out of line: traversals of still geometry
+/// never call it.
+#[cold]
+#[inline(never)]
+fn deforming_hit(ray: &Ray, tmax: f32, keys: &[[Vec3; 3]]) -> Option<PrimitiveHit> {
+    let tri = super::deformation::triangle_at(keys, ray.time);
+    super::triangle::intersect(&RayShear::new(ray), &TriangleBlock::new(&[tri]), tmax)
+        .map(|hits| hits.get(0))
 }
 
 /// Whether a hit on primitive `prim` with intersection `flags` counts: not on a culled back,
@@ -615,7 +653,7 @@ pub(crate) mod tests {
                         Primitive::Sphere { centre, radius } => {
                             sphere::intersect(&ray, centre, radius, tmax)?
                         }
-                        Primitive::Quadric(_) => unreachable!(),
+                        Primitive::Quadric(_) | Primitive::Deforming { .. } => unreachable!(),
                     };
                     let culled = flags[i] == CULL_BACK && !hit.front;
                     let rejected = flags[i] == ALPHA_TESTED && !accept(i as u32, &hit);

@@ -1,15 +1,19 @@
 //! Meshes: triangle primitives (strips and fans converted; points and lines skipped) with
 //! their attributes checked and repaired, spheres that lucerna's extras mark, skinning and
-//! morph targets applied at the render's pose, tangents completed.
+//! morph targets applied at the render's pose (and at the shutter's keys for deformation
+//! blur), tangents completed.
 
 use super::super::{skinning, tangents};
 use super::Importer;
 use super::accessors::finite_or;
+use super::deformation::{Deforming, Skin};
 use crate::error::Result;
+use crate::geometry::deformation::Deformation;
 use crate::scene::{self, Instance, Mesh};
 use glam::{DMat4, DVec3, Vec2, Vec3, Vec4};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
+use std::collections::HashMap;
 
 impl<'a> Importer<'a> {
     /// Whether the mesh's `extras` make it an analytic sphere:
@@ -108,27 +112,29 @@ impl<'a> Importer<'a> {
             }
             None => vec![DMat4::IDENTITY; joints.len()],
         };
-        let mut joint_matrices = Vec::with_capacity(joints.len());
-        for (j, &joint) in joints.iter().enumerate() {
-            let world = match self.world_of.get(&joint) {
-                Some(w) => *w,
-                None => {
-                    return Err(self.err(
-                        format!("{element}.joints[{j}]"),
-                        format!("node {joint} is not in the rendered scene"),
-                    ));
-                }
-            };
-            joint_matrices.push(world * inverse_bind[j]);
+        if let Some(j) = joints.iter().position(|j| !self.world_of.contains_key(j)) {
+            return Err(self.err(
+                format!("{element}.joints[{j}]"),
+                format!("node {} is not in the rendered scene", joints[j]),
+            ));
         }
+        let skin = Skin {
+            joints,
+            inverse_bind,
+        };
+        let joint_matrices = skin.matrices(&self.world_of);
         if joint_matrices.iter().any(|m| !m.is_finite()) {
             return Err(self.err(&element, "a joint matrix is not finite"));
         }
         let weights = self.node_weights(&node, &mesh);
         for primitive in mesh.primitives() {
-            if let Some(m) =
-                self.deformed(&node, &mesh, &primitive, &weights, Some(&joint_matrices))?
-            {
+            if let Some(m) = self.deformed(
+                &node,
+                &mesh,
+                &primitive,
+                &weights,
+                Some((&skin, &joint_matrices)),
+            )? {
                 self.scene.instances.push(Instance {
                     name: name.to_string(),
                     mesh: m,
@@ -148,7 +154,7 @@ impl<'a> Importer<'a> {
         mesh: &gltf::Mesh,
         primitive: &gltf::Primitive,
         weights: &[f32],
-        joints: Option<&[DMat4]>,
+        skin: Option<(&Skin, &[DMat4])>,
     ) -> Result<Option<u32>> {
         if !matches!(
             primitive.mode(),
@@ -166,10 +172,14 @@ impl<'a> Importer<'a> {
             return Ok(None);
         };
         let vertices = out.positions.len();
+        // With the shutter open on an animation, the mesh is posed again at its keys.
+        let sampled = self.samples_deformation();
+        let rest = sampled.then(|| (out.positions.clone(), out.normals.clone()));
+        let mut targets = Vec::new();
         let mut notes: Vec<String> = Vec::new();
         let buffers = &self.buffers;
         let reader = primitive.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-        if weights.iter().any(|&w| w != 0.0) {
+        if weights.iter().any(|&w| w != 0.0) || (sampled && primitive.morph_targets().len() > 0) {
             for (t, target) in primitive.morph_targets().enumerate() {
                 for (name, acc) in [
                     ("POSITION", target.positions()),
@@ -194,7 +204,7 @@ impl<'a> Importer<'a> {
                     }
                 }
             }
-            let targets: Vec<skinning::MorphTarget> = reader
+            targets = reader
                 .read_morph_targets()
                 .map(|(p, n, t)| skinning::MorphTarget {
                     positions: p.map(|it| it.map(Vec3::from_array).collect()),
@@ -211,7 +221,8 @@ impl<'a> Importer<'a> {
             }
             skinning::morph(&mut out, &targets, weights);
         }
-        if let Some(joints) = joints {
+        let mut skinned = None;
+        if let Some((skin, joints)) = skin {
             let mut influences: Vec<skinning::Influences> = vec![Vec::new(); vertices];
             let mut set = 0;
             while let (Some(j), Some(w)) = (
@@ -265,13 +276,35 @@ impl<'a> Importer<'a> {
                     "{bad} joint influences name a joint the skin does not have and are ignored"
                 ));
             }
+            skinned = Some((skin.clone(), influences));
         }
         for note in notes {
             self.warn(&element, note);
         }
-        self.complete_tangents(&mut out, &element);
+        let index = self.scene.meshes.len() as u32;
+        match rest {
+            // Tangents are completed once the keys are known (completing them may split
+            // vertices, the keys' too).
+            Some((positions, normals)) => {
+                let (skin, influences) = skinned.unzip();
+                self.deforming.push(Deforming {
+                    mesh: index,
+                    node: node.index(),
+                    gltf_mesh: mesh.index(),
+                    element,
+                    skin,
+                    deformer: skinning::Deformer {
+                        positions,
+                        normals,
+                        targets,
+                        influences,
+                    },
+                });
+            }
+            None => self.complete_tangents(&mut out, &element),
+        }
         self.scene.meshes.push(out);
-        Ok(Some((self.scene.meshes.len() - 1) as u32))
+        Ok(Some(index))
     }
 
     pub(super) fn primitive(
@@ -434,6 +467,7 @@ impl<'a> Importer<'a> {
             colors,
             triangles,
             material,
+            deformation: None,
         };
         // The file's tangents where a normal map or anisotropy needs them (MikkTSpace's
         // are made by complete_tangents, after any deformation: it splits vertices).
@@ -486,6 +520,59 @@ pub(super) fn assemble_triangles(mode: Mode, indices: &[u32]) -> Vec<[u32; 3]> {
     tris.into_iter()
         .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
         .collect()
+}
+
+/// Deformation blur of skinned and morphed meshes: with the shutter open on an animation,
+/// each deformed mesh is posed again at the keys of the shutter (the joints' world transforms
+/// and the morph weights sampled there) into its `Deformation`; a mesh whose vertices do not
+/// move keeps none. Tangents are completed after, so that the vertices they split are split
+/// in every key alike.
+impl<'a> Importer<'a> {
+    /// Whether deformed meshes are posed at the shutter's keys: the shutter is open and the
+    /// file is animated.
+    pub(super) fn samples_deformation(&self) -> bool {
+        self.shutter.is_some() && self.doc.animations().next().is_some()
+    }
+
+    /// Each deformed mesh's positions and normals with the pose at one key of the shutter
+    /// (the nodes' world transforms `world`, the morph weights sampled with them), appended
+    /// to its `keys`.
+    pub(super) fn pose_deforming(&self, world: &HashMap<usize, DMat4>, keys: &mut [Deformation]) {
+        for (d, keys) in self.deforming.iter().zip(keys) {
+            let node = self.doc.nodes().nth(d.node).expect("visited node");
+            let mesh = self.doc.meshes().nth(d.gltf_mesh).expect("the node's mesh");
+            let weights = self.node_weights(&node, &mesh);
+            let joints = d.skin.as_ref().map(|s| s.matrices(world));
+            let (p, n) = d.deformer.pose(&weights, joints.as_deref());
+            keys.positions.push(p);
+            if let Some(n) = n {
+                keys.normals.get_or_insert_with(Vec::new).push(n);
+            }
+        }
+    }
+
+    /// Gives each deformed mesh its `keys` (from [`Importer::pose_deforming`]) where its
+    /// vertices move, then completes its tangents.
+    pub(super) fn finish_deforming(&mut self, keys: Vec<Deformation>) {
+        let deforming = std::mem::take(&mut self.deforming);
+        let mut keys = keys.into_iter();
+        for d in deforming {
+            let mut mesh = std::mem::take(&mut self.scene.meshes[d.mesh as usize]);
+            if let Some(deformation) = keys.next() {
+                let vertices = mesh.positions.len();
+                match deformation.check(vertices, mesh.normals.is_some()) {
+                    Ok(()) if deformation.moves() => mesh.deformation = Some(deformation),
+                    Ok(()) => {}
+                    Err(reason) => self.warn(
+                        &d.element,
+                        format!("its deformation over the shutter is not blurred: {reason}"),
+                    ),
+                }
+            }
+            self.complete_tangents(&mut mesh, &d.element);
+            self.scene.meshes[d.mesh as usize] = mesh;
+        }
+    }
 }
 
 #[cfg(test)]

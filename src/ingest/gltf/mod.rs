@@ -16,6 +16,7 @@
 
 mod accessors;
 mod camera;
+mod deformation;
 pub mod delivery;
 mod document;
 mod lights;
@@ -113,6 +114,7 @@ pub fn import_with(
         placed: Vec::new(),
         placed_cameras: Vec::new(),
         unblurred: Vec::new(),
+        deforming: Vec::new(),
         unsupported_material_extensions: Default::default(),
         texture_plan: Default::default(),
     };
@@ -163,6 +165,9 @@ pub(crate) struct Importer<'a> {
     /// With a shutter, the nodes of lights and analytic spheres (which do not move), and
     /// what they are, for a warning where they would.
     unblurred: Vec<(usize, &'static str)>,
+    /// With the shutter open on an animation, the deformed meshes, posed again at its keys
+    /// ([`Importer::sample_motion`]).
+    deforming: Vec<deformation::Deforming>,
     /// Unsupported extensions a material uses → the materials' names (one warning each).
     unsupported_material_extensions: std::collections::BTreeMap<String, Vec<String>>,
     /// Which images are read through a tile cache (the textures do not fit in the texture

@@ -288,7 +288,9 @@ impl<'a> Importer<'a> {
             } else {
                 let locals = self.instance_transforms(&node, DMat4::IDENTITY)?;
                 for primitive in mesh.primitives() {
-                    let m = if weights.iter().any(|&w| w != 0.0) {
+                    let morphs = weights.iter().any(|&w| w != 0.0)
+                        || (self.samples_deformation() && primitive.morph_targets().len() > 0);
+                    let m = if morphs {
                         self.deformed(&node, &mesh, &primitive, &weights, None)?
                     } else {
                         self.primitive(&mesh, &primitive)?
@@ -334,15 +336,19 @@ impl<'a> Importer<'a> {
 
     /// Gives each instance and camera that moves while the shutter (`open`, `close`,
     /// seconds) is open its transforms at [`MOTION_KEYS`] evenly spaced times of it: the
-    /// animations sampled there, the node hierarchy composed again. Skinned and morphed
-    /// shapes keep the frame's (deformation is not blurred), and so do lights and analytic
-    /// spheres, with a warning where they move; the frame's pose is restored after.
+    /// animations sampled there, the node hierarchy composed again; skinned and morphed
+    /// meshes are posed again at the same times (`deformation`). Lights and analytic spheres
+    /// keep the frame's, with a warning where they move; the frame's pose is restored after.
     pub(super) fn sample_motion(
         &mut self,
         scene: gltf::Scene<'a>,
         (open, close): (f64, f64),
     ) -> Result<()> {
-        if self.placed.is_empty() && self.placed_cameras.is_empty() && self.unblurred.is_empty() {
+        if self.placed.is_empty()
+            && self.placed_cameras.is_empty()
+            && self.unblurred.is_empty()
+            && self.deforming.is_empty()
+        {
             return Ok(());
         }
         // Sampling again would repeat the frame's warnings about clips.
@@ -354,6 +360,7 @@ impl<'a> Importer<'a> {
         let mut keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed.len()];
         let mut camera_keys = vec![Vec::with_capacity(MOTION_KEYS); self.placed_cameras.len()];
         let mut unblurred_keys = vec![Vec::with_capacity(MOTION_KEYS); self.unblurred.len()];
+        let mut deformation_keys = vec![Default::default(); self.deforming.len()];
         for k in 0..MOTION_KEYS {
             let time = open + (close - open) * k as f64 / (MOTION_KEYS - 1) as f64;
             self.pose.clear();
@@ -375,9 +382,11 @@ impl<'a> Importer<'a> {
             for (&(node, _), keys) in self.unblurred.iter().zip(&mut unblurred_keys) {
                 keys.push(world[&node]);
             }
+            self.pose_deforming(&world, &mut deformation_keys);
         }
         self.scene.warnings.truncate(warnings);
         (self.pose, self.morph_weights) = (pose, weights);
+        self.finish_deforming(deformation_keys);
         for ((camera, node), keys) in std::mem::take(&mut self.placed_cameras)
             .into_iter()
             .zip(camera_keys)
