@@ -61,7 +61,10 @@ class GltfWriter:
             acc["max"] = [max(v[k] for v in values) for k in range(3)]
         return self._list("accessors", acc)
 
-    def mesh(self, name, positions, triangles, material, normals=None, extras=None, uvs=None):
+    def mesh(self, name, positions, triangles, material, normals=None, extras=None, uvs=None,
+             targets=None):
+        """A mesh of one primitive; `targets`: morph targets, each a list of position
+        displacements."""
         attributes = {"POSITION": self.accessor(positions, "VEC3")}
         if normals is not None:
             attributes["NORMAL"] = self.accessor(normals, "VEC3")
@@ -70,6 +73,9 @@ class GltfWriter:
         component = 5123 if len(positions) < 65536 else 5125
         indices = self.accessor([i for t in triangles for i in t], "SCALAR", component)
         mesh = {"name": name, "primitives": [{"attributes": attributes, "indices": indices, "material": material}]}
+        if targets:
+            mesh["primitives"][0]["targets"] = [{"POSITION": self.accessor(t, "VEC3")} for t in targets]
+            mesh["weights"] = [0.0] * len(targets)
         if extras is not None:
             mesh["extras"] = extras
         return self._list("meshes", mesh)
