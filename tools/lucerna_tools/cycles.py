@@ -153,3 +153,32 @@ def figures(ours, ours_b, cycles_a, cycles_b, regions):
         "relmse_lucerna_vs_cycles": relmse(ours, cycles_a, m),
         "noise_floor": (relmse(cycles_b, cycles_a, m) + relmse(ours_b, ours, m)) / 2}
         for name, m in regions.items()}
+
+
+def lucerna_blur_renders(scene, work, resolution, spp, sky, frame, fps, shutter):
+    """lucerna's renders for a motion blur comparison: seeds 1 and 2 with the shutter
+    `shutter` (OPEN,CLOSE in frames) open at `frame`, and seed 3 without blur (the frozen
+    frame), each with a 1-pixel box filter and a sky of radiance `sky`. Returns (seed 1,
+    seed 2, frozen, seed 1 header)."""
+    common = dict(spp=spp, filter="box", env=",".join([str(sky)] * 3), frame=frame, fps=fps)
+    ours, header, _ = lt.render(scene, work / "a.exr", resolution, seed=1, shutter=shutter, **common)
+    ours_b, _, _ = lt.render(scene, work / "b.exr", resolution, seed=2, shutter=shutter, **common)
+    frozen, _, _ = lt.render(scene, work / "frozen.exr", resolution, seed=3, **common)
+    return ours, ours_b, frozen, header
+
+
+def blur_figures(ours, ours_b, frozen, cycles_a, cycles_b, header, spp, out, sheet):
+    """A motion blur comparison's figures (`figures` over the image and over the pixels the
+    motion changes: where lucerna's blurred frame differs from its frozen one), written to
+    `out`/figures.json and printed, and its contact sheets: `sheet` (lucerna | Cycles) and
+    blurred-and-frozen.png (lucerna blurred | frozen)."""
+    moving = np.abs(ours - frozen).max(axis=-1) > 0.05
+    height, width = moving.shape
+    result = {"spp": spp, "resolution": [width, height], "moving_pixels": int(moving.sum())}
+    result.update(figures(ours, ours_b, cycles_a, cycles_b,
+                          {"image": np.ones(moving.shape, bool), "moving": moving}))
+    result["seconds_lucerna"] = header["lucerna/render_seconds"]
+    (out / "figures.json").write_text(json.dumps(result, indent=1) + "\n")
+    print(json.dumps(result, indent=1))
+    lt.difference_sheet(ours, cycles_a, out / sheet)
+    lt.difference_sheet(ours, frozen, out / "blurred-and-frozen.png")

@@ -20,12 +20,10 @@ and figures.json: relMSE and luminance ratio over the image and over the pixels 
 changes, with the noise floor (each renderer's two seeds against each other).
 """
 import argparse
-import json
 import math
 import tempfile
 from pathlib import Path
 
-import numpy as np
 
 import lucerna_tools as lt
 from lucerna_tools import cycles
@@ -133,17 +131,14 @@ def main():
     width, height = map(int, args.resolution.split("x"))
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    env = ",".join([str(SKY)] * 3)
     shutter = f"{SHUTTER[0]},{SHUTTER[1]}"
     positions, triangles, displacements = banner()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         gltf = work / "deformation.gltf"
         write_gltf(gltf, width, height, positions, triangles, displacements)
-        common = dict(spp=args.spp, filter="box", env=env, frame=FRAME, fps=FPS)
-        ours, header, _ = lt.render(gltf, work / "a.exr", (width, height), seed=1, shutter=shutter, **common)
-        ours_b, _, _ = lt.render(gltf, work / "b.exr", (width, height), seed=2, shutter=shutter, **common)
-        frozen, _, _ = lt.render(gltf, work / "frozen.exr", (width, height), seed=3, **common)
+        ours, ours_b, frozen, header = cycles.lucerna_blur_renders(
+            gltf, work, (width, height), args.spp, SKY, FRAME, FPS, shutter)
         job = {"width": width, "height": height, "spp": args.spp, "sky": SKY, "floor": FLOOR,
                "colour": COLOUR, "sun": SUN, "sun_direction": SUN_DIRECTION,
                "positions": positions, "triangles": triangles, "displacements": displacements,
@@ -151,16 +146,8 @@ def main():
                "fps": FPS, "vfov": VFOV, "camera": CAMERA}
         cycles_a, cycles_b = (cycles.render(work, "deformation_blur", SCENE_SCRIPT, job, seed)
                               for seed in (1, 2))
-    # The pixels motion changes: where the blurred frame differs from the frozen one.
-    moving = np.abs(ours - frozen).max(axis=-1) > 0.05
-    figures = {"spp": args.spp, "resolution": [width, height], "moving_pixels": int(moving.sum())}
-    figures.update(cycles.figures(ours, ours_b, cycles_a, cycles_b,
-                                  {"image": np.ones(moving.shape, bool), "moving": moving}))
-    figures["seconds_lucerna"] = header["lucerna/render_seconds"]
-    (out / "figures.json").write_text(json.dumps(figures, indent=1) + "\n")
-    print(json.dumps(figures, indent=1))
-    lt.difference_sheet(ours, cycles_a, out / "deformation-blur.png")
-    lt.difference_sheet(ours, frozen, out / "blurred-and-frozen.png")
+    cycles.blur_figures(ours, ours_b, frozen, cycles_a, cycles_b, header, args.spp, out,
+                        "deformation-blur.png")
 
 
 if __name__ == "__main__":
