@@ -112,7 +112,8 @@ pub fn refine_subdivision_surfaces(
 
 /// The deformation of subdivision surface `surface` refined at `level` into `refined`: each
 /// of its point keys refined as its points were (the same topology gives the same vertices
-/// in the same order), positions and normals; `None` for a cage that keeps its shape.
+/// in the same order), positions and normals; `None` for a cage that keeps its shape (or,
+/// with a warning, whose keys refine to other vertices).
 fn refined_keys(
     surface: &scene::SubdivisionSurface,
     level: u32,
@@ -137,11 +138,14 @@ fn refined_keys(
         normals: (normals.len() == positions.len() && refined.normals.is_some()).then_some(normals),
         positions,
     };
-    deformation
-        .check(refined.positions.len(), refined.normals.is_some())
-        .ok()
-        .filter(|_| deformation.moves())
-        .map(|()| deformation)
+    if let Err(reason) = deformation.check(refined.positions.len(), refined.normals.is_some()) {
+        log::warn!(
+            "{}: its refined keys over the shutter do not match its refinement ({reason}): it keeps the frame's shape",
+            refined.name
+        );
+        return None;
+    }
+    deformation.moves().then_some(deformation)
 }
 
 /// `mesh` moved by `to_render` (object space to render space), in place: positions, normals
