@@ -175,15 +175,11 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for ClosestLanes<'
         for s in shapes {
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
+                    let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
                     let closest = &mut self.closest[lane];
-                    if let Some(hit) =
-                        s.shape
-                            .intersect(&self.rays.ray(lane), closest.bound(), &self.bvh.corners)
-                    {
-                        let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                        closest.consider(hit, s.prim, s.flags, accept);
-                        self.bound[lane] = closest.bound();
-                    }
+                    let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
+                    self.bvh.shape_closest(s, &ray, shear, closest, accept);
+                    self.bound[lane] = closest.bound();
                 }
                 continue;
             };
@@ -281,11 +277,9 @@ impl<F: FnMut(usize, u32, &PrimitiveHit) -> bool> LaneVisitor for OccludedLanes<
             }
             let Shape::Sphere { centre, radius } = s.shape else {
                 for lane in Lanes::new(active) {
-                    let ray = self.rays.ray(lane);
+                    let (ray, shear) = (self.rays.ray(lane), self.shears.lane(lane));
                     let accept = &mut |prim, hit: &PrimitiveHit| (self.accept)(lane, prim, hit);
-                    if let Some(hit) = s.shape.intersect(&ray, ray.tmax, &self.bvh.corners)
-                        && accepted(&hit, s.prim, s.flags, accept)
-                    {
+                    if self.bvh.shape_occludes(s, &ray, shear, accept) {
                         self.answer(lane);
                         active &= !(1 << lane);
                     }

@@ -51,13 +51,47 @@ struct LeafShape {
     flags: u8,
 }
 
-/// The shapes tested one by one: the analytic ones, and triangles that change shape over
-/// the shutter (their corners at `keys` keys from [`Bvh::corners`]`[first]` on).
+/// The shapes tested one by one: the analytic ones, and up to four triangles that change
+/// shape over the shutter (a [`DeformingBlock`] of [`Bvh::deforming`]), tested together.
 #[derive(Clone, Copy, Debug)]
 enum Shape {
     Sphere { centre: Vec3, radius: f32 },
     Quadric(quadric::Quadric),
-    Deforming { first: u32, keys: u32 },
+    Deforming(u32),
+}
+
+/// Up to four triangles of a leaf that change shape over the shutter: each lane's corners at
+/// its keys are `keys[lane]` entries of [`Bvh::corners`] from `first[lane]` on (no keys: an
+/// empty lane). A ray tests them as one [`TriangleBlock`] made where they are at its time.
+#[derive(Clone, Copy, Debug)]
+struct DeformingBlock {
+    first: [u32; 4],
+    keys: [u32; 4],
+    prims: [u32; 4],
+    flags: [u8; 4],
+}
+
+impl DeformingBlock {
+    /// The ray's hits (`shear` is its) on the block's triangles where they are at shutter
+    /// time `time`, in `(0, tmax)`.
+    #[inline]
+    fn intersect(
+        &self,
+        corners: &[[Vec3; 3]],
+        time: f32,
+        shear: &RayShear,
+        tmax: f32,
+    ) -> Option<super::triangle::BlockHits> {
+        let count = self.keys.iter().take_while(|&&k| k > 0).count();
+        let mut tris = [[Vec3::ZERO; 3]; 4];
+        for (tri, (&first, &keys)) in tris.iter_mut().zip(self.first.iter().zip(&self.keys)) {
+            let (first, keys) = (first as usize, keys as usize);
+            if keys > 0 {
+                *tri = super::deformation::triangle_at(&corners[first..first + keys], time);
+            }
+        }
+        super::triangle::intersect(shear, &TriangleBlock::new(&tris[..count]), tmax)
+    }
 }
 
 /// A leaf's label in the wide BVH: its blocks (or, without triangles, its shapes) start at
@@ -71,8 +105,10 @@ pub struct Bvh {
     bvh: WideBvh,
     /// Leaves' triangles, in leaf order.
     blocks: Vec<LeafTriangles>,
-    /// Leaves' spheres, quadrics and deforming triangles, in leaf order.
+    /// Leaves' spheres, quadrics and blocks of deforming triangles, in leaf order.
     shapes: Vec<LeafShape>,
+    /// The blocks of deforming triangles that [`Shape::Deforming`] indexes.
+    deforming: Vec<DeformingBlock>,
     /// The corners of deforming triangles at their keys (`geometry::deformation`).
     corners: Vec<[Vec3; 3]>,
 }
@@ -107,11 +143,12 @@ impl Bvh {
         let mut bvh = WideBvh::build(&aabbs, PRIMITIVES_PER_LEAF, NODE_COST);
         drop(aabbs);
         let order = std::mem::take(&mut bvh.order);
-        let (mut blocks, mut shapes) = (Vec::new(), Vec::new());
+        let (mut blocks, mut shapes, mut deforming) = (Vec::new(), Vec::new(), Vec::new());
         bvh.relabel_leaves(|first, count| {
             let leaf = &order[first as usize..(first + count) as usize];
             let (first_block, first_shape) = (blocks.len(), shapes.len());
             let mut triangles = Vec::with_capacity(leaf.len());
+            let mut moving = Vec::new();
             for &prim in leaf {
                 let flags = flags[prim as usize];
                 match primitive(prim) {
@@ -126,12 +163,28 @@ impl Bvh {
                         prim,
                         flags,
                     }),
-                    Primitive::Deforming { first, keys, .. } => shapes.push(LeafShape {
-                        shape: Shape::Deforming { first, keys },
-                        prim,
-                        flags,
-                    }),
+                    Primitive::Deforming { first, keys } => moving.push((first, keys, prim, flags)),
                 }
+            }
+            for chunk in moving.chunks(4) {
+                let mut block = DeformingBlock {
+                    first: [0; 4],
+                    keys: [0; 4],
+                    prims: [0; 4],
+                    flags: [0; 4],
+                };
+                for (lane, &(first, keys, prim, flags)) in chunk.iter().enumerate() {
+                    block.first[lane] = first;
+                    block.keys[lane] = keys;
+                    block.prims[lane] = prim;
+                    block.flags[lane] = flags;
+                }
+                shapes.push(LeafShape {
+                    shape: Shape::Deforming(deforming.len() as u32),
+                    prim: block.prims[0],
+                    flags: 0,
+                });
+                deforming.push(block);
             }
             for chunk in triangles.chunks(4) {
                 let (mut lane_prims, mut lane_flags) = ([0; 4], [0; 4]);
@@ -162,7 +215,59 @@ impl Bvh {
             bvh,
             blocks,
             shapes,
+            deforming,
             corners,
+        }
+    }
+
+    /// Lowers `closest` by shape `s`'s hits along `ray` (`shear` is the ray's).
+    #[inline(always)]
+    fn shape_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        s: &LeafShape,
+        ray: &Ray,
+        shear: &RayShear,
+        closest: &mut Closest,
+        accept: &mut F,
+    ) {
+        if let Shape::Deforming(block) = s.shape {
+            let block = &self.deforming[block as usize];
+            if let Some(hits) = block.intersect(&self.corners, ray.time, shear, closest.bound()) {
+                for lane in hits.lanes() {
+                    closest.consider(hits.get(lane), block.prims[lane], block.flags[lane], accept);
+                }
+            }
+        } else if let Some(hit) = s.shape.intersect(ray, closest.bound()) {
+            closest.consider(hit, s.prim, s.flags, accept);
+        }
+    }
+
+    /// Whether shape `s` holds an accepted hit along `ray` (`shear` is the ray's).
+    #[inline(always)]
+    fn shape_occludes<F: FnMut(u32, &PrimitiveHit) -> bool>(
+        &self,
+        s: &LeafShape,
+        ray: &Ray,
+        shear: &RayShear,
+        accept: &mut F,
+    ) -> bool {
+        if let Shape::Deforming(block) = s.shape {
+            let block = &self.deforming[block as usize];
+            let Some(hits) = block.intersect(&self.corners, ray.time, shear, ray.tmax) else {
+                return false;
+            };
+            hits.lanes().any(|lane| {
+                accepted(
+                    &hits.get(lane),
+                    block.prims[lane],
+                    block.flags[lane],
+                    accept,
+                )
+            })
+        } else {
+            s.shape
+                .intersect(ray, ray.tmax)
+                .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
         }
     }
 
@@ -172,6 +277,7 @@ impl Bvh {
         self.bvh.bytes()
             + self.blocks.len() * size_of::<LeafTriangles>()
             + self.shapes.len() * size_of::<LeafShape>()
+            + self.deforming.len() * size_of::<DeformingBlock>()
             + self.corners.len() * size_of::<[Vec3; 3]>()
     }
 
@@ -273,7 +379,9 @@ impl Bvh {
                 }
             }
         }
-        shapes_closest(shapes, &self.corners, ray, closest, accept);
+        for s in shapes {
+            self.shape_closest(s, ray, shear, closest, accept);
+        }
         if closest.tmax < before {
             LeafResult::Closer(closest.tmax)
         } else {
@@ -303,39 +411,10 @@ impl Bvh {
                 }
             }
         }
-        shapes_occlude(shapes, &self.corners, ray, accept)
+        shapes
+            .iter()
+            .any(|s| self.shape_occludes(s, ray, shear, accept))
     }
-}
-
-/// Tests `shapes` for `ray`'s closest hit.
-#[inline(always)]
-fn shapes_closest<F: FnMut(u32, &PrimitiveHit) -> bool>(
-    shapes: &[LeafShape],
-    corners: &[[Vec3; 3]],
-    ray: &Ray,
-    closest: &mut Closest,
-    accept: &mut F,
-) {
-    for s in shapes {
-        if let Some(hit) = s.shape.intersect(ray, closest.bound(), corners) {
-            closest.consider(hit, s.prim, s.flags, accept);
-        }
-    }
-}
-
-/// Whether one of `shapes` holds an accepted hit along `ray`.
-#[inline(always)]
-fn shapes_occlude<F: FnMut(u32, &PrimitiveHit) -> bool>(
-    shapes: &[LeafShape],
-    corners: &[[Vec3; 3]],
-    ray: &Ray,
-    accept: &mut F,
-) -> bool {
-    shapes.iter().any(|s| {
-        s.shape
-            .intersect(ray, ray.tmax, corners)
-            .is_some_and(|hit| accepted(&hit, s.prim, s.flags, accept))
-    })
 }
 
 /// The closest accepted hit so far. A hit at exactly its distance wins if its primitive was
@@ -402,29 +481,16 @@ impl Closest {
 }
 
 impl Shape {
-    /// The shape's hit along `ray` in `(0, tmax)`; a deforming triangle's is where it is
-    /// at the ray's time (its corners at its keys in `corners`).
+    /// The analytic shape's hit along `ray` in `(0, tmax)` (deforming blocks are tested by
+    /// [`Bvh::shape_closest`] and [`Bvh::shape_occludes`]).
     #[inline(always)]
-    fn intersect(&self, ray: &Ray, tmax: f32, corners: &[[Vec3; 3]]) -> Option<PrimitiveHit> {
+    fn intersect(&self, ray: &Ray, tmax: f32) -> Option<PrimitiveHit> {
         match *self {
             Self::Sphere { centre, radius } => sphere::intersect(ray, centre, radius, tmax),
             Self::Quadric(q) => q.intersect(ray, tmax),
-            Self::Deforming { first, keys } => {
-                deforming_hit(ray, tmax, &corners[first as usize..(first + keys) as usize])
-            }
+            Self::Deforming(_) => None,
         }
     }
-}
-
-/// The hit along `ray` in `(0, tmax)` of the deforming triangle whose corners at its keys
-/// are `keys`, where it is at the ray's time. Out of line: traversals of still geometry
-/// never call it.
-#[cold]
-#[inline(never)]
-fn deforming_hit(ray: &Ray, tmax: f32, keys: &[[Vec3; 3]]) -> Option<PrimitiveHit> {
-    let tri = super::deformation::triangle_at(keys, ray.time);
-    super::triangle::intersect(&RayShear::new(ray), &TriangleBlock::new(&[tri]), tmax)
-        .map(|hits| hits.get(0))
 }
 
 /// Whether a hit on primitive `prim` with intersection `flags` counts: not on a culled back,
