@@ -296,3 +296,29 @@ def test_lucerna_renders_deforming_points_as_moving_xforms(stage_file, tmp_path,
     sharp = render(by_points, "sharp", "--shutter", "0,0")
     assert np.abs(points - xform).max() < 1e-3, np.abs(points - xform).max()
     assert np.abs(points - sharp).max() > 0.1
+
+
+def test_points_that_are_not_finite_over_the_shutter_keep_the_frame(stage_file, converted):
+    """Velocities of NaN (or infinite accelerations) would put points nowhere over the
+    shutter: the mesh keeps the frame's shape, with a warning naming it."""
+    text = '''def Mesh "Broken" {
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points.timeSamples = { 4: [(0, 0, 0), (1, 0, 0), (0, 1, 0)] }
+    vector3f[] velocities.timeSamples = { 4: [(0, 0, 0), (nan, 0, 0), (0, 0, 0)] }
+}
+def Mesh "Flung" {
+    uniform token subdivisionScheme = "none"
+    int[] faceVertexCounts = [3]
+    int[] faceVertexIndices = [0, 1, 2]
+    point3f[] points.timeSamples = { 4: [(0, 0, 2), (1, 0, 2), (0, 1, 2)] }
+    vector3f[] velocities.timeSamples = { 4: [(0, 0, 0), (1, 0, 0), (0, 0, 0)] }
+    vector3f[] accelerations.timeSamples = { 4: [(0, 0, 0), (inf, 0, 0), (0, 0, 0)] }
+}
+'''
+    scene = converted(stage_file(text, name="broken.usda"), frame=4, shutter=(-0.5, 0.5))
+    for name in ("/Broken", "/Flung"):
+        assert "deformation" not in scene.mesh(name)
+    warned = scene.warnings_about("not finite")
+    assert any("/Broken" in w for w in warned) and any("/Flung" in w for w in warned), warned
