@@ -95,6 +95,16 @@ impl Deformation {
         self.positions[i][v].lerp(self.positions[i + 1][v], u)
     }
 
+    /// The corners `tri` at shutter time `time`, and their shading normals (not normalised)
+    /// where the mesh has normals: one key interval found for all six.
+    #[inline]
+    pub fn triangle(&self, tri: [u32; 3], time: f32) -> ([Vec3; 3], Option<[Vec3; 3]>) {
+        let (i, u) = segment(self.positions.len(), time);
+        let lerp =
+            |keys: &[Vec<Vec3>]| tri.map(|v| keys[i][v as usize].lerp(keys[i + 1][v as usize], u));
+        (lerp(&self.positions), self.normals.as_deref().map(lerp))
+    }
+
     /// Vertex `v`'s shading normal at shutter time `time` (not normalised), if the mesh has
     /// normals.
     #[inline]

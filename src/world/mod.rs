@@ -373,8 +373,8 @@ impl World {
         };
         let mesh = &self.surfaces.meshes[mesh as usize];
         let d = mesh.deformation.as_ref()?;
-        let corners = mesh.triangles[tri as usize].map(|i| i as usize);
-        let [a, b, c] = corners.map(|i| d.position(i, time));
+        let corners = mesh.triangles[tri as usize];
+        let ([a, b, c], _) = d.triangle(corners, time);
         // Barycentrics of the point from the areas it spans with the edges.
         let n = (b - a).cross(c - a);
         let area = n.length_squared();
@@ -384,7 +384,7 @@ impl World {
         let b1 = (it.p - a).cross(c - a).dot(n) / area;
         let b2 = (b - a).cross(it.p - a).dot(n) / area;
         let at = |time: f32| {
-            let [a, b, c] = corners.map(|i| d.position(i, time));
+            let ([a, b, c], _) = d.triangle(corners, time);
             a * (1.0 - b1 - b2) + b * b1 + c * b2
         };
         Some((at(0.0), at(1.0)))

@@ -636,12 +636,7 @@ fn deformed_corners(
     tri: [u32; 3],
     time: f32,
 ) -> ([Vec3; 3], Option<[Vec3; 3]>) {
-    let corners = tri.map(|i| d.position(i as usize, time));
-    let normals = d
-        .normals
-        .as_ref()
-        .map(|_| tri.map(|i| d.normal(i as usize, time).unwrap_or(Vec3::ZERO)));
-    (corners, normals)
+    d.triangle(tri, time)
 }
 
 /// Bends a shading normal towards the geometric normal until the viewer is above its
